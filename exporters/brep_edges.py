@@ -1,0 +1,310 @@
+"""Steps 1-4 of `exporters.brep`: surfaces, intersection curves, vertices and the shared `TopoDS_Edge` of
+every VB-Rep edge (output frame, millimetres)."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from OCP.BRep import BRep_Builder, BRep_Tool
+from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+from OCP.BRepLib import BRepLib
+from OCP.Geom import Geom_Curve
+from OCP.Geom2d import Geom2d_Curve
+from OCP.GeomAbs import GeomAbs_C2
+from OCP.GeomAPI import GeomAPI_PointsToBSpline
+from OCP.gp import gp_Pnt
+from OCP.TColgp import TColgp_Array1OfPnt
+from OCP.TopLoc import TopLoc_Location
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Vertex
+
+from exporters.frames import FrameMap
+from exporters.occ_curves import (
+    curve_from_dict,
+    curve_points,
+    fit_pcurve,
+    intersection_curves,
+    is_elementary,
+    iso_curve,
+    nearest_branch,
+    project_on_curve,
+)
+from exporters.occ_surfaces import AnalyticSurface, distance_to_surface, make_surface
+from exporters.polygons import subsample
+from v2c.labels import PrimitiveType
+from v2c.vbrep.model import EdgeType
+
+if TYPE_CHECKING:
+    from exporters.brep import BrepConfig
+    from v2c.vbrep.model import VBRep, VEdge
+
+
+@dataclass
+class EdgeGeom:
+    """Geometry of one edge before it becomes a TopoDS_Edge: a trimmed 3D curve, or a pcurve on a face."""
+
+    curve: Geom_Curve | None = None
+    face: int | None = None  # the face whose surface carries the pcurve
+    pcurve: Geom2d_Curve | None = None
+    t0: float = 0.0  # parameter at the VB-Rep edge's v0 ...
+    t1: float = 0.0  # ... and at v1 (t1 < t0: the curve runs v1 -> v0)
+    end0: np.ndarray | None = None  # 3D end points (mm) at t0 and t1
+    end1: np.ndarray | None = None
+
+
+def _unwrap_params(t: np.ndarray, period: float) -> np.ndarray:
+    """Curve parameters made continuous along a polyline (jumps over half a period removed)."""
+    d = np.diff(t)
+    d -= period * np.round(d / period)
+    return np.concatenate([[t[0]], t[0] + np.cumsum(d)])
+
+
+def _near(t: float, ref: float, period: float | None) -> float:
+    """``t`` shifted by whole periods to lie nearest ``ref``."""
+    return t if period is None else t + period * np.round((ref - t) / period)
+
+
+class EdgeBuilder:
+    """Steps 1-4 for one VB-Rep: `run` fills ``surfaces`` (VFace id -> AnalyticSurface), ``curves``
+    (intersection VEdge id -> untrimmed exact curve), ``vpos`` (VVertex id -> position, mm), ``geoms`` (VEdge
+    id -> EdgeGeom) and ``edges`` (VEdge id -> TopoDS_Edge oriented from v0 to v1); problems go to
+    ``warnings``."""
+
+    def __init__(self, vbrep: VBRep, fmap: FrameMap, config: BrepConfig) -> None:
+        self.vb = vbrep
+        self.fmap = fmap
+        self.cfg = config
+        size = fmap.length(vbrep.scale) if vbrep.scale > 0 else 100.0
+        self.branch_tol = max(config.branch_tol_abs, config.branch_tol_rel * size)
+        self.fit_tol = max(config.fit_tol_abs, config.fit_tol_rel * size)
+        self.warnings: list[str] = []
+        self.surfaces: dict[int, AnalyticSurface] = {}
+        self.curves: dict[int, Geom_Curve] = {}
+        self.vpos: dict[int, np.ndarray] = {}
+        self.geoms: dict[int, EdgeGeom] = {}
+        self.edges: dict[int, TopoDS_Edge] = {}
+        self.bb = BRep_Builder()
+
+    def run(self) -> EdgeBuilder:
+        """All four steps, in order."""
+        self.build_surfaces()
+        self.build_intersection_curves()
+        self.place_vertices()
+        self.build_edge_geometry()
+        self.edges = self.build_edges()
+        return self
+
+    def build_surfaces(self) -> None:
+        for f in self.vb.faces:
+            try:
+                self.surfaces[f.id] = make_surface(f.primitive, self.fmap, f.mesh_vertices)
+            except (ValueError, KeyError, TypeError) as exc:
+                self.warnings.append(f"face {f.id}: no surface ({exc}); face skipped")
+
+    def build_intersection_curves(self) -> None:
+        for e in self.vb.edges:
+            if EdgeType(e.type) is not EdgeType.INTERSECTION or len(e.faces) != 2:
+                continue
+            fa, fb = e.faces
+            if fa not in self.surfaces or fb not in self.surfaces:
+                continue
+            poly = subsample(self.fmap.points(e.polyline), self.cfg.branch_samples)
+            try:
+                cands = intersection_curves(self.surfaces[fa], self.surfaces[fb], self.cfg.intss_tol)
+            except Exception as exc:  # noqa: BLE001 - OCCT raises Standard_Failure subclasses
+                cands = []
+                self.warnings.append(f"edge {e.id}: GeomAPI_IntSS failed ({exc})")
+            curve, dist = nearest_branch(cands, poly)
+            if curve is None or dist > self.branch_tol or not is_elementary(curve):
+                # IntSS approximates some exact pairs (nearly coaxial surfaces of revolution): the VB-Rep's
+                # own line/circle is used instead when it lies on both surfaces.
+                exact = self._verified_dict_curve(e, poly)
+                if exact is not None:
+                    curve, dist = exact, 0.0
+            if curve is None or dist > self.branch_tol:
+                self.warnings.append(
+                    f"edge {e.id}: no intersection branch within {self.branch_tol:.2f} mm of the polyline "
+                    f"({len(cands)} branches, nearest {dist:.2f} mm); fitted on face {fa} instead"
+                )
+                continue
+            self.curves[e.id] = curve
+
+    def _verified_dict_curve(self, e: VEdge, poly: np.ndarray) -> Geom_Curve | None:
+        """The edge's analytic ``curve`` dict as an OCCT curve, if it runs along the polyline and lies on both
+        faces' surfaces within ``analytic_tol``."""
+        c = curve_from_dict(e.curve, self.fmap)
+        if c is None:
+            return None
+        t, d = project_on_curve(c, poly)
+        if not np.all(np.isfinite(d)) or d.max() > self.branch_tol:
+            return None
+        on = curve_points(c, t)
+        if max(distance_to_surface(self.surfaces[f], on).max() for f in e.faces) > self.cfg.analytic_tol:
+            return None
+        return c
+
+    def place_vertices(self) -> None:
+        inc_curves: dict[int, list[Geom_Curve]] = defaultdict(list)
+        inc_surfs: dict[int, set[int]] = defaultdict(set)
+        for e in self.vb.edges:
+            for v in {e.v0, e.v1}:
+                if e.id in self.curves:
+                    inc_curves[v].append(self.curves[e.id])
+                inc_surfs[v].update(f for f in e.faces if f in self.surfaces)
+        for v in self.vb.vertices:
+            x = self.fmap.points(v.position)
+            for _ in range(self.cfg.vertex_iterations):
+                if inc_curves[v.id]:
+                    proj = []
+                    for c in inc_curves[v.id]:
+                        t, d = project_on_curve(c, x[None])
+                        if np.isfinite(d[0]):
+                            proj.append(curve_points(c, t)[0])
+                elif inc_surfs[v.id]:
+                    proj = [self.surfaces[f].project(x[None])[0] for f in sorted(inc_surfs[v.id])]
+                else:
+                    break
+                if not proj:
+                    break
+                nx = np.mean(proj, axis=0)
+                done = np.linalg.norm(nx - x) < 1e-9
+                x = nx
+                if done or len(proj) == 1:
+                    break
+            self.vpos[v.id] = x
+
+    def _curve_geom(self, e: VEdge, curve: Geom_Curve) -> EdgeGeom | None:
+        poly = subsample(self.fmap.points(e.polyline), self.cfg.branch_samples)
+        period = curve.Period() if curve.IsPeriodic() else None
+        t, _ = project_on_curve(curve, poly)
+        if not np.all(np.isfinite(t)):
+            return None
+        if period is not None:
+            t = _unwrap_params(t, period)
+        (ta,), _ = project_on_curve(curve, self.vpos[e.v0][None])
+        (tb,), _ = project_on_curve(curve, self.vpos[e.v1][None])
+        if not (np.isfinite(ta) and np.isfinite(tb)):
+            return None
+        ta = _near(ta, t[0], period)
+        if e.v0 == e.v1:
+            if period is None:
+                return None
+            tb = ta + np.sign(t[-1] - t[0] or 1.0) * period
+        else:
+            tb = _near(tb, t[-1], period)
+        if period is None:
+            lo, hi = curve.FirstParameter(), curve.LastParameter()
+            ta, tb = float(np.clip(ta, lo, hi)), float(np.clip(tb, lo, hi))
+        if abs(tb - ta) < 1e-9:
+            return None
+        ends = curve_points(curve, np.array([ta, tb]))
+        return EdgeGeom(curve=curve, t0=float(ta), t1=float(tb), end0=ends[0], end1=ends[1])
+
+    def _pcurve_geom(self, e: VEdge, face: int) -> EdgeGeom | None:
+        s = self.surfaces[face]
+        poly = self.fmap.points(e.polyline)
+        poly = subsample(poly, self.cfg.max_fit_points)
+        pts = np.concatenate([self.vpos[e.v0][None], poly[1:-1], self.vpos[e.v1][None]])
+        uv = s.uv(pts)
+        uv = s.unwrap(uv)
+        # Characteristic length of one parameter unit: angles scale with the radius.
+        unit = max(s.radius, s.minor_radius, 1.0) if s.u_periodic else 1.0
+        iso = None
+        if np.ptp(uv[:, 0]) <= self.fit_tol / unit or np.ptp(uv[:, 1]) <= self.fit_tol / unit:
+            iso = iso_curve(s, uv[0], uv[-1], self.fit_tol / unit)
+        if iso is not None:  # along an iso line: an exact circle or line with its matching pcurve
+            c3, c2, t0, t1 = iso
+            ends = curve_points(c3, np.array([t0, t1]))
+            return EdgeGeom(curve=c3, face=face, pcurve=c2, t0=t0, t1=t1, end0=ends[0], end1=ends[1])
+        try:
+            pc = fit_pcurve(uv, self.fit_tol / unit, circles=s.kind is PrimitiveType.PLANE)
+        except Exception as exc:  # noqa: BLE001 - OCCT approximation failures
+            self.warnings.append(f"edge {e.id}: pcurve fit failed ({exc})")
+            return None
+        t0, t1 = pc.FirstParameter(), pc.LastParameter()
+        ends = s.evaluate(np.array([[pc.Value(t).X(), pc.Value(t).Y()] for t in (t0, t1)]))
+        return EdgeGeom(face=face, pcurve=pc, t0=t0, t1=t1, end0=ends[0], end1=ends[1])
+
+    def _free_geom(self, e: VEdge) -> EdgeGeom | None:
+        """A 3D curve through the polyline for an edge none of whose faces has a surface."""
+        poly = subsample(self.fmap.points(e.polyline), self.cfg.max_fit_points)
+        pts = np.concatenate([self.vpos[e.v0][None], poly[1:-1], self.vpos[e.v1][None]])
+        arr = TColgp_Array1OfPnt(1, len(pts))
+        for i, q in enumerate(pts):
+            arr.SetValue(i + 1, gp_Pnt(*map(float, q)))
+        fit = GeomAPI_PointsToBSpline(arr, 1 if len(pts) == 2 else 3, 8, GeomAbs_C2, self.fit_tol)
+        if not fit.IsDone():
+            return None
+        c = fit.Curve()
+        t0, t1 = c.FirstParameter(), c.LastParameter()
+        ends = curve_points(c, np.array([t0, t1]))
+        return EdgeGeom(curve=c, t0=t0, t1=t1, end0=ends[0], end1=ends[1])
+
+    def build_edge_geometry(self) -> None:
+        for e in self.vb.edges:
+            g = None
+            if e.id in self.curves:
+                g = self._curve_geom(e, self.curves[e.id])
+                if g is None:
+                    self.warnings.append(f"edge {e.id}: its intersection curve could not be trimmed; fitted")
+            if g is None:
+                for f in e.faces:
+                    if f in self.surfaces:
+                        g = self._pcurve_geom(e, f)
+                        if g is not None:
+                            break
+            if g is None:
+                g = self._free_geom(e)
+            if g is None:
+                self.warnings.append(f"edge {e.id}: no geometry could be built; edge dropped")
+                continue
+            self.geoms[e.id] = g
+
+    def build_edges(self) -> dict[int, TopoDS_Edge]:
+        gap: dict[int, float] = defaultdict(float)
+        for e in self.vb.edges:
+            g = self.geoms.get(e.id)
+            if g is None:
+                continue
+            gap[e.v0] = max(gap[e.v0], float(np.linalg.norm(g.end0 - self.vpos[e.v0])))
+            gap[e.v1] = max(gap[e.v1], float(np.linalg.norm(g.end1 - self.vpos[e.v1])))
+        verts: dict[int, TopoDS_Vertex] = {}
+        for vid, x in self.vpos.items():
+            tol = max(self.cfg.min_tolerance, 1.05 * gap[vid] + self.cfg.min_tolerance)
+            vx = TopoDS_Vertex()
+            self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), tol)
+            verts[vid] = vx
+            if gap[vid] > self.branch_tol:
+                self.warnings.append(f"vertex {vid}: edges end up to {gap[vid]:.2f} mm away from it")
+        edges: dict[int, TopoDS_Edge] = {}
+        for e in self.vb.edges:
+            g = self.geoms.get(e.id)
+            if g is None:
+                continue
+            va, vb = verts[e.v0], verts[e.v1]
+            forward = g.t1 > g.t0
+            lo, hi = (g.t0, g.t1) if forward else (g.t1, g.t0)
+            v_lo, v_hi = (va, vb) if forward else (vb, va)
+            try:
+                if g.curve is None:
+                    mk = BRepBuilderAPI_MakeEdge(g.pcurve, self.surfaces[g.face].geom, v_lo, v_hi, lo, hi)
+                else:
+                    mk = BRepBuilderAPI_MakeEdge(g.curve, v_lo, v_hi, lo, hi)
+                ok = mk.IsDone()
+            except Exception as exc:  # noqa: BLE001 - OCCT construction errors: report, skip the edge
+                ok, mk = False, exc
+            if not ok:
+                why = mk.Error() if hasattr(mk, "Error") else mk
+                self.warnings.append(f"edge {e.id}: BRepBuilderAPI_MakeEdge failed ({why})")
+                continue
+            edge = mk.Edge()
+            if g.curve is None:
+                BRepLib.BuildCurves3d_s(edge)
+            elif g.pcurve is not None:  # exact iso curve: attach its pcurve (same parametrisation)
+                self.bb.UpdateEdge(edge, g.pcurve, self.surfaces[g.face].geom, TopLoc_Location(),
+                                   BRep_Tool.Tolerance_s(edge))
+            # Stored oriented from v0 to v1, so a loop entry (id, reversed) is this edge, reversed or not.
+            edges[e.id] = edge if forward else TopoDS.Edge_s(edge.Reversed())
+        return edges

@@ -1,0 +1,342 @@
+"""Step 5 of `exporters.brep`: each VB-Rep face as an OCCT face on its analytic surface, bounded by the shared
+edges of `exporters.brep_edges` (its loops, or a repaired version of them), else by its mesh outline."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import TYPE_CHECKING
+
+import numpy as np
+from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+from OCP.BRepCheck import BRepCheck_Analyzer
+from OCP.BRepLib import BRepLib
+from OCP.GCE2d import GCE2d_MakeSegment
+from OCP.gp import gp_Pnt, gp_Pnt2d
+from OCP.ShapeBuild import ShapeBuild_ReShape
+from OCP.ShapeFix import ShapeFix_Face
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_REVERSED
+from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Vertex, TopoDS_Wire
+from OCP.TopTools import TopTools_IndexedMapOfShape
+
+from exporters.occ_curves import curve_points
+from exporters.occ_surfaces import AnalyticSurface, distance_to_surface
+from exporters.polygons import mesh_boundary_loop, polygon_crossings, signed_area, simplify_closed
+
+if TYPE_CHECKING:
+    from exporters.brep_edges import EdgeBuilder
+    from v2c.vbrep.model import VFace
+
+Loop = list[tuple[int, bool]]
+
+
+def edges_of(shape: TopoDS_Shape) -> list[TopoDS_Edge]:
+    """The edges of a shape (the shape itself when it is one)."""
+    if shape.ShapeType() == TopAbs_EDGE:
+        return [TopoDS.Edge_s(shape)]
+    out = []
+    exp = TopExp_Explorer(shape, TopAbs_EDGE)
+    while exp.More():
+        out.append(TopoDS.Edge_s(exp.Current()))
+        exp.Next()
+    return out
+
+
+class FaceBuilder:
+    """Step 5 on the result of an `EdgeBuilder`: `build_face`, else `build_fallback_face`. ShapeFix's edge
+    replacements are kept in the shared context ``ctx`` (apply it to faces and edges at the end); ``done``
+    holds the faces built so far."""
+
+    def __init__(self, eb: EdgeBuilder) -> None:
+        self.vb = eb.vb
+        self.fmap = eb.fmap
+        self.cfg = eb.cfg
+        self.fit_tol = eb.fit_tol
+        self.surfaces = eb.surfaces
+        self.geoms = eb.geoms
+        self.vpos = eb.vpos
+        self.edges = eb.edges
+        self.warnings = eb.warnings
+        self.bb = eb.bb
+        self.ctx = ShapeBuild_ReShape()
+        self.done: dict[int, TopoDS_Face] = {}
+
+    def _wire(self, loop: Loop, edges: dict[int, TopoDS_Edge]) -> TopoDS_Wire | None:
+        w = TopoDS_Wire()
+        self.bb.MakeWire(w)
+        for eid, rev in loop:
+            if eid not in edges:
+                return None
+            ed = TopoDS.Edge_s(self.ctx.Apply(edges[eid]))
+            self.bb.Add(w, ed.Reversed() if rev else ed)
+        w.Closed(True)
+        return w
+
+    def _loop_uv_polygon(self, s: AnalyticSurface, loop: Loop, n: int = 40,
+                         ) -> tuple[np.ndarray, float] | None:
+        """The loop's built edges sampled in the surface's (u, v) ((M, 2), periodic parameters made
+        continuous) and their largest distance off the surface (mm, for edges carried by the other face); None
+        when an edge is missing or the loop winds around a periodic surface (no closed polygon)."""
+        pts, dev = [], 0.0
+        for eid, rev in loop:
+            g = self.geoms.get(eid)
+            if g is None:
+                return None
+            ts = np.linspace(g.t0, g.t1, n)
+            if g.curve is None and self.surfaces[g.face] is s:
+                uv = np.array([[g.pcurve.Value(t).X(), g.pcurve.Value(t).Y()] for t in ts])
+            else:
+                if g.curve is None:  # a pcurve on the edge's other face: through 3D
+                    uv2 = np.array([[g.pcurve.Value(t).X(), g.pcurve.Value(t).Y()] for t in ts])
+                    xyz = self.surfaces[g.face].evaluate(uv2)
+                else:
+                    xyz = curve_points(g.curve, ts)
+                uv = s.uv(xyz)
+                dev = max(dev, float(distance_to_surface(s, xyz).max()))
+            pts.append((uv[::-1] if rev else uv)[:-1])
+        poly = np.concatenate(pts)
+        for k, periodic in ((0, s.u_periodic), (1, s.v_periodic)):
+            if periodic:
+                poly[:, k] = np.unwrap(poly[:, k])
+                if abs(poly[-1, k] - poly[0, k]) > np.pi / 2:  # winds around: the closing jump is a period
+                    return None
+        return poly, dev
+
+    def _boundaries_cross(self, s: AnalyticSurface, loops: list[Loop]) -> bool:
+        """Whether the loops' edges cross each other away from their vertices (sampled in (u, v)); crossings
+        within a vertex's reach (as BRepCheck tolerates them) and loops that cannot be sampled do not
+        count."""
+        sampled = [self._loop_uv_polygon(s, lp) for lp in loops]
+        if any(p is None for p in sampled):
+            return False
+        pts = polygon_crossings([p for p, _ in sampled])
+        if len(pts) == 0:
+            return False
+        ends = np.array([self.vpos[v] for lp in loops for eid, _ in lp
+                         for v in (self.vb.edges[eid].v0, self.vb.edges[eid].v1)])
+        # edges off the surface get that much tolerance once fixed, and BRepCheck looks no closer
+        reach = max(3 * self.fit_tol, 1e-3 * self.fmap.length(self.vb.scale), 2 * max(d for _, d in sampled))
+        dist = np.linalg.norm(s.evaluate(pts)[:, None] - ends[None], axis=2).min(1)
+        return bool(np.any(dist > reach))
+
+    def _loop_area_uv(self, s: AnalyticSurface, loop: Loop) -> float:
+        """Signed (u, v) area of a loop from its edges' polylines (positive: counter-clockwise)."""
+        pts = []
+        for eid, rev in loop:
+            poly = np.asarray(self.vb.edges[eid].polyline, float)
+            pts.append(poly[::-1] if rev else poly)
+        uv = s.uv(self.fmap.points(np.concatenate(pts)))
+        return signed_area(s.unwrap(uv))
+
+    def _fix_face(self, face: TopoDS_Face, ctx: ShapeBuild_ReShape | None = None) -> TopoDS_Face:
+        fix = ShapeFix_Face(face)
+        # Only the fixes that complete a boundary (pcurves, seams, periodic shifts, same-parameter, vertex
+        # tolerances, order): the repairs that cut, drop or re-route edges and wires are off. They would
+        # change the VB-Rep's edges (losing their attributes) and cost seconds on a wire that is wrong anyway;
+        # such a face fails BRepCheck and gets its fallback instead.
+        fix.FixIntersectingWiresMode = 0
+        fix.FixLoopWiresMode = 0
+        fix.FixSplitFaceMode = 0
+        fix.FixSmallAreaWireMode = 0
+        wire = fix.FixWireTool()
+        wire.FixSelfIntersectionMode = 0
+        wire.FixIntersectingEdgesMode = 0
+        wire.FixNonAdjacentIntersectingEdgesMode = 0
+        wire.FixSmallMode = 0
+        wire.FixNotchedEdgesMode = 0
+        wire.FixTailMode = 0
+        wire.FixLackingMode = 0
+        fix.SetContext(ctx if ctx is not None else self.ctx)
+        fix.SetPrecision(self.cfg.fix_precision)
+        fix.SetMaxTolerance(self.cfg.fix_max_tolerance)
+        fix.Perform()
+        return fix.Face()
+
+    def _loop_closed(self, loop: Loop) -> bool:
+        """True when the loop's edges chain end to start through shared vertices back to the start."""
+        ends = []
+        for eid, rev in loop:
+            e = self.vb.edges[eid]
+            ends.append((e.v1, e.v0) if rev else (e.v0, e.v1))
+        return all(ends[i][1] == ends[(i + 1) % len(ends)][0] for i in range(len(ends)))
+
+    def _orient_to_camera(self, face: TopoDS_Face, f: VFace) -> TopoDS_Face:
+        s = self.surfaces[f.id]
+        pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
+        if len(pts) == 0:
+            return face
+        uv = s.uv(pts.mean(0)[None])
+        p = s.evaluate(uv)[0]
+        n = s.normal(uv)[0] * (-1.0 if face.Orientation() == TopAbs_REVERSED else 1.0)
+        if n @ (self.fmap.camera_center - p) < 0:
+            face = TopoDS.Face_s(face.Reversed())
+        return face
+
+    def _try_face(self, f: VFace, loops: list[Loop], edges: dict[int, TopoDS_Edge],
+                  ) -> TopoDS_Face | None:
+        """The face bounded by ``loops`` (outer first) if ShapeFix makes it valid; edge replacements ShapeFix
+        made are kept (in the shared context) only when it does."""
+        s = self.surfaces[f.id]
+        wires = [self._wire(lp, edges) for lp in loops]
+        if not wires or any(w is None for w in wires):
+            return None
+        if self._boundaries_cross(s, loops):
+            return None  # BRepCheck would say so too, at a hundred times the cost
+        face = TopoDS_Face()
+        self.bb.MakeFace(face, s.geom, self.cfg.fix_precision)
+        for k, (w, lp) in enumerate(zip(wires, loops)):
+            # OCCT wants the outer wire counter-clockwise in (u, v), holes clockwise.
+            area = self._loop_area_uv(s, lp)
+            self.bb.Add(face, w.Reversed() if (area < 0) == (k == 0) else w)
+        local = ShapeBuild_ReShape()
+        try:
+            face = self._fix_face(face, local)
+        except Exception as exc:  # noqa: BLE001 - any OCCT failure: try without broken loops, then the mesh
+            self.warnings.append(f"face {f.id}: ShapeFix_Face failed ({exc})")
+            return None
+        if not BRepCheck_Analyzer(face).IsValid():
+            return None
+        # ShapeFix may drop a wire it finds inconsistent and return a valid face of the rest: the face must
+        # still hold every loop edge (or what ShapeFix replaced it with).
+        held = TopTools_IndexedMapOfShape()
+        TopExp.MapShapes_s(face, TopAbs_EDGE, held)
+        replaced = []
+        for lp in loops:
+            for eid, _ in lp:
+                old = self.ctx.Apply(edges[eid])
+                new = local.Value(old)
+                if not all(held.Contains(x) for x in edges_of(new)):
+                    return None
+                if not new.IsSame(old):
+                    replaced.append((old, new))
+        if replaced and not self._replacements_keep_faces_valid(replaced):
+            return None
+        for old, new in replaced:
+            self.ctx.Replace(old, new)
+        return self._orient_to_camera(face, f)
+
+    def _replacements_keep_faces_valid(self, replaced: list[tuple[TopoDS_Shape, TopoDS_Shape]]) -> bool:
+        """Whether the faces built so far stay valid when ShapeFix's replacements of shared edges (made while
+        fixing another face) are applied to them."""
+        trial = ShapeBuild_ReShape()
+        for old, new in replaced:
+            trial.Replace(old, new)
+        for face in self.done.values():
+            current = self.ctx.Apply(face)
+            moved = trial.Apply(current)
+            if not moved.IsSame(current) and not BRepCheck_Analyzer(moved).IsValid():
+                return False
+        return True
+
+    def _rechain(self, loops: list[Loop]) -> list[Loop] | None:
+        """The loops' edges chained again through their shared vertex ids (orientations recomputed), when they
+        form closed loops that way; None when some chain does not close."""
+        todo = [eid for lp in loops for eid, _ in lp if eid in self.geoms]
+        at: dict[int, list[int]] = defaultdict(list)
+        for eid in todo:
+            e = self.vb.edges[eid]
+            at[e.v0].append(eid)
+            if e.v1 != e.v0:
+                at[e.v1].append(eid)
+        used: set[int] = set()
+        out = []
+        for first in todo:
+            if first in used:
+                continue
+            e = self.vb.edges[first]
+            loop, used_here = [(first, False)], {first}
+            start, cur = e.v0, e.v1
+            while cur != start:
+                nxt = next((x for x in at[cur] if x not in used and x not in used_here), None)
+                if nxt is None:
+                    return None
+                ne = self.vb.edges[nxt]
+                rev = ne.v1 == cur and ne.v0 != cur
+                loop.append((nxt, rev))
+                used_here.add(nxt)
+                cur = ne.v0 if rev else ne.v1
+            used |= used_here
+            out.append(loop)
+        return out
+
+    def build_face(self, f: VFace, edges: dict[int, TopoDS_Edge],
+                   ) -> tuple[TopoDS_Face, list[Loop]] | None:
+        """The face trimmed by its loops and the loops it kept, trying in turn: the VB-Rep's loops; their
+        edges chained again through shared vertices (when the given loops do not close); only the loops that
+        close; only the largest closed loop. Anything but the first is reported as a warning. None if all
+        fail."""
+        if not f.loops:
+            return None
+        s = self.surfaces[f.id]
+
+        def by_area(loops: list[Loop]) -> list[Loop]:
+            return sorted(loops, key=lambda lp: -abs(self._loop_area_uv(s, lp)))
+
+        attempts: list[tuple[str, list[Loop]]] = [("", f.loops)]
+        if not all(self._loop_closed(lp) for lp in f.loops):
+            chained = self._rechain(f.loops)
+            if chained:
+                attempts.append(("its edges chained again through shared vertices", by_area(chained)))
+        closed = by_area([lp for lp in f.loops if self._loop_closed(lp)])
+        if closed and len(closed) < len(f.loops):
+            attempts.append(("only its closed loops", closed))
+        if len(closed) > 1:
+            attempts.append(("only its largest loop", closed[:1]))
+        tried: list[list[Loop]] = []
+        for why, loops in attempts:
+            if loops in tried:
+                continue
+            tried.append(loops)
+            face = self._try_face(f, loops, edges)
+            if face is not None:
+                if why:
+                    why = f"its loops do not bound a valid face; bounded by {why}"
+                    self.warnings.append(f"face {f.id}: {why}")
+                return face, loops
+        return None
+
+    def build_fallback_face(self, f: VFace) -> TopoDS_Face | None:
+        """The face bounded by its mesh's longest boundary loop, simplified and projected onto its surface: a
+        polygon of straight (u, v) segments, which lie on the surface exactly."""
+        loop = mesh_boundary_loop(np.asarray(f.mesh_triangles, int))
+        if loop is None or len(loop) < 3:
+            return None
+        s = self.surfaces[f.id]
+        pts = s.project(self.fmap.points(np.asarray(f.mesh_vertices, float)[loop]))
+        pts = pts[simplify_closed(pts, self.fit_tol)]
+        if len(pts) < 3:
+            return None
+        uv = s.uv(pts)
+        uv = s.unwrap(uv)
+        if signed_area(uv) < 0:
+            uv = uv[::-1]  # outer wire counter-clockwise in (u, v)
+        xyz = s.evaluate(uv)
+        try:
+            verts = []
+            for q in xyz:
+                vx = TopoDS_Vertex()
+                self.bb.MakeVertex(vx, gp_Pnt(*map(float, q)), self.cfg.min_tolerance)
+                verts.append(vx)
+            w = TopoDS_Wire()
+            self.bb.MakeWire(w)
+            for i in range(len(uv)):
+                j = (i + 1) % len(uv)
+                seg = GCE2d_MakeSegment(gp_Pnt2d(*uv[i]), gp_Pnt2d(*uv[j])).Value()
+                mk = BRepBuilderAPI_MakeEdge(seg, s.geom, verts[i], verts[j], seg.FirstParameter(),
+                                             seg.LastParameter())
+                if not mk.IsDone():
+                    return None
+                edge = mk.Edge()
+                BRepLib.BuildCurves3d_s(edge)
+                self.bb.Add(w, edge)
+            w.Closed(True)
+            face = TopoDS_Face()
+            self.bb.MakeFace(face, s.geom, self.cfg.fix_precision)
+            self.bb.Add(face, w)
+            face = self._fix_face(face)
+        except Exception as exc:  # noqa: BLE001 - any OCCT failure: the face is skipped, reported
+            self.warnings.append(f"face {f.id}: fallback failed ({exc})")
+            return None
+        if not BRepCheck_Analyzer(face).IsValid():
+            return None
+        return self._orient_to_camera(face, f)

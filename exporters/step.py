@@ -1,0 +1,347 @@
+"""VB-Rep -> STEP AP242 (millimetres) with typed edges, and the typed reader.
+
+What the file carries (../shared/SCAN_FORMAT.md, "Output of v2c to-step"):
+
+- analytic faces (PLANE, CYLINDRICAL_SURFACE, CONICAL_SURFACE, SPHERICAL_SURFACE, TOROIDAL_SURFACE) trimmed by
+  their VB-Rep loops, faces that share edges in one open shell (SHELL_BASED_SURFACE_MODEL); see
+  `exporters.brep`;
+- every VB-Rep edge named ``"<type>:<confidence>:e<id>"`` (confidence with two decimals), on layer
+  ``edge_<type>`` and coloured by type (sRGB: intersection blue, silhouette red, visibility cyan, occluded
+  green);
+- every face named ``"<type>:<axis>:f<id>"`` (axis X, Y, Z, U; ``-`` for a sphere);
+- one product holding one compound: the shells and the free edges (edges on no face) as direct children.
+
+Frames (`exporters.frames`): ``"part"`` (default) puts the recovered axis frame on X/Y/Z with the footprint
+origin (centre of the visible geometry's X/Y bounding box, at its lowest Z); ``"camera"`` keeps the camera
+frame.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from OCP.BRepAdaptor import BRepAdaptor_Surface
+from OCP.BRepCheck import BRepCheck_Analyzer
+from OCP.GeomAbs import (
+    GeomAbs_BSplineSurface,
+    GeomAbs_Cone,
+    GeomAbs_Cylinder,
+    GeomAbs_Plane,
+    GeomAbs_Sphere,
+    GeomAbs_SurfaceOfRevolution,
+    GeomAbs_Torus,
+)
+from OCP.Message import Message, Message_Gravity
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE
+from OCP.TopExp import TopExp
+from OCP.TopoDS import TopoDS, TopoDS_Shape
+from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape
+
+from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, translate_built
+from exporters.frames import Frame, FrameMap, frame_map
+from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
+from v2c.labels import PrimitiveType
+from v2c.vbrep.model import EdgeType
+
+if TYPE_CHECKING:
+    from v2c.vbrep.model import VBRep, VEdge, VFace
+
+#: Edge colours by type, sRGB in [0, 1].
+EDGE_COLORS: dict[EdgeType, RGB] = {
+    EdgeType.INTERSECTION: (0.0, 0.0, 1.0),
+    EdgeType.SILHOUETTE: (1.0, 0.0, 0.0),
+    EdgeType.VISIBILITY: (0.0, 1.0, 1.0),
+    EdgeType.OCCLUDED: (0.0, 1.0, 0.0),
+}
+
+#: Surface names of `TypedFace.surface` by OCCT GeomAbs type. A torus whose tube radius exceeds its ring
+#: radius comes back from STEP as a surface of revolution ("revolution"), which still counts as a torus.
+_SURFACE_NAMES = {
+    GeomAbs_Plane: "plane",
+    GeomAbs_Cylinder: "cylinder",
+    GeomAbs_Cone: "cone",
+    GeomAbs_Sphere: "sphere",
+    GeomAbs_Torus: "torus",
+    GeomAbs_SurfaceOfRevolution: "revolution",
+    GeomAbs_BSplineSurface: "bspline",
+}
+
+_EDGE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)$")
+_FACE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<axis>[XYZU-]):f(?P<id>\d+)$")
+
+
+# ------------------------------------------------------------------------------------------------ naming
+def edge_name(edge: VEdge) -> str:
+    """``"<type>:<confidence>:e<id>"``, confidence with two decimals."""
+    return f"{EdgeType(edge.type).value}:{float(edge.confidence):.2f}:e{int(edge.id)}"
+
+
+def edge_layer(edge_type: EdgeType | str) -> str:
+    """``"edge_<type>"``."""
+    return f"edge_{EdgeType(edge_type).value}"
+
+
+def face_name(face: VFace) -> str:
+    """``"<type>:<axis>:f<id>"``; axis X/Y/Z/U, ``-`` when the face has none (sphere)."""
+    return f"{PrimitiveType(face.primitive['type']).value}:{face.axis_label or '-'}:f{int(face.id)}"
+
+
+# ------------------------------------------------------------------------------------------------ writing
+class StepExportError(RuntimeError):
+    """The VB-Rep cannot be written as a useful STEP (no face could be built); the message says why."""
+
+
+@dataclass
+class StepReport:
+    """What `write` did. seconds: wall time of the whole write (build + XCAF + file), s. frame_map: camera
+    metres -> the file's millimetres. face_edges: VFace id -> the VEdge ids its boundary holds in the file.
+    shape_valid: BRepCheck of the whole assembled shape."""
+
+    path: Path
+    frame: Frame
+    n_faces: int
+    n_edges: int
+    free_edges: list[int]
+    fallback_faces: list[int]
+    skipped_faces: list[int]
+    invalid_faces: list[int]
+    warnings: list[str]
+    seconds: float
+    frame_map: FrameMap | None = None
+    face_edges: dict[int, set[int]] = field(default_factory=dict)
+    shape_valid: bool = True
+
+
+@contextmanager
+def quiet_occt() -> Iterator[None]:
+    """Silence OCCT's default messenger (transfer statistics on stdout) except failures, then restore it."""
+    saved = []
+    for p in Message.DefaultMessenger_s().Printers():
+        saved.append((p, p.GetTraceLevel()))
+        p.SetTraceLevel(Message_Gravity.Message_Fail)
+    try:
+        yield
+    finally:
+        for p, lvl in saved:
+            p.SetTraceLevel(lvl)
+
+
+def build(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None) -> BuiltBRep:
+    """The OCCT topology of a VB-Rep in ``frame`` (millimetres); see `exporters.brep`.
+
+    Part frame: the footprint origin (`exporters.frames`) is measured on the built faces and edges, so the
+    result's bounding box is centred in X and Y and starts at Z = 0 (to 1e-6 mm); ``built.fmap`` maps camera
+    metres into it.
+    """
+    frame = Frame(frame)
+    built = build_brep(vbrep, frame_map(vbrep, frame), config)
+    if frame is Frame.PART and (built.faces or built.edges):
+        lo, hi = bounding_box(built.shape)
+        shift = -np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
+        if np.abs(shift).max() > 1e-6:
+            built = translate_built(built, shift)
+    return built
+
+
+def _attributes(vbrep: VBRep, built: BuiltBRep) -> list[SubShapeAttrs]:
+    subs = []
+    for f in vbrep.faces:
+        if f.id in built.faces:
+            subs.append(SubShapeAttrs(built.faces[f.id], face_name(f)))
+    for e in vbrep.edges:
+        t = EdgeType(e.type)
+        for shape in built.edges.get(e.id, []):
+            subs.append(SubShapeAttrs(shape, edge_name(e), edge_layer(t), EDGE_COLORS[t]))
+    return subs
+
+
+def write(
+    vbrep: VBRep,
+    path: str | Path,
+    frame: Frame | str = Frame.PART,
+    product: str | None = None,
+    config: BrepConfig | None = None,
+) -> StepReport:
+    """Write a VB-Rep as STEP AP242 (millimetres) to ``path``, atomically (temporary file + rename).
+
+    frame: "part" (recovered axis frame, footprint origin) or "camera". product: the product name (default:
+    the file stem). Returns a `StepReport`; faces that could not be built are reported there, not raised,
+    unless none could: then `StepExportError` and nothing is written.
+    """
+    t0 = time.perf_counter()
+    path = Path(path)
+    frame = Frame(frame)
+    built = build(vbrep, frame, config)
+    if not built.faces:
+        # A product of edges alone is useless and crashes FreeCAD 0.20's import: refuse rather than write it.
+        detail = "; ".join(built.warnings[:3]) or "the VB-Rep has no faces"
+        raise StepExportError(f"{path}: no face could be built ({detail})")
+    invalid = [fid for fid, face in built.faces.items() if not BRepCheck_Analyzer(face).IsValid()]
+    shape_valid = BRepCheck_Analyzer(built.shape).IsValid()
+    warnings = list(built.warnings) + [f"face {fid}: fails BRepCheck" for fid in invalid]
+    if not shape_valid and not invalid:
+        warnings.append("the assembled shape fails BRepCheck")
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix or '.step'}")
+    try:
+        with quiet_occt():
+            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return StepReport(
+        path=path,
+        frame=frame,
+        n_faces=len(built.faces),
+        n_edges=len(built.edges),
+        free_edges=built.free_edges,
+        fallback_faces=built.fallback_faces,
+        skipped_faces=built.skipped_faces,
+        invalid_faces=invalid,
+        warnings=warnings,
+        seconds=time.perf_counter() - t0,
+        frame_map=built.fmap,
+        face_edges=built.face_edges,
+        shape_valid=shape_valid,
+    )
+
+
+# ------------------------------------------------------------------------------------------------ reading
+def _edge_type(text: str | None) -> EdgeType | None:
+    try:
+        return EdgeType(text) if text else None
+    except ValueError:
+        return None
+
+
+def _type_of_color(rgb: RGB | None, tol: float = 0.02) -> EdgeType | None:
+    if rgb is None:
+        return None
+    for t, c in EDGE_COLORS.items():
+        if max(abs(a - b) for a, b in zip(rgb, c)) <= tol:
+            return t
+    return None
+
+
+@dataclass(frozen=True)
+class TypedFace:
+    """A face read back. surface: "plane", "cylinder", "cone", "sphere", "torus", "revolution", "bspline" or
+    "other"; name: its STEP name; type, axis, id: parsed from the name (None when it does not parse)."""
+
+    surface: str
+    name: str | None
+    type: PrimitiveType | None
+    axis: str | None
+    id: int | None
+
+
+@dataclass(frozen=True)
+class TypedEdge:
+    """An edge read back with its type three ways: from its name, its layer and its colour (sRGB).
+
+    n_faces: how many faces of the file use it (2 for an intersection edge shared by its faces).
+    """
+
+    name: str | None
+    id: int | None
+    type: EdgeType | None
+    confidence: float | None
+    layer: str | None
+    layer_type: EdgeType | None
+    color: RGB | None
+    color_type: EdgeType | None
+    n_faces: int
+
+
+@dataclass
+class TypedStep:
+    """A STEP file read back: its products, its shape, every unique face and edge (named or not)."""
+
+    path: Path
+    products: list[str]
+    shape: TopoDS_Shape
+    faces: list[TypedFace] = field(default_factory=list)
+    edges: list[TypedEdge] = field(default_factory=list)
+
+    @property
+    def typed_edges(self) -> list[TypedEdge]:
+        """The edges whose name carries a VB-Rep edge type."""
+        return [e for e in self.edges if e.type is not None]
+
+    def edge(self, edge_id: int) -> list[TypedEdge]:
+        """The edge(s) named with VB-Rep edge id ``edge_id``."""
+        return [e for e in self.edges if e.id == edge_id]
+
+
+def _parse_edge(name: str | None) -> tuple[int | None, EdgeType | None, float | None]:
+    m = _EDGE_NAME.match(name or "")
+    if not m:
+        return None, None, None
+    return int(m["id"]), _edge_type(m["type"]), float(m["conf"])
+
+
+def _parse_face(name: str | None) -> tuple[int | None, PrimitiveType | None, str | None]:
+    m = _FACE_NAME.match(name or "")
+    if not m:
+        return None, None, None
+    try:
+        ptype = PrimitiveType(m["type"])
+    except ValueError:
+        ptype = None
+    return int(m["id"]), ptype, (None if m["axis"] == "-" else m["axis"])
+
+
+def read_typed(path: str | Path) -> TypedStep:
+    """Read a STEP written by `write` (or any STEP) back: faces with surface type and name, edges with type
+    from name, layer and colour. Raises `exporters.xcaf.XcafError` for an unreadable file."""
+    path = Path(path)
+    with quiet_occt():
+        rs = read_xcaf_step(path)
+    ancestors = TopTools_IndexedDataMapOfShapeListOfShape()
+    TopExp.MapShapesAndAncestors_s(rs.shape, TopAbs_EDGE, TopAbs_FACE, ancestors)
+    out = TypedStep(path=path, products=rs.products, shape=rs.shape)
+    for f in rs.faces:
+        kind = BRepAdaptor_Surface(TopoDS.Face_s(f.shape)).GetType()
+        fid, ptype, axis = _parse_face(f.name)
+        out.faces.append(TypedFace(_SURFACE_NAMES.get(kind, "other"), f.name, ptype, axis, fid))
+    for e in rs.edges:
+        eid, etype, conf = _parse_edge(e.name)
+        n = 0
+        if ancestors.Contains(e.shape):
+            faces = ancestors.FindFromKey(e.shape)
+            uniq: list[TopoDS_Shape] = []
+            for face in faces:
+                if not any(face.IsSame(u) for u in uniq):
+                    uniq.append(face)
+            n = len(uniq)
+        layer = next((lay for lay in e.layers if lay.startswith("edge_")), e.layers[0] if e.layers else None)
+        layer_type = _edge_type(layer[len("edge_"):]) if layer and layer.startswith("edge_") else None
+        out.edges.append(TypedEdge(e.name, eid, etype, conf, layer, layer_type, e.color,
+                                   _type_of_color(e.color), n))
+    return out
+
+
+__all__ = [
+    "EDGE_COLORS",
+    "Frame",
+    "FrameMap",
+    "StepExportError",
+    "StepReport",
+    "TypedEdge",
+    "TypedFace",
+    "TypedStep",
+    "build",
+    "edge_layer",
+    "edge_name",
+    "face_name",
+    "read_typed",
+    "write",
+]

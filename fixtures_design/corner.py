@@ -1,0 +1,75 @@
+"""Corner locator: an L block that seats on a convex dihedral edge of the part.
+
+Cross-section, in the edge's local frame (x = outward normal of face A, y = outward normal of face B, z along the
+edge; the part fills the quadrant x < 0, y < 0)::
+
+          y
+          |  +---------------+          inner faces: x = c (against face A) and y = c (against face B),
+          |  |   wall t      |          c = clearance; each leg reaches ``leg`` along its face (clamped to
+      ----+--+---+           |          ``leg_fraction`` of how far the face reaches from the edge)
+     part    | c |  wall t   |
+     (x<0,   |   |           |
+      y<0)   +---+-----------+---- x
+
+The block spans ``length`` along the edge, centred on it and kept ``end_margin`` from its ends.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fixtures_design.frames import FrameMap
+from fixtures_design.model import Fixture, FixtureKind, faces_facing, local_plane, place, prism, sample_face
+from fixtures_design.references import DihedralReference
+
+
+@dataclass(frozen=True)
+class CornerParams:
+    """Corner locator parameters (millimetres)."""
+
+    clearance: float = 0.2  # mm: gap between each inner face and the part face it locates
+    wall: float = 6.0  # mm: wall thickness of each leg
+    leg: float = 15.0  # mm: how far each inner face reaches from the edge along its part face
+    length: float = 40.0  # mm: block length along the edge
+    end_margin: float = 2.0  # mm: kept free at each end of the edge
+    leg_fraction: float = 0.8  # of the face's reach from the edge: the most a leg covers
+
+
+def corner_profile(leg_a: float, leg_b: float, p: CornerParams) -> np.ndarray:
+    """(6, 2) L profile in the edge's local (x, y), mm (see the module docstring)."""
+    c, t = p.clearance, p.wall
+    return np.array([(c, -leg_a), (c + t, -leg_a), (c + t, c + t), (-leg_b, c + t), (-leg_b, c), (c, c)])
+
+
+def design_corner(ref: DihedralReference, fmap: FrameMap, params: CornerParams = CornerParams()) -> Fixture:
+    """An L block seated on ``ref`` (camera frame, metres), built in the output frame of ``fmap`` (mm).
+
+    Mating faces: the two inner faces, ``params.clearance`` off the two planes of the edge.
+    """
+    a = fmap.vectors(ref.normals[0])
+    b = fmap.vectors(ref.normals[1])
+    b = b - (b @ a) * a  # square the frame (the planes are perpendicular within the selection tolerance)
+    b /= np.linalg.norm(b)
+    z = np.cross(a, b)
+    p0, p1 = fmap.points(ref.start), fmap.points(ref.end)
+    edge_len = float(np.linalg.norm(p1 - p0))
+    length = min(params.length, edge_len - 2 * params.end_margin)
+    if length <= 0:
+        raise ValueError(f"edge e{ref.edge_id} is {edge_len:.1f} mm long: too short for end margins of "
+                         f"{params.end_margin} mm")
+    # depths[0] is how far face A reaches from the edge (along -y), depths[1] face B (along -x).
+    leg_a = min(params.leg, params.leg_fraction * fmap.length(ref.depths[0]))
+    leg_b = min(params.leg, params.leg_fraction * fmap.length(ref.depths[1]))
+    plane = local_plane(0.5 * (p0 + p1), a, z)
+    local = prism(corner_profile(leg_a, leg_b, params), -length / 2, length / 2)
+    solid = place(local, plane)
+    c = params.clearance
+    against_a = faces_facing(local, [-1, 0, 0], np.array([c, 0, 0]))
+    against_b = faces_facing(local, [0, -1, 0], np.array([0, c, 0]))
+    mating = [place(f, plane) for f in against_a + against_b]
+    refs = [ref.faces[0]] * len(against_a) + [ref.faces[1]] * len(against_b)
+    pts = np.concatenate([sample_face(f) for f in mating])
+    return Fixture(FixtureKind.CORNER, solid, mating, pts, ref, fmap, params, refs,
+                   {"leg_mm": (leg_a, leg_b), "length_mm": length})

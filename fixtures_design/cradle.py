@@ -1,0 +1,102 @@
+"""Cradle for a cylinder: a U or V block under a horizontal cylinder or boss.
+
+Local frame: origin on the cylinder axis at the rim circle, z along the axis into the cylinder's body, y = the
+part's up direction made perpendicular to the axis, x = y x z. With R = radius + clearance the block is::
+
+    U: a block from y = -R cos(wrap/2) down to y = -(R + wall), minus the cylinder of radius R: its groove (the
+       mating face) wraps ``wrap_deg`` degrees around the underside, ``clearance`` off the cylinder.
+    V: a 90-degree V groove whose flanks are tangent to the circle of radius R at 45 degrees either side of the
+       bottom: it touches along two lines (the contact points), ``clearance`` off the cylinder.
+
+The block spans ``length`` along the axis, starting ``end_margin`` from the rim circle, clamped to the length of
+the cylinder face the view shows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from build123d import Plane, Solid
+
+from fixtures_design.frames import FrameMap
+from fixtures_design.model import Fixture, FixtureKind, local_plane, place, prism, sample_face, unit
+from fixtures_design.references import CircleReference, ReferenceKind
+
+_S45 = np.sqrt(0.5)
+
+
+@dataclass(frozen=True)
+class CradleParams:
+    """Cradle parameters (millimetres, degrees)."""
+
+    style: Literal["U", "V"] = "U"
+    clearance: float = 0.2  # mm: gap between the groove and the cylinder
+    wall: float = 6.0  # mm: material under the groove and beside it
+    length: float = 30.0  # mm: block length along the cylinder axis
+    end_margin: float = 2.0  # mm: kept free from the rim circle and from the far end of the seen cylinder
+    wrap_deg: float = 120.0  # degrees: U groove's angular span around the underside
+    max_tilt_deg: float = 30.0  # degrees: largest angle between the cylinder axis and the horizontal
+
+
+def _u_block(radius: float, p: CradleParams, z0: float, z1: float) -> Solid:
+    half = np.radians(p.wrap_deg) / 2
+    y_top = -radius * np.cos(half)
+    w = radius * np.sin(half) + p.wall
+    block = prism(np.array([(-w, y_top), (w, y_top), (w, -(radius + p.wall)), (-w, -(radius + p.wall))]), z0, z1)
+    return block.cut(Solid.make_cylinder(radius, z1 - z0 + 2, Plane.XY.offset(z0 - 1))).clean()
+
+
+def _v_profile(radius: float, p: CradleParams) -> np.ndarray:
+    y_top = -0.3 * radius
+    x_top = (radius + y_top * _S45) / _S45  # where a flank tangent at 45 degrees crosses y = y_top
+    w = x_top + p.wall
+    apex = -radius / _S45
+    bottom = apex - p.wall
+    return np.array([(-w, bottom), (w, bottom), (w, y_top), (x_top, y_top), (0.0, apex), (-x_top, y_top),
+                     (-w, y_top)])
+
+
+def design_cradle(ref: CircleReference, fmap: FrameMap, up: np.ndarray,
+                  params: CradleParams = CradleParams()) -> Fixture:
+    """A cradle under the boss/cylinder of ``ref`` (camera frame, metres), output frame of ``fmap`` (mm).
+
+    up: (3,) the part's up direction in the output frame (`fixtures_design.frames.up_vector`).
+    Mating faces: the U groove (or the two V flanks); contact points on the groove (or the V's contact lines).
+    """
+    if ref.kind is not ReferenceKind.BOSS:
+        raise ValueError(f"edge e{ref.edge_id} is the rim of a {ref.kind.value}: a cradle needs a boss/cylinder")
+    z = unit(fmap.vectors(ref.axis))
+    up = unit(up)
+    tilt = float(np.degrees(np.arcsin(min(1.0, abs(z @ up)))))
+    if tilt > params.max_tilt_deg:
+        raise ValueError(f"cylinder of e{ref.edge_id} is {tilt:.0f} deg off the horizontal (cradles take up to "
+                         f"{params.max_tilt_deg:.0f} deg)")
+    y = unit(up - (up @ z) * z)
+    x = np.cross(y, z)
+    seen = fmap.length(ref.extent)
+    length = min(params.length, seen - 2 * params.end_margin)
+    if length <= 0:
+        raise ValueError(f"the view shows only {seen:.1f} mm of the cylinder of e{ref.edge_id}")
+    radius = fmap.length(ref.radius) + params.clearance
+    z0, z1 = params.end_margin, params.end_margin + length
+    plane = local_plane(fmap.points(ref.center), x, z)
+    if params.style == "U":
+        local = _u_block(radius, params, z0, z1)
+        groove = [f for f in local.faces() if f.geom_type.name == "CYLINDER"]
+        pts_local = np.concatenate([sample_face(f) for f in groove])
+    elif params.style == "V":
+        local = prism(_v_profile(radius, params), z0, z1)
+        groove = [f for f in local.faces() if f.geom_type.name == "PLANE"
+                  and abs(abs(np.array(tuple(f.normal_at(f.center())))[0]) - _S45) < 1e-6]
+        zs = np.linspace(z0, z1, 25)
+        pts_local = np.concatenate([np.stack([np.full_like(zs, s * radius * _S45),
+                                              np.full_like(zs, -radius * _S45), zs], 1) for s in (-1, 1)])
+    else:
+        raise ValueError(f"unknown cradle style {params.style!r}: expected 'U' or 'V'")
+    m = np.stack([np.array(tuple(plane.x_dir)), np.array(tuple(plane.y_dir)), np.array(tuple(plane.z_dir))])
+    pts = pts_local @ m + np.array(tuple(plane.origin))
+    return Fixture(FixtureKind.CRADLE, place(local, plane), [place(f, plane) for f in groove], pts, ref, fmap,
+                   params, [ref.cylinder_face] * len(groove),
+                   {"length_mm": length, "groove_radius_mm": radius, "tilt_deg": tilt})

@@ -1,0 +1,140 @@
+"""Nest plate: a plate with a pocket that follows the part's visible footprint.
+
+The VB-Rep's face meshes are projected along the part's up axis (VB-Rep frame Z) onto its ground plane (from the
+scan around the part when given, else the lowest mesh point), rasterised at ``pixel`` mm and grown by
+``clearance`` (a disc dilation, plus two pixels so rasterisation and outline simplification never pull the wall
+into the part); the outer outline of the result becomes the pocket. The pocket floor lies ``clearance`` under the
+ground, ``depth`` deep; a ``floor`` thick bottom and a ``wall`` wide rim surround it.
+
+All faces count toward the footprint (low-confidence ones too): a larger pocket is the safe side. Parts whose
+lower section is narrower than their visible outline (overhangs) sit in the pocket with extra play.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from build123d import Face, Location, Solid, Vector, Wire
+
+from exporters.frames import proper_rotation
+from fixtures_design.frames import FrameMap
+from fixtures_design.model import Fixture, FixtureKind, local_plane, place, sample_face
+from v2c.vbrep.model import VBRep
+
+
+@dataclass(frozen=True)
+class NestParams:
+    """Nest plate parameters (millimetres)."""
+
+    clearance: float = 0.2  # mm: gap between pocket walls and the footprint outline, and under the part
+    depth: float = 5.0  # mm: pocket depth above the part's ground
+    floor: float = 4.0  # mm: plate thickness under the pocket
+    wall: float = 8.0  # mm: rim width around the pocket's bounding box
+    pixel: float = 0.05  # mm: raster resolution of the footprint (walls sit up to 3 pixels beyond the clearance)
+    min_area_frac: float = 0.01  # of the largest outline's area: smaller separate outlines are ignored
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """The part's visible footprint in its ground frame (part axes, mm, origin at the camera's projection).
+
+    outlines: closed counter-clockwise polygons (K, 2) in the ground frame's (X, Y), mm. ground_z: the ground's Z
+    (mm, the lowest mesh point). axes: (3, 3) rows = part X, Y, Z in the camera frame.
+    """
+
+    outlines: list[np.ndarray]
+    ground_z: float
+    axes: np.ndarray
+
+
+def footprint(vbrep: VBRep, pixel: float = 0.05, min_area_frac: float = 0.01,
+              ground_height: float | None = None, grow: float = 0.0) -> Footprint:
+    """Project the VB-Rep face meshes onto the part's ground plane and trace the outer outlines (mm).
+
+    grow: mm the outlines are pushed outwards (a disc dilation of the raster, plus one pixel so the traced
+    outline, which runs through boundary pixel centres, and its simplification (1 pixel) never fall inside the
+    true one).
+    ground_height: metres along the part's Z from the camera centre; default: the lowest face-mesh point.
+    """
+    axes = proper_rotation(vbrep.frame)
+    tris = []
+    zmin = np.inf
+    for f in vbrep.faces:
+        v = 1000.0 * np.asarray(f.mesh_vertices, float).reshape(-1, 3) @ axes.T
+        t = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
+        if len(v) and len(t):
+            tris.append(v[t][:, :, :2])
+            zmin = min(zmin, float(v[:, 2].min()))
+    if not tris:
+        raise ValueError("the VB-Rep has no face meshes: no footprint to nest")
+    tri = np.concatenate(tris)
+    # One pixel for outlines tracing boundary pixel centres, one for the polygon simplification (<= 1 pixel).
+    r_px = int(np.ceil(grow / pixel)) + 2 if grow > 0 else 0
+    margin = (r_px + 4) * pixel
+    lo = tri.reshape(-1, 2).min(axis=0) - margin
+    size = np.ceil((tri.reshape(-1, 2).max(axis=0) + margin - lo) / pixel).astype(int) + 1
+    img = np.zeros((size[1], size[0]), np.uint8)
+    sub = 16  # cv2 shift=4: coordinates in 1/16 pixel
+    for t in np.round((tri - lo) / pixel * sub).astype(np.int32):
+        cv2.fillConvexPoly(img, t, 1, lineType=cv2.LINE_8, shift=4)
+    if r_px:
+        img = cv2.dilate(img, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r_px + 1, 2 * r_px + 1)))
+    contours, _ = cv2.findContours(img, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    areas = [cv2.contourArea(c) for c in contours]
+    outlines = []
+    for c, a in zip(contours, areas):
+        if a < min_area_frac * max(areas) or len(c) < 3:
+            continue
+        poly = cv2.approxPolyDP(c, 1.0, True).reshape(-1, 2).astype(float) * pixel + lo
+        x, y = poly[:, 0], poly[:, 1]
+        if (x * np.roll(y, -1) - np.roll(x, -1) * y).sum() < 0:
+            poly = poly[::-1]
+        outlines.append(poly)
+    return Footprint(outlines, zmin if ground_height is None else 1000.0 * ground_height, axes)
+
+
+def design_nest(vbrep: VBRep, fmap: FrameMap, params: NestParams = NestParams(),
+                ground_height: float | None = None) -> Fixture:
+    """A nest plate for the part of ``vbrep``, in the output frame of ``fmap`` (mm).
+
+    ground_height: the ground's height (metres along the part's Z, camera origin); default: lowest mesh point.
+    Mating faces: the pocket's side walls (``clearance`` plus up to three pixels off the footprint outline).
+    """
+    fp = footprint(vbrep, params.pixel, params.min_area_frac, ground_height, grow=params.clearance)
+    c = params.clearance
+    z_floor = fp.ground_z - c
+    z_top = fp.ground_z + params.depth
+    pocket_faces = []
+    hulls = 0
+    for poly in fp.outlines:
+        face = Face(Wire.make_polygon([Vector(float(x), float(y), z_floor) for x, y in poly], close=True))
+        if not face.is_valid or face.area <= 0:  # a self-touching outline: take its convex hull (larger: safe)
+            hull = cv2.convexHull(poly.astype(np.float32)).reshape(-1, 2)
+            face = Face(Wire.make_polygon([Vector(float(x), float(y), z_floor) for x, y in hull], close=True))
+            hulls += 1
+        pocket_faces.append(face)
+    pocket = [Solid.extrude(f, Vector(0, 0, z_top - z_floor + 1.0)) for f in pocket_faces]
+    bb = np.array([[tuple(f.bounding_box().min), tuple(f.bounding_box().max)] for f in pocket_faces])
+    lo, hi = bb[:, 0, :2].min(axis=0), bb[:, 1, :2].max(axis=0)
+    w = params.wall
+    plate = Solid.make_box(hi[0] - lo[0] + 2 * w, hi[1] - lo[1] + 2 * w, z_top - (z_floor - params.floor))
+    plate = plate.moved(Location((lo[0] - w, lo[1] - w, z_floor - params.floor)))
+    local = plate
+    for p in pocket:
+        local = local.cut(p)
+    local = local.clean()
+    walls = []
+    for f in local.faces():
+        n = np.array(tuple(f.normal_at(f.center())))
+        cx, cy = f.center().X, f.center().Y
+        if abs(n[2]) < 1e-3 and lo[0] - 1e-3 <= cx <= hi[0] + 1e-3 and lo[1] - 1e-3 <= cy <= hi[1] + 1e-3:
+            walls.append(f)
+    plane = local_plane(fmap.points(np.zeros(3)), fmap.vectors(fp.axes[0]), fmap.vectors(fp.axes[2]))
+    mating = [place(f, plane) for f in walls]
+    pts = np.concatenate([sample_face(f, grid=2 if len(mating) > 50 else 8) for f in mating])
+    solid = place(local, plane)
+    return Fixture(FixtureKind.NEST, solid, mating, pts, fp, fmap, params, [-1] * len(mating),
+                   {"pocket_depth_mm": params.depth, "outlines": len(fp.outlines), "convex_hull_fallbacks": hulls})
+

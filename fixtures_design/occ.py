@@ -1,0 +1,83 @@
+"""OCCT helpers of the fixture designer: faces in file order, face meshes, analytic primitives and edge curves of
+a B-rep in millimetres, turned into the VB-Rep's units (metres) where said."""
+
+from __future__ import annotations
+
+import numpy as np
+from build123d import Shape
+from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
+from OCP.GeomAbs import GeomAbs_Circle, GeomAbs_Cylinder, GeomAbs_Line, GeomAbs_Plane
+from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
+from OCP.TopExp import TopExp_Explorer
+from OCP.TopLoc import TopLoc_Location
+from OCP.TopoDS import TopoDS
+
+M_PER_MM = 1e-3
+
+
+def _xyz(p: object) -> np.ndarray:
+    return np.array([p.X(), p.Y(), p.Z()])
+
+
+def occt_faces(shape: Shape) -> list:
+    """The faces of a shape in ``TopExp_Explorer`` order (the order of gt/faces.png)."""
+    out = []
+    exp = TopExp_Explorer(shape.wrapped, TopAbs_FACE)
+    while exp.More():
+        out.append(TopoDS.Face_s(exp.Current()))
+        exp.Next()
+    return out
+
+
+def face_mesh(face: object) -> tuple[np.ndarray, np.ndarray]:
+    loc = TopLoc_Location()
+    tri = BRep_Tool.Triangulation_s(face, loc)
+    if tri is None:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    trsf = loc.Transformation()
+    v = np.array([_xyz(tri.Node(i).Transformed(trsf)) for i in range(1, tri.NbNodes() + 1)])
+    t = np.array([tri.Triangle(i).Get() for i in range(1, tri.NbTriangles() + 1)], np.int64) - 1
+    if face.Orientation() == TopAbs_REVERSED:
+        t = t[:, ::-1]
+    return v, t
+
+
+def face_primitive(face: object) -> dict | None:
+    """Primitive dict (camera frame, metres) of a planar or cylindrical face; None for other types."""
+    s = BRepAdaptor_Surface(face)
+    if s.GetType() == GeomAbs_Plane:
+        ax = s.Plane().Axis()
+        n = _xyz(ax.Direction())
+        if face.Orientation() == TopAbs_REVERSED:
+            n = -n
+        return {"type": "plane", "params": {"origin": (_xyz(ax.Location()) * M_PER_MM).tolist(), "normal": n.tolist()}}
+    if s.GetType() == GeomAbs_Cylinder:
+        c = s.Cylinder()
+        return {"type": "cylinder", "params": {"origin": (_xyz(c.Axis().Location()) * M_PER_MM).tolist(),
+                                               "axis": _xyz(c.Axis().Direction()).tolist(),
+                                               "radius": c.Radius() * M_PER_MM}}
+    return None
+
+
+def faces_the_camera(v_mm: np.ndarray, t: np.ndarray) -> bool:
+    if not len(t):
+        return False
+    a, b, c = v_mm[t[:, 0]], v_mm[t[:, 1]], v_mm[t[:, 2]]
+    n = np.cross(b - a, c - a)
+    return bool(((n * (a + b + c) / 3).sum(axis=1) < 0).any())
+
+
+def edge_curve(edge: object, n: int = 24) -> tuple[np.ndarray, dict | None]:
+    """(n, 3) polyline (mm) and analytic curve dict (camera frame, metres) of an edge."""
+    c = BRepAdaptor_Curve(edge)
+    ts = np.linspace(c.FirstParameter(), c.LastParameter(), n)
+    poly = np.array([_xyz(c.Value(t)) for t in ts])
+    if c.GetType() == GeomAbs_Line:
+        d = poly[-1] - poly[0]
+        return poly, {"kind": "line", "origin": poly[0] * M_PER_MM, "direction": d / np.linalg.norm(d)}
+    if c.GetType() == GeomAbs_Circle:
+        circ = c.Circle()
+        return poly, {"kind": "circle", "center": _xyz(circ.Location()) * M_PER_MM,
+                      "axis": _xyz(circ.Axis().Direction()), "radius": circ.Radius() * M_PER_MM}
+    return poly, {"kind": "intersection"}

@@ -1,0 +1,65 @@
+"""Locating pin for a cylindrical hole: a pin on a flange, inserted along the hole's axis.
+
+Local frame: origin at the hole's rim centre (on the plane the hole pierces), z along the hole axis into the
+material. The pin (radius = hole radius - clearance) runs from the flange down to ``depth`` into the hole (clamped
+to the hole depth the view shows, less the clearance); the flange (radius = pin radius + ``flange``, thickness
+``wall``) sits ``clearance`` above the plane, no wider than the plane face around the hole (``land``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from build123d import Face, Plane, Solid
+
+from fixtures_design.frames import FrameMap
+from fixtures_design.model import Fixture, FixtureKind, faces_facing, local_plane, place, sample_face, unit
+from fixtures_design.references import CircleReference, ReferenceKind
+
+
+@dataclass(frozen=True)
+class PinParams:
+    """Locating pin parameters (millimetres)."""
+
+    clearance: float = 0.1  # mm: radial gap pin-hole, and the gap between flange and the hole's plane
+    depth: float = 10.0  # mm: insertion depth of the pin below the hole's rim
+    wall: float = 5.0  # mm: flange thickness
+    flange: float = 4.0  # mm: flange radius beyond the pin radius (clamped to the plane's land around the hole)
+
+
+def design_pin(ref: CircleReference, fmap: FrameMap, params: PinParams = PinParams()) -> Fixture:
+    """A locating pin for the hole ``ref`` (camera frame, metres), in the output frame of ``fmap`` (mm).
+
+    Mating faces: the pin's cylindrical side (against the hole wall) and the flange's underside (against the
+    hole's plane), each ``params.clearance`` off.
+    """
+    if ref.kind is not ReferenceKind.HOLE:
+        raise ValueError(f"edge e{ref.edge_id} is the rim of a {ref.kind.value}: a locating pin needs a hole")
+    if ref.site != "rim":
+        raise ValueError(f"edge e{ref.edge_id} is a hole's {ref.site}, not its opening rim")
+    c = params.clearance
+    r = fmap.length(ref.radius) - c
+    if r <= 0:
+        raise ValueError(f"hole e{ref.edge_id} radius {fmap.length(ref.radius):.2f} mm is not above the "
+                         f"clearance {c} mm")
+    depth = min(params.depth, fmap.length(ref.extent) - c)
+    if depth <= 0:
+        raise ValueError(f"hole e{ref.edge_id} shows only {fmap.length(ref.extent):.2f} mm of depth")
+    flange_r = min(r + params.flange, max(r + c, fmap.length(ref.land) - c))
+    z = unit(fmap.vectors(ref.axis))
+    x = np.cross(z, [1.0, 0.0, 0.0])
+    if np.linalg.norm(x) < 0.1:
+        x = np.cross(z, [0.0, 1.0, 0.0])
+    plane = local_plane(fmap.points(ref.center), x, z)
+    # Flange from z = -(c + wall) to -c; pin from -c to depth (local z points into the hole).
+    flange = Solid.make_cylinder(flange_r, params.wall, Plane.XY.offset(-(c + params.wall)))
+    pin = Solid.make_cylinder(r, depth + c, Plane.XY.offset(-c))
+    local = flange.fuse(pin).clean()
+    side = [f for f in local.faces() if f.geom_type.name == "CYLINDER" and abs(f.radius - r) < 1e-6]
+    under = faces_facing(local, [0, 0, 1], np.array([0, 0, -c]))
+    mating: list[Face] = [place(f, plane) for f in side + under]
+    pts = np.concatenate([sample_face(f) for f in mating])
+    refs = [ref.cylinder_face] * len(side) + [ref.plane_face] * len(under)
+    return Fixture(FixtureKind.PIN, place(local, plane), mating, pts, ref, fmap, params, refs,
+                   {"pin_radius_mm": r, "depth_mm": depth, "flange_radius_mm": flange_r})

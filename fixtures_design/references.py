@@ -1,0 +1,388 @@
+"""Mating references of a VB-Rep: the intersection edges a fixture may touch.
+
+Only ``intersection`` edges qualify: where two fitted surfaces meet, the reconstruction knows the part's true
+boundary. Silhouette, visibility and occluded edges are where the view stops, not where the part does, so a fixture
+never references them. Among intersection edges with ``confidence >= min_confidence``:
+
+- **dihedral**: a straight edge between two planes whose normals are perpendicular (within
+  ``SelectionConfig.perpendicular_tol_deg``) and which is convex (each face lies behind the other's plane, i.e. the
+  material is inside the wedge): a corner locator seats on it.
+- **hole** / **boss**: a circle where a cylinder meets a plane whose normal is parallel to the cylinder's axis. A
+  hole's wall lies behind the plane (on its material side) and the plane's face lies outside the circle; a boss's
+  wall lies in front of the plane (the boss's base) or behind it with the plane's face inside the circle (the boss's
+  end cap).
+
+Everything here is in the VB-Rep's camera frame (OpenCV: x right, y down, z forward), metres. Plane normals are
+oriented outwards, i.e. towards the camera: a face the camera sees has its outward normal facing the viewer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from v2c.vbrep.model import EdgeType, VBRep, VEdge, VFace
+
+
+class ReferenceKind(str, Enum):
+    """What a mating reference is: a convex dihedral edge, a hole's rim or a boss's rim."""
+
+    DIHEDRAL = "dihedral"
+    HOLE = "hole"
+    BOSS = "boss"
+
+
+class NoReferenceError(LookupError):
+    """No intersection edge qualifies as the reference a fixture needs. The message says what was needed and lists
+    every edge of the VB-Rep with its type, confidence and why it was not taken."""
+
+
+@dataclass(frozen=True)
+class SelectionConfig:
+    """Thresholds of the reference selection."""
+
+    perpendicular_tol_deg: float = 5.0  # degrees: |angle between plane normals - 90| for a dihedral edge
+    coaxial_tol_deg: float = 5.0  # degrees: angle between a cylinder's axis and its rim plane's normal
+    min_length_frac: float = 0.05  # fraction of VBRep.scale: shortest usable dihedral edge
+    straightness_frac: float = 0.01  # fraction of edge length: max polyline distance from its line (no curve)
+    convex_margin_frac: float = 0.01  # fraction of VBRep.scale: margin of the convexity side tests
+    min_arc_deg: float = 150.0  # degrees: least angular span of a rim's cylinder face (fillets span ~90)
+    min_hole_closure: float = 0.75  # fraction of directions around a hole's rim where its plane face must
+    # be found just outside it (a slot's round end, open on one side, falls short)
+    rim_probes: tuple[float, ...] = (0.1, 0.2, 0.3)  # fractions of the radius: the plane face is probed at
+    # (1 -+ each) x radius around a rim (inside vs outside the circle), to tell a hole from a boss
+
+
+@dataclass(frozen=True)
+class DihedralReference:
+    """A convex straight edge between two perpendicular planes (camera frame, metres).
+
+    start, end: (3,) the edge's end points. normals: the two faces' outward unit normals, in the order of ``faces``.
+    depths: how far each face reaches away from the edge inside its plane (metres), over the edge's span.
+    angle_deg: angle between the two normals (90 for a right-angle edge).
+    """
+
+    edge_id: int
+    confidence: float
+    faces: tuple[int, int]
+    start: np.ndarray
+    end: np.ndarray
+    normals: tuple[np.ndarray, np.ndarray]
+    depths: tuple[float, float]
+    angle_deg: float
+    kind: ReferenceKind = ReferenceKind.DIHEDRAL
+
+    @property
+    def direction(self) -> np.ndarray:
+        d = self.end - self.start
+        return d / np.linalg.norm(d)
+
+    @property
+    def length(self) -> float:
+        """Edge length (metres)."""
+        return float(np.linalg.norm(self.end - self.start))
+
+
+@dataclass(frozen=True)
+class CircleReference:
+    """A circle where a cylinder meets a plane (camera frame, metres).
+
+    center: (3,) the circle's centre (on the plane). axis: (3,) unit, from the circle into the cylinder's extent
+    (into a hole; along a boss's body). radius: metres. plane_normal: (3,) the plane's outward unit normal.
+    extent: how far the cylinder face reaches from the circle along ``axis`` (metres; a lower bound of a hole's
+    depth or a boss's length, from what the view shows). site: where on the feature the circle is: "rim" (a
+    hole's opening), "floor" (a blind hole's bottom), "base" (where a boss stands on the plane) or "cap" (a boss's
+    end face). land: for a hole's rim, the distance from the axis (metres) out to which the plane face surrounds
+    the rim all round (where a pin's flange may rest); the radius otherwise.
+    """
+
+    edge_id: int
+    confidence: float
+    kind: ReferenceKind
+    cylinder_face: int
+    plane_face: int
+    center: np.ndarray
+    axis: np.ndarray
+    radius: float
+    plane_normal: np.ndarray
+    extent: float
+    site: str = "rim"
+    land: float = 0.0
+
+
+Reference = DihedralReference | CircleReference
+
+
+@dataclass
+class _Audit:
+    """Why each edge was taken or not, for NoReferenceError messages."""
+
+    lines: list[str] = field(default_factory=list)
+
+    def add(self, e: VEdge, verdict: str) -> None:
+        kind = (e.curve or {}).get("kind", "-") if e.curve is not None else "-"
+        self.lines.append(
+            f"  e{e.id}: {EdgeType(e.type).value} conf {e.confidence:.2f} curve {kind} faces "
+            f"{tuple(int(f) for f in e.faces)}: {verdict}"
+        )
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def _ptype(face: VFace) -> str:
+    return str(face.primitive.get("type", "")).lower()
+
+
+def _face_points(face: VFace) -> np.ndarray:
+    return np.asarray(face.mesh_vertices, float).reshape(-1, 3)
+
+
+def face_samples(face: VFace, subdivisions: int = 4) -> np.ndarray:
+    """(N, 3) points spread over a face mesh's triangles (barycentric grid per triangle), camera metres."""
+    v = _face_points(face)
+    t = np.asarray(face.mesh_triangles, int).reshape(-1, 3)
+    if not len(t):
+        return v
+    k = subdivisions
+    ij = np.array([(i, j) for i in range(k + 1) for j in range(k + 1 - i)], float) / k
+    bary = np.column_stack([ij, 1.0 - ij.sum(axis=1)])
+    return np.einsum("bk,tkd->tbd", bary, v[t]).reshape(-1, 3)
+
+
+def _basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing ``axis`` to an orthonormal frame."""
+    u = np.cross(axis, [1.0, 0.0, 0.0])
+    if np.linalg.norm(u) < 0.1:
+        u = np.cross(axis, [0.0, 1.0, 0.0])
+    u = _unit(u)
+    return u, np.cross(axis, u)
+
+
+def _polar(points: np.ndarray, center: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(N, 2) coordinates of points in the plane through ``center`` normal to ``axis`` (``_basis`` axes)."""
+    u, w = _basis(axis)
+    rel = np.asarray(points, float) - center
+    return np.stack([rel @ u, rel @ w], axis=1)
+
+
+def _inside_triangles(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(P,) bool: which 2D points lie in any of the 2D triangles (T, 3, 2)."""
+    if not len(tris):
+        return np.zeros(len(points), bool)
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+
+    def cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return (p[None, :, 0] - o[None, :, 0]) * (q[:, None, 1] - o[None, :, 1]) - (
+            p[None, :, 1] - o[None, :, 1]) * (q[:, None, 0] - o[None, :, 0])
+
+    d1, d2, d3 = cross(a, b, points), cross(b, c, points), cross(c, a, points)
+    neg = (d1 < 0) | (d2 < 0) | (d3 < 0)
+    pos = (d1 > 0) | (d2 > 0) | (d3 > 0)
+    return (~(neg & pos)).any(axis=1)
+
+
+def outward_plane_normal(face: VFace, trusted: bool = False) -> np.ndarray:
+    """Unit normal of a planar face pointing out of the material (towards the camera that sees the face).
+
+    trusted: the primitive's normal is already outward (a VB-Rep read back from a STEP, whose faces face the
+    camera); otherwise it is turned towards the camera at the origin.
+    """
+    n = _unit(face.primitive["params"]["normal"])
+    if trusted:
+        return n
+    pts = _face_points(face)
+    c = pts.mean(axis=0) if len(pts) else np.asarray(face.primitive["params"]["origin"], float)
+    return -n if n @ c > 0 else n
+
+
+def _edge_line(e: VEdge, cfg: SelectionConfig) -> tuple[np.ndarray, np.ndarray] | str:
+    """End points of a straight edge, or the reason it is not straight."""
+    poly = np.asarray(e.polyline, float).reshape(-1, 3)
+    curve = e.curve or {}
+    if curve.get("kind") == "line":
+        o, d = np.asarray(curve["origin"], float), _unit(curve["direction"])
+    else:
+        if curve.get("kind") not in (None, "intersection") or len(poly) < 2:
+            return f"curve is a {curve.get('kind')}, not a line"
+        o = poly.mean(axis=0)
+        d = np.linalg.svd(poly - o)[2][0]
+        off = (poly - o) - np.outer((poly - o) @ d, d)
+        span = np.ptp((poly - o) @ d)
+        if span <= 0 or np.linalg.norm(off, axis=1).max() > cfg.straightness_frac * span:
+            return "polyline is not straight"
+    t = (poly - o) @ d
+    return o + t.min() * d, o + t.max() * d
+
+
+def _dihedral(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> DihedralReference | str:
+    f0, f1 = (vb.faces[int(i)] for i in e.faces)
+    if _ptype(f0) != "plane" or _ptype(f1) != "plane":
+        return f"faces are {_ptype(f0)}/{_ptype(f1)}, not two planes"
+    trusted = bool(vb.meta.get("outward_normals", False))
+    n0, n1 = outward_plane_normal(f0, trusted), outward_plane_normal(f1, trusted)
+    angle = float(np.degrees(np.arccos(np.clip(n0 @ n1, -1.0, 1.0))))
+    if abs(angle - 90.0) > cfg.perpendicular_tol_deg:
+        return f"planes meet at {angle:.1f} deg between normals, not perpendicular"
+    line = _edge_line(e, cfg)
+    if isinstance(line, str):
+        return line
+    a, b = line
+    length = float(np.linalg.norm(b - a))
+    if length < cfg.min_length_frac * vb.scale:
+        return f"too short ({length * 1e3:.1f} mm)"
+    p0, p1 = _face_points(f0), _face_points(f1)
+    if not len(p0) or not len(p1):
+        return "a face has no mesh: material side unknown"
+    m = 0.5 * (a + b)
+    margin = cfg.convex_margin_frac * vb.scale
+    s0, s1 = (p0.mean(axis=0) - m) @ n1, (p1.mean(axis=0) - m) @ n0
+    if not (s0 < -margin and s1 < -margin):
+        return "concave or ambiguous (a face lies in front of the other's plane)"
+    d = _unit(b - a)
+    depths = []
+    for pts in (p0, p1):
+        rel = pts - a
+        along = rel @ d
+        inside = (along >= -margin) & (along <= length + margin)
+        perp = rel[inside] - np.outer(along[inside], d)
+        depths.append(float(np.linalg.norm(perp, axis=1).max()) if inside.any() else 0.0)
+    return DihedralReference(e.id, float(e.confidence), (f0.id, f1.id), a, b, (n0, n1),
+                             (depths[0], depths[1]), angle)
+
+
+def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
+    faces = [vb.faces[int(i)] for i in e.faces]
+    types = sorted(_ptype(f) for f in faces)
+    if types != ["cylinder", "plane"]:
+        return f"faces are {'/'.join(types)}, not a cylinder and a plane"
+    cyl = next(f for f in faces if _ptype(f) == "cylinder")
+    pln = next(f for f in faces if _ptype(f) == "plane")
+    n = outward_plane_normal(pln, bool(vb.meta.get("outward_normals", False)))
+    cp = cyl.primitive["params"]
+    axis = _unit(cp["axis"])
+    tilt = float(np.degrees(np.arccos(min(1.0, abs(axis @ n)))))
+    if tilt > cfg.coaxial_tol_deg:
+        return f"cylinder axis {tilt:.1f} deg off the plane normal: not a rim circle"
+    curve = e.curve or {}
+    if curve.get("kind") == "circle":
+        center, radius = np.asarray(curve["center"], float), float(curve["radius"])
+    else:
+        # The rim circle from the primitives: the cylinder axis meets the plane.
+        o = np.asarray(cp["origin"], float)
+        po = np.asarray(pln.primitive["params"]["origin"], float)
+        center = o + axis * ((po - o) @ n) / (axis @ n)
+        radius = float(cp["radius"])
+    pc = face_samples(cyl)
+    if not len(pc) or not len(pln.mesh_triangles):
+        return "a face has no mesh: hole or boss unknown"
+    xy = _polar(pc, center, axis)
+    ang_c = np.arctan2(xy[:, 1], xy[:, 0])
+    nbins = 36
+    bins_c = np.unique(np.floor((ang_c + np.pi) / (2 * np.pi) * nbins).astype(int) % nbins)
+    span = 360.0 * len(bins_c) / nbins
+    if span < cfg.min_arc_deg:
+        return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a hole or boss"
+    h = (pc - center) @ n
+    front = bool(np.median(h) > 0)  # the wall stands in front of the plane (outside the material)
+    # Probe the plane face just inside and just outside the rim, at the angles the cylinder face covers.
+    tri = np.asarray(pln.mesh_triangles, int).reshape(-1, 3)
+    v2 = _polar(_face_points(pln), center, axis)
+    phis = (bins_c + 0.5) * 2 * np.pi / nbins - np.pi
+    ring = np.stack([np.cos(phis), np.sin(phis)], axis=1) * radius
+    inner = sum(int(_inside_triangles(ring * (1 - f), v2[tri]).sum()) for f in cfg.rim_probes)
+    outer = sum(int(_inside_triangles(ring * (1 + f), v2[tri]).sum()) for f in cfg.rim_probes)
+    if inner == 0 and outer == 0:
+        return "the plane face has no area next to the rim: hole or boss unknown"
+    inside = inner > outer  # the plane face covers the disc inside the rim (a cap, or a blind hole's floor)
+    if not front and not inside:  # a hole's rim: the plane must surround it (a slot's round end does not)
+        phi = (np.arange(nbins) + 0.5) * 2 * np.pi / nbins - np.pi
+        full = np.stack([np.cos(phi), np.sin(phi)], axis=1) * radius
+        hit = np.zeros(nbins, bool)
+        for f in cfg.rim_probes:
+            hit |= _inside_triangles(full * (1 + f), v2[tri])
+        if hit.mean() < cfg.min_hole_closure:
+            return (f"the plane surrounds only {100 * hit.mean():.0f}% of the rim: an open arc (a slot's end?), "
+                    "not a hole")
+        land = radius
+        for f in np.arange(1.05, 4.0, 0.05):
+            if not _inside_triangles(full * f, v2[tri]).all():
+                break
+            land = f * radius
+    else:
+        land = radius
+    # Wall behind the plane: a hole's rim (plane outside) or a boss's cap (plane inside). Wall in front: a
+    # boss's base (plane outside) or a blind hole's floor (plane inside).
+    kind = ReferenceKind.BOSS if front != inside else ReferenceKind.HOLE
+    into = n if front else -n
+    site = {(False, False): "rim", (True, True): "floor", (True, False): "base", (False, True): "cap"}[
+        (front, inside)]
+    extent = float(np.abs(h).max())
+    return CircleReference(e.id, float(e.confidence), kind, cyl.id, pln.id, center, into, radius, n, extent,
+                           site, land)
+
+
+def _select(vb: VBRep, wanted: set[ReferenceKind], min_confidence: float,
+            cfg: SelectionConfig) -> tuple[list[Reference], _Audit]:
+    refs: list[Reference] = []
+    audit = _Audit()
+    for e in vb.edges:
+        if EdgeType(e.type) is not EdgeType.INTERSECTION:
+            audit.add(e, "not an intersection edge: never a reference")
+            continue
+        if e.confidence < min_confidence:
+            audit.add(e, f"confidence under {min_confidence:.2f}")
+            continue
+        if len(e.faces) != 2:
+            audit.add(e, "does not join two faces")
+            continue
+        kind = (e.curve or {}).get("kind")
+        types = sorted(_ptype(vb.faces[int(i)]) for i in e.faces)
+        if types == ["plane", "plane"] and kind in ("line", "intersection", None):
+            r: Reference | str = _dihedral(vb, e, cfg)
+        elif types == ["cylinder", "plane"]:
+            r = _circle(vb, e, cfg)
+        else:
+            r = f"faces are {'/'.join(types)}: neither a plane/plane line nor a cylinder/plane circle"
+        if isinstance(r, str):
+            audit.add(e, r)
+        elif r.kind not in wanted:
+            audit.add(e, f"a {r.kind.value}, not wanted here")
+        else:
+            audit.add(e, f"qualifies as a {r.kind.value}")
+            refs.append(r)
+    refs.sort(key=lambda r: (-r.confidence, -(r.length if isinstance(r, DihedralReference) else r.radius)))
+    return refs, audit
+
+
+def select_references(
+    vbrep: VBRep,
+    kinds: Iterable[ReferenceKind | str] = tuple(ReferenceKind),
+    min_confidence: float = 0.5,
+    config: SelectionConfig = SelectionConfig(),
+) -> list[Reference]:
+    """Mating references of ``vbrep`` of the given kinds, best first (confidence, then length or radius).
+
+    min_confidence: edges with a lower confidence (in [0, 1]) are ignored. Raises :class:`NoReferenceError` when
+    none qualifies; its message lists every edge and why it was not taken.
+    """
+    wanted = {ReferenceKind(k) for k in kinds}
+    refs, audit = _select(vbrep, wanted, min_confidence, config)
+    if not refs:
+        need = " or ".join(sorted(k.value for k in wanted))
+        raise NoReferenceError(
+            f"no intersection edge with confidence >= {min_confidence:.2f} qualifies as a {need} reference; "
+            f"the VB-Rep has {len(vbrep.edges)} edges:\n" + "\n".join(audit.lines)
+        )
+    return refs
+
+
+def explain_edges(vbrep: VBRep, min_confidence: float = 0.5,
+                  config: SelectionConfig = SelectionConfig()) -> str:
+    """One line per edge saying whether (and as what) it qualifies as a mating reference."""
+    return "\n".join(_select(vbrep, set(ReferenceKind), min_confidence, config)[1].lines)

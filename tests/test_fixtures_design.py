@@ -1,0 +1,122 @@
+"""Fixtures on generated scans whose true part is known (gt/part.step, camera frame, mm).
+
+For each fixture: its mating faces lie within max(0.5 mm, 1 % of the part size) of the true face they reference
+(the true part as a whole for a nest's pocket walls), and it does not cut into the true part (OCCT common volume
+under 0.1 % of the fixture's volume). Ground-truth VB-Reps come from `fixtures_design.testing.vbrep_from_scan`;
+the last test uses the real reconstruction (`v2c.pipeline.reconstruct`, oracle segmentation).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fixtures_design import CradleParams, check_mating, design_fixture, interference
+from fixtures_design.frames import camera_mm_matrix, up_vector
+from fixtures_design.model import transformed
+from fixtures_design.testing import synthetic_scan, true_faces, vbrep_from_scan
+
+#: (family, seed) of the generated scans and the fixtures each one gets (seeds chosen for the needed feature).
+CASES = [("block", 0, "corner"), ("block", 0, "nest"), ("bracket", 0, "pin"), ("bracket", 1, "corner"),
+         ("shaft", 0, "cradle"), ("shaft", 2, "cradle")]
+
+
+@pytest.fixture(scope="module")
+def scans(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, int], tuple]:
+    out = tmp_path_factory.mktemp("fixture_scans")
+    res = {}
+    for family, seed in sorted({(f, s) for f, s, _ in CASES}):
+        path = synthetic_scan(out, family, seed)
+        vb, truth_cam = vbrep_from_scan(path)
+        res[(family, seed)] = (path, vb, truth_cam)
+    return res
+
+
+def _measure(vb, truth_cam, fx, points_per_face: int = 40):
+    m = camera_mm_matrix(fx.fmap)
+    truth = transformed(truth_cam, m)
+    mating = check_mating(fx, truth, true_faces(vb, truth_cam, m), max_points_per_face=points_per_face)
+    common, frac = interference(fx, truth)
+    return mating, common, frac
+
+
+@pytest.mark.parametrize("family,seed,kind", CASES)
+def test_fixture_mates_with_the_true_part_and_does_not_cut_it(scans, family, seed, kind):
+    _, vb, truth_cam = scans[(family, seed)]
+    fx = design_fixture(vb, kind, frame="part")
+    tol = max(0.5, 0.01 * vb.scale * 1000.0)
+    mating, common, frac = _measure(vb, truth_cam, fx, 8 if kind == "nest" else 40)
+    assert fx.solid.is_valid and fx.volume_mm3 > 1000.0
+    assert mating.max < tol, (kind, mating)
+    # The clearance is the designed gap: every mating face sits about that far from its true face.
+    clearance = fx.params.clearance
+    assert mating.median == pytest.approx(clearance, abs=0.25)
+    assert frac < 1e-3, (kind, common, fx.volume_mm3)
+    assert len(fx.mating_faces) == len(fx.mating_refs) >= 1
+
+
+def test_corner_in_camera_and_part_frames_is_the_same_block(scans):
+    _, vb, truth_cam = scans[("block", 0)]
+    a = design_fixture(vb, "corner", frame="part")
+    b = design_fixture(vb, "corner", frame="camera")
+    assert a.reference.edge_id == b.reference.edge_id
+    assert a.volume_mm3 == pytest.approx(b.volume_mm3, rel=1e-9)
+    # The camera-frame block, moved by the camera -> part map, lands on the part-frame block.
+    m = camera_mm_matrix(a.fmap)
+    va = np.array(sorted(np.round([tuple(v) for v in a.solid.vertices()], 6).tolist()))
+    vb_ = np.array([tuple(v) for v in transformed(b.solid, m).vertices()])
+    vb_ = np.array(sorted(np.round(vb_, 6).tolist()))
+    assert va.shape == vb_.shape == (12, 3)
+    assert np.abs(va - vb_).max() < 1e-5
+    for fx in (a, b):
+        mating, _, frac = _measure(vb, truth_cam, fx)
+        assert mating.max < 0.3 and frac == 0.0
+    # In the part frame the ground is Z = 0 and the part's up axis is +Z.
+    assert np.allclose(up_vector(vb, a.fmap), [0, 0, 1])
+
+
+def test_v_cradle_touches_along_two_lines(scans):
+    _, vb, truth_cam = scans[("shaft", 0)]
+    fx = design_fixture(vb, "cradle", CradleParams(style="V", clearance=0.3))
+    m = camera_mm_matrix(fx.fmap)
+    from fixtures_design.verify import distances_mm
+
+    d = distances_mm(fx.contact_points, transformed(truth_cam, m))
+    assert np.abs(d - 0.3).max() < 0.01
+    assert interference(fx, transformed(truth_cam, m))[1] == 0.0
+    assert len(fx.mating_faces) == 2
+
+
+def test_pin_fits_the_hole(scans):
+    _, vb, _ = scans[("bracket", 0)]
+    fx = design_fixture(vb, "pin")
+    ref = fx.reference
+    assert fx.notes["pin_radius_mm"] == pytest.approx(1000 * ref.radius - fx.params.clearance)
+    assert 0 < fx.notes["depth_mm"] <= fx.params.depth
+    assert fx.notes["flange_radius_mm"] <= 1000 * ref.land
+
+
+def test_cradle_refuses_an_upright_cylinder():
+    from fixtures_design import NoReferenceError
+    from v2c.vbrep.examples import cylinder_upright
+
+    with pytest.raises(NoReferenceError, match="90 deg off the horizontal"):
+        design_fixture(cylinder_upright(), "cradle")
+
+
+def test_corner_on_the_reconstruction_of_a_generated_scan(scans):
+    """The real pipeline (oracle segmentation) on a generated block: its corner locator still mates."""
+    from v2c.pipeline import reconstruct
+
+    path, vb_true, truth_cam = scans[("bracket", 1)]
+    vb = reconstruct(Path(path), segmentation="oracle")
+    fx = design_fixture(vb, "corner", min_confidence=0.5)
+    m = camera_mm_matrix(fx.fmap)
+    truth = transformed(truth_cam, m)
+    mating = check_mating(fx, truth)
+    common, frac = interference(fx, truth)
+    tol = max(0.5, 0.01 * vb_true.scale * 1000.0)
+    assert mating.max < tol, mating
+    assert frac < 1e-3, common

@@ -1,0 +1,87 @@
+"""Instance extraction from label + boundary maps (v2c.segment.instances) on synthetic maps with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from v2c.segment.data import boundary_map
+from v2c.segment.instances import InstanceConfig, extract_instances
+
+
+def _faces_and_labels() -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
+    """A 60 x 80 map: background frame, face 1 (label 1) left, face 2 (label 7) right, face 3 (label 3) bottom,
+    face 4 (label 1, same as face 1) a square inside face 2's column range but separated by boundaries."""
+    faces = np.zeros((60, 80), np.uint16)
+    faces[5:35, 5:40] = 1
+    faces[5:35, 40:75] = 2
+    faces[35:55, 5:75] = 3
+    faces[12:24, 50:62] = 4
+    lab_of = {0: 0, 1: 1, 2: 7, 3: 3, 4: 1}
+    labels = np.vectorize(lab_of.get)(faces).astype(np.uint8)
+    return faces, labels, lab_of
+
+
+def _match(seg_inst: np.ndarray, faces: np.ndarray) -> dict[int, int]:
+    """Map each gt face to the instance covering it, asserting a one-to-one exact match."""
+    out = {}
+    for f in np.unique(faces[faces > 0]):
+        ids = np.unique(seg_inst[faces == f])
+        assert len(ids) == 1, f"face {f} split into instances {ids}"
+        out[int(f)] = int(ids[0])
+    assert len(set(out.values())) == len(out), "two faces share an instance"
+    assert np.array_equal(seg_inst > 0, faces > 0)
+    return out
+
+
+def test_exact_masks_from_labels_and_boundaries() -> None:
+    faces, labels, lab_of = _faces_and_labels()
+    seg = extract_instances(labels, boundary_map(faces))
+    m = _match(seg.instances, faces)
+    assert seg.num_instances == 4
+    for f, i in m.items():
+        assert seg.labels[i] == lab_of[f]
+        assert seg.scores[i] == 1.0
+    assert seg.labels[0] == 0 and seg.method == "learned"
+
+
+def test_label_noise_without_boundary_is_merged() -> None:
+    faces, labels, _ = _faces_and_labels()
+    noisy = labels.copy()
+    noisy[8:20, 8:20] = 4  # a 144-px patch of the wrong label inside face 1, no boundary around it
+    seg = extract_instances(noisy, boundary_map(faces))
+    m = _match(seg.instances, faces)
+    i1 = m[1]
+    assert seg.labels[i1] == 1  # majority label of the merged instance
+    area1 = int((faces == 1).sum())
+    assert abs(seg.scores[i1] - (area1 - 144) / area1) < 1e-6
+
+
+def test_small_specks_are_absorbed_and_probabilities_label() -> None:
+    faces, labels, _ = _faces_and_labels()
+    bnd = boundary_map(faces)
+    noisy = labels.copy()
+    noisy[40:43, 20:23] = 9  # a 9-px speck enclosed by a predicted boundary ring
+    bnd2 = bnd.copy()
+    bnd2[39:44, 19:24] = True
+    bnd2[40:43, 20:23] = False
+    probs = np.zeros((18,) + faces.shape, np.float32)
+    probs[noisy.astype(np.int64), np.arange(60)[:, None], np.arange(80)[None, :]] = 0.8
+    probs[0] += 0.2 * (noisy != 0)
+    seg = extract_instances(noisy, bnd2, probs=probs, cfg=InstanceConfig(min_area_px=24))
+    m = _match(seg.instances, faces)
+    assert seg.labels[m[3]] == 3
+    # background probability is excluded and the rest renormalised: 0.8 of the face pixels -> score ~1 minus speck
+    area3 = int((faces == 3).sum())
+    assert abs(seg.scores[m[3]] - (area3 - 9) / area3) < 1e-5
+
+
+def test_region_restricts_instances() -> None:
+    faces, labels, _ = _faces_and_labels()
+    region = np.zeros(faces.shape, bool)
+    region[:, :40] = True
+    seg = extract_instances(labels, boundary_map(faces), region=region)
+    assert not (seg.instances[:, 40:] > 0).any()
+    left = faces.copy()
+    left[:, 40:] = 0
+    assert np.array_equal(seg.instances > 0, left > 0)
+    assert seg.num_instances == 2

@@ -1,0 +1,123 @@
+"""Scripting API: a scan folder -> STEP (+ VB-Rep JSON and figure), as `v2c to-step` does it for one scan.
+
+    >>> from v2c.api import scan_to_step
+    >>> result = scan_to_step("scans/part_01")          # writes scans/part_01/reconstruction.step
+    >>> result.step, result.report.n_faces
+
+`scan_to_step` = `v2c.scan.load_scan` -> `v2c.pipeline.reconstruct` -> `exporters.step.write` (millimetres,
+part frame by default), then the extras next to the STEP: ``<stem>.vbrep.json`` (the VB-Rep) and
+``<stem>.png`` (the result figure of `exporters.figure`). Every file is written atomically (temporary file in
+the same folder, then renamed), so an interrupted run never leaves a half-written STEP.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from exporters.step import StepReport
+    from v2c.scan import Scan
+    from v2c.vbrep.model import VBRep
+
+#: File name of the STEP written into the scan folder when no output is given.
+DEFAULT_STEP_NAME = "reconstruction.step"
+#: Files whose presence makes a folder a scan folder (SCAN_FORMAT.md).
+SCAN_MARKERS = ("camera.json", "depth.png", "depth.npy", "color.png", "color.jpg")
+
+
+@dataclass
+class ScanExport:
+    """What `scan_to_step` wrote for one scan. seconds: wall time per step ("load", "reconstruct", "step",
+    "extras"); warnings: non-fatal problems (faces rebuilt from their mesh outline, a missing figure, ...)."""
+
+    scan: Path
+    step: Path
+    report: StepReport
+    vbrep_json: Path | None = None
+    figure: Path | None = None
+    warnings: list[str] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def is_scan_dir(path: Path) -> bool:
+    """True when ``path`` is a folder holding any of the scan files of SCAN_FORMAT.md."""
+    return path.is_dir() and any((path / m).exists() for m in SCAN_MARKERS)
+
+
+def expand_scans(paths: list[str | Path]) -> list[Path]:
+    """Scan folders from command-line paths: a scan folder stays itself; a folder that is not a scan but holds
+    scan folders becomes those (sorted by name); anything else is kept, so loading it reports the problem."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir() and not is_scan_dir(p):
+            subs = sorted(q for q in p.iterdir() if is_scan_dir(q))
+            if subs:
+                out.extend(subs)
+                continue
+        out.append(p)
+    return out
+
+
+def extras_paths(step: Path) -> tuple[Path, Path]:
+    """(VB-Rep JSON, figure PNG) written next to a STEP file: ``<stem>.vbrep.json`` and ``<stem>.png``."""
+    return step.with_name(step.stem + ".vbrep.json"), step.with_name(step.stem + ".png")
+
+
+def reconstruct(scan: Scan | str | Path, segmentation: str = "learned", ablation: str = "full",
+                roi: str | tuple[int, int, int, int] | None = None) -> VBRep:
+    """The VB-Rep of a scan (a loaded `Scan` or a folder) by `v2c.pipeline.reconstruct`; camera frame, m."""
+    from v2c import pipeline
+    from v2c.scan import load_scan
+
+    if isinstance(scan, (str, Path)):
+        scan = load_scan(scan, roi=roi)
+    return pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation)
+
+
+def scan_to_step(
+    scan_dir: str | Path,
+    out: str | Path | None = None,
+    frame: str = "part",
+    segmentation: str = "learned",
+    extras: bool = True,
+    roi: str | tuple[int, int, int, int] | None = None,
+    ablation: str = "full",
+) -> ScanExport:
+    """Reconstruct one scan folder and write its STEP (default ``SCAN/reconstruction.step``) and, unless
+    ``extras`` is False, the VB-Rep JSON and figure next to it. Raises `v2c.scan.ScanError` for a bad scan and
+    whatever the pipeline raises; on any error no STEP is written."""
+    from exporters import step as step_export
+    from exporters.figure import result_figure
+    from v2c import pipeline
+    from v2c.scan import load_scan
+
+    scan_dir = Path(scan_dir)
+    out = Path(out) if out is not None else scan_dir / DEFAULT_STEP_NAME
+    seconds: dict[str, float] = {}
+    t = time.perf_counter()
+    scan = load_scan(scan_dir, roi=roi)
+    seconds["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    vbrep, seg, _ = pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation,
+                                         return_stages=True)
+    seconds["reconstruct"] = time.perf_counter() - t
+    out.parent.mkdir(parents=True, exist_ok=True)
+    t = time.perf_counter()
+    report = step_export.write(vbrep, out, frame=frame, product=scan_dir.name)
+    seconds["step"] = time.perf_counter() - t
+    result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
+                        seconds=seconds)
+    if extras:
+        t = time.perf_counter()
+        json_path, png_path = extras_paths(out)
+        result.vbrep_json = vbrep.save(json_path)
+        try:
+            result_figure(scan, seg.instances, vbrep, png_path)  # written atomically by exporters.figure
+            result.figure = png_path
+        except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
+            result.warnings.append(f"figure not written ({type(exc).__name__}: {exc})")
+        seconds["extras"] = time.perf_counter() - t
+    return result

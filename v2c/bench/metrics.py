@@ -1,0 +1,430 @@
+"""Every metric of ../shared/BENCHMARK.md on one synthetic scan and its reconstructed VB-Rep.
+
+`scan_metrics(vbrep, scan)` returns one flat dict per scan (the run averages them over scans):
+
+- ``chamfer`` / ``chamfer_all``: 0.5 * (mean over R of the distance to G + mean over G of the distance to R),
+  divided by the ground-truth part size. G: 20,000 clean-depth points of the part's pixels (`gt_points` of
+  v2c.bench.vbrep, seeded); R: 20,000 points drawn area-uniformly on the face meshes, keeping (``chamfer``) those
+  the camera sees, i.e. whose camera ray meets no triangle of the reconstruction before the point (exact ray
+  cast, `visible_points`), or (``chamfer_all``) all of them.
+- face matching: the reconstruction is rendered from the scan's camera with a z-buffer (`render_vbrep`: one ray
+  per pixel centre, the nearest triangle wins), giving each predicted face its pixel set; predicted faces and
+  analytic ground-truth faces are paired greedily by largest IoU (`v2c.bench.segmentation.match_faces`) at IoU
+  >= 0.5 (``precision``, ``recall``, ``recall_all``) and >= 0.75 (``..._75``). Precision's denominator: predicted
+  faces covering >= 1 pixel, less those lying mostly on non-analytic ground truth (left out as those faces are);
+  recall's: ground-truth faces of >= 50 pixels; ``recall_all``: every analytic ground-truth face seen.
+- ``type_accuracy`` / ``axis_accuracy`` over the IoU-0.5 pairs: same primitive type; same axis class, the
+  predicted class read from the predicted axis against meta.json ``axes_cam`` within 1.5 degrees
+  (`v2c.labels.axis_class`), the ground-truth class from primitives.json ``axis_label`` (spheres: none).
+- ``alignment``: over IoU-0.5 pairs where both faces have an axis (plane normal; cylinder, cone, torus axis),
+  min(|a - b|, |a + b|) of the unit axes; mean over the pairs.
+- ``depth_error``: median |rendered depth - clean depth| over part pixels both cover, / part size.
+- ``edge_type_accuracy``: `v2c.bench.vbrep.edge_type_accuracy` (the ground-truth rule of v2c.vbrep.gt_types).
+- ``runtime``: the stage timings of the VB-Rep's meta (seconds), merged with the caller's.
+
+`vbrep_from_gt(scan)` builds the ideal VB-Rep of a synthetic scan (faces = the ground-truth primitives, meshes
+through the pixel corners of each face's region, on the true surface): the floor of every metric.
+
+Units: metres and the camera frame (OpenCV) inside; lengths in the results are divided by the part size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from v2c.bench.segmentation import match_faces
+from v2c.bench.vbrep import edge_type_accuracy, gt_points, part_size
+from v2c.labels import AXIS_ALIGN_TOL_DEG, IGNORE, axis_class
+from v2c.vbrep.mesh import sample_surface
+from v2c.vbrep.model import VBRep, VFace
+from v2c.vbrep.raycast import intersect, pixel_rays
+
+ANALYTIC_TYPES = ("plane", "cylinder", "cone", "sphere", "torus")
+
+
+@dataclass(frozen=True)
+class MetricConfig:
+    """Thresholds of BENCHMARK.md and of this module's geometric tests."""
+
+    n_points: int = 20000  # points in G and in R (BENCHMARK.md)
+    seed: int = 0  # seeds G's and R's random draws
+    iou_thresholds: tuple[float, ...] = (0.5, 0.75)  # face-matching IoU; the first one feeds type/axis/alignment
+    min_gt_px: int = 50  # pixels: ground-truth faces under this count only in recall_all
+    axis_tol_deg: float = AXIS_ALIGN_TOL_DEG  # degrees: axis class tolerance against the part axes
+    ignore_share: float = 0.5  # predicted faces with more of their pixels on non-analytic gt faces are left out
+    visibility_eps_rel: float = 1e-4  # part sizes: a sample counts as seen when no triangle is nearer by more
+    max_draw_rounds: int = 8  # rounds of drawing R candidates until n_points visible ones are found
+    edge_tol_px: float = 3.0  # pixels: reach of an edge-type record (v2c.bench.vbrep.edge_type_accuracy)
+    edge_types: bool = True  # compute edge-type accuracy (needs the scan's exact primitives)
+
+
+# ----------------------------------------------------------------------------------------------- rendering
+
+
+def vbrep_mesh(vbrep: VBRep) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All face meshes in one: vertices (n, 3) camera metres, triangles (m, 3) int64, face index (m,) int64 (the
+    position in ``vbrep.faces``)."""
+    verts, tris, owner, off = [], [], [], 0
+    for k, f in enumerate(vbrep.faces):
+        t = np.asarray(f.mesh_triangles, np.int64).reshape(-1, 3)
+        if len(t) == 0:
+            continue
+        v = np.asarray(f.mesh_vertices, float).reshape(-1, 3)
+        verts.append(v)
+        tris.append(t + off)
+        owner.append(np.full(len(t), k, np.int64))
+        off += len(v)
+    if not verts:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    return np.concatenate(verts), np.concatenate(tris), np.concatenate(owner)
+
+
+class MeshCaster:
+    """First-hit ray casts against a triangle mesh (trimesh + Embree), rays from the camera centre.
+
+    ``cast(directions)`` returns, per ray ``x(t) = t * d``, the hit triangle (-1 = none) and the ray parameter t
+    of the hit (inf = none): with ``d`` = a pixel ray of z component 1, t is the depth z (metres); with ``d`` =
+    a point p, t < 1 means something lies in front of p.
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
+        self.vertices = np.asarray(vertices, float)
+        self.triangles = np.asarray(triangles, np.int64)
+        self._intersector = None
+        if len(self.triangles):
+            import trimesh
+
+            mesh = trimesh.Trimesh(self.vertices, self.triangles, process=False, validate=False)
+            try:
+                from trimesh.ray.ray_pyembree import RayMeshIntersector
+            except ImportError:  # pure-numpy fallback (slow, same answers)
+                from trimesh.ray.ray_triangle import RayMeshIntersector
+            self._intersector = RayMeshIntersector(mesh)
+            p0, p1, p2 = (self.vertices[self.triangles[:, k]] for k in range(3))
+            self._normal = np.cross(p1 - p0, p2 - p0)
+            self._offset = np.einsum("ij,ij->i", self._normal, p0)
+
+    def cast(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = np.asarray(directions, float).reshape(-1, 3)
+        tri = np.full(len(d), -1, np.int64)
+        t = np.full(len(d), np.inf)
+        if self._intersector is None or len(d) == 0:
+            return tri, t
+        tri = np.asarray(self._intersector.intersects_first(np.zeros_like(d), d), np.int64)
+        hit = tri >= 0
+        nd = np.einsum("ij,ij->i", self._normal[tri[hit]], d[hit])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            th = self._offset[tri[hit]] / nd
+        th = np.where(np.isfinite(th) & (th > 0), th, np.inf)
+        t[hit] = th
+        tri[np.flatnonzero(hit)[~np.isfinite(th)]] = -1
+        return tri, t
+
+
+@dataclass
+class Rendering:
+    """The reconstruction seen from the scan's camera: face (H, W) int64 index into ``vbrep.faces`` of the nearest
+    triangle at each pixel centre (-1 = none); depth (H, W) float64 z depth in metres (0 = none)."""
+
+    face: np.ndarray
+    depth: np.ndarray
+
+    def pixel_counts(self, n_faces: int) -> np.ndarray:
+        """(n_faces,) pixels each face covers."""
+        f = self.face[self.face >= 0]
+        return np.bincount(f, minlength=n_faces)[:n_faces]
+
+
+def render_vbrep(vbrep: VBRep, caster: MeshCaster | None = None) -> Rendering:
+    """Render the VB-Rep's face meshes from its camera (``vbrep.K``, ``vbrep.image_size``) with a z-buffer: one
+    ray per pixel centre (u, v integers), the nearest triangle wins, whatever its orientation."""
+    w, h = (int(x) for x in vbrep.image_size)
+    if caster is None:
+        V, T, _ = vbrep_mesh(vbrep)
+        caster = MeshCaster(V, T)
+    owner = vbrep_mesh(vbrep)[2]
+    uu, vv = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    rays = pixel_rays(np.stack([uu.ravel(), vv.ravel()], 1), vbrep.K)
+    tri, t = caster.cast(rays)
+    face = np.where(tri >= 0, owner[np.maximum(tri, 0)] if len(owner) else -1, -1)
+    depth = np.where(tri >= 0, t, 0.0)
+    return Rendering(face.reshape(h, w), depth.reshape(h, w))
+
+
+def visible_points(points: np.ndarray, caster: MeshCaster, eps: float) -> np.ndarray:
+    """(N,) bool: the camera sees each camera-frame point, i.e. no triangle crosses its ray more than ``eps``
+    metres before it."""
+    p = np.asarray(points, float).reshape(-1, 3)
+    _, t = caster.cast(p)
+    dist = np.linalg.norm(p, axis=1)
+    return ~((t < 1.0) & ((1.0 - t) * dist > eps))
+
+
+# ------------------------------------------------------------------------------------------------- chamfer
+
+
+def reconstruction_points(vbrep: VBRep, n: int, rng: np.random.Generator, caster: MeshCaster | None = None,
+                          visible_only: bool = True, eps: float = 0.0, max_rounds: int = 8) -> np.ndarray:
+    """R: ``n`` points (camera metres) drawn area-uniformly on the face meshes; with ``visible_only`` only those
+    the camera sees (draws again until ``n`` are found or ``max_rounds`` rounds are spent)."""
+    V, T, _ = vbrep_mesh(vbrep)
+    if len(T) == 0:
+        return np.zeros((0, 3))
+    if not visible_only:
+        return sample_surface(V, T, n, rng)
+    caster = caster or MeshCaster(V, T)
+    found: list[np.ndarray] = []
+    have, share = 0, 1.0
+    for _ in range(max_rounds):
+        m = int(min(20 * n, max(256, 1.2 * (n - have) / max(share, 0.05))))
+        cand = sample_surface(V, T, m, rng)
+        vis = visible_points(cand, caster, eps)
+        share = max(float(vis.mean()), 1e-3)
+        found.append(cand[vis])
+        have += int(vis.sum())
+        if have >= n:
+            break
+    return np.concatenate(found)[:n]
+
+
+def chamfer_distance(R: np.ndarray, G: np.ndarray, size: float) -> float:
+    """0.5 * (mean over R of the distance to the nearest point of G + mean over G of the distance to R) / size;
+    inf when either set is empty."""
+    if len(R) == 0 or len(G) == 0:
+        return float("inf")
+    d_rg = cKDTree(G).query(R)[0]
+    d_gr = cKDTree(R).query(G)[0]
+    return float(0.5 * (d_rg.mean() + d_gr.mean()) / size)
+
+
+# --------------------------------------------------------------------------------------- face matching & co
+
+
+def _gt_tables(scan: Any) -> tuple[dict[int, dict], np.ndarray]:
+    """faces.png value -> primitives.json entry, and the faces.png map with non-analytic faces set to 0."""
+    gt = scan.gt
+    prims = {int(p.get("pixel_value", int(p.get("id", k)) + 1)): p for k, p in enumerate(gt.primitives)}
+    faces = np.asarray(gt.faces).astype(np.int64)
+    non = np.zeros(int(faces.max()) + 1, bool)
+    for v, p in prims.items():
+        if v < len(non) and p.get("type") not in ANALYTIC_TYPES:
+            non[v] = True
+    labels = np.asarray(gt.labels)
+    nonanalytic = non[faces] | ((faces > 0) & (labels == IGNORE))
+    return prims, np.where(nonanalytic, 0, faces)
+
+
+def _axis(prim: dict) -> np.ndarray | None:
+    p = prim.get("params", {})
+    a = p.get("normal") if prim.get("type") == "plane" else p.get("axis")
+    if a is None or prim.get("type") == "sphere":
+        return None
+    a = np.asarray(a, float)
+    return a / np.linalg.norm(a)
+
+
+def axis_alignment(a: np.ndarray, b: np.ndarray) -> float:
+    """min(|a - b|, |a + b|) of two unit axes (sign-free; 0 = parallel, sqrt(2) = orthogonal)."""
+    return float(min(np.linalg.norm(a - b), np.linalg.norm(a + b)))
+
+
+def predicted_axis_class(face: VFace, axes_cam: np.ndarray, tol_deg: float = AXIS_ALIGN_TOL_DEG) -> str | None:
+    """Axis class (X, Y, Z, U) of a predicted face read from its primitive's axis against the ground-truth part
+    axes (rows X, Y, Z, camera frame) within ``tol_deg`` degrees; None for spheres and axis-less faces."""
+    a = _axis(face.primitive)
+    return None if a is None else axis_class(a, axes_cam, tol_deg).value
+
+
+def face_matching(vbrep: VBRep, scan: Any, rendering: Rendering, config: MetricConfig = MetricConfig()
+                  ) -> dict[str, Any]:
+    """Precision / recall at every IoU threshold of ``config``, and type accuracy, axis accuracy and primitive
+    alignment over the pairs at the first threshold (module docstring). Counts are returned too."""
+    prims, gt_map = _gt_tables(scan)
+    faces_png = np.asarray(scan.gt.faces).astype(np.int64)
+    pred_map = rendering.face + 1  # 0 = nothing rendered
+    n_faces = len(vbrep.faces)
+    counts = rendering.pixel_counts(n_faces)
+    on_non = np.bincount(rendering.face[(rendering.face >= 0) & (faces_png > 0) & (gt_map == 0)],
+                         minlength=n_faces)[:n_faces]
+    counted = np.flatnonzero((counts > 0) & (on_non <= config.ignore_share * counts)) + 1
+    g_area = np.bincount(gt_map.ravel(), minlength=1)
+    gt_all = np.flatnonzero(g_area > 0)
+    gt_all = gt_all[gt_all > 0]
+    gt_big = gt_all[g_area[gt_all] >= config.min_gt_px]
+    nan = float("nan")
+    out: dict[str, Any] = {"n_pred": len(counted), "n_pred_rendered": int((counts > 0).sum()),
+                           "n_gt": len(gt_big), "n_gt_all": len(gt_all)}
+    counted_set, big_set = set(counted.tolist()), set(gt_big.tolist())
+    first_pairs: list[tuple[int, int, float]] = []
+    for k, thr in enumerate(config.iou_thresholds):
+        pairs = match_faces(pred_map, gt_map, thr) if gt_map.any() and pred_map.any() else []
+        if k == 0:
+            first_pairs = pairs
+        suffix = "" if k == 0 else f"_{round(thr * 100):d}"
+        mp = sum(1 for a, _, _ in pairs if a in counted_set)
+        mg = sum(1 for _, b, _ in pairs if b in big_set)
+        out["precision" + suffix] = mp / len(counted) if len(counted) else nan
+        out["recall" + suffix] = mg / len(gt_big) if len(gt_big) else nan
+        out["recall_all" + suffix] = len(pairs) / len(gt_all) if len(gt_all) else nan
+        out["n_pairs" + suffix] = len(pairs)
+    axes_cam = np.asarray(scan.gt.meta["axes_cam"], float)
+    type_ok = axis_ok = 0
+    align: list[float] = []
+    for a, b, _ in first_pairs:
+        pf, gp = vbrep.faces[a - 1], prims[b]
+        type_ok += int(pf.primitive.get("type") == gp.get("type"))
+        g_cls = gp.get("axis_label") if gp.get("type") != "sphere" else None
+        axis_ok += int(predicted_axis_class(pf, axes_cam, config.axis_tol_deg) == g_cls)
+        pa, ga = _axis(pf.primitive), _axis(gp)
+        if pa is not None and ga is not None:
+            align.append(axis_alignment(pa, ga))
+    n = len(first_pairs)
+    out.update({
+        "type_accuracy": type_ok / n if n else nan, "axis_accuracy": axis_ok / n if n else nan,
+        "type_ok": type_ok, "axis_ok": axis_ok,
+        "alignment": float(np.mean(align)) if align else nan, "n_align_pairs": len(align),
+    })
+    return out
+
+
+def depth_error(rendering: Rendering, scan: Any) -> tuple[float, float]:
+    """Median |rendered depth - clean depth| over the part pixels (gt faces > 0, clean depth > 0) both cover,
+    divided by the part size; and the share of part pixels the rendering covers."""
+    clean = np.asarray(scan.gt.depth_clean, float)
+    part = (np.asarray(scan.gt.faces) > 0) & (clean > 0)
+    both = part & (rendering.depth > 0)
+    cover = float(both.sum() / part.sum()) if part.any() else float("nan")
+    if not both.any():
+        return float("nan"), cover
+    return float(np.median(np.abs(rendering.depth[both] - clean[both])) / part_size(scan)), cover
+
+
+def runtime_split(vbrep: VBRep, extra: dict[str, float] | None = None) -> dict[str, float]:
+    """Seconds per stage: the VB-Rep's ``meta["timings"]`` (segment, fit, vbrep, total) updated with ``extra``
+    (e.g. load, step); fit sub-stages as ``fit.<name>``."""
+    out = {k: float(v) for k, v in (vbrep.meta.get("timings") or {}).items()}
+    out.update({f"fit.{k}": float(v) for k, v in (vbrep.meta.get("fit_timings") or {}).items()})
+    out.update({k: float(v) for k, v in (extra or {}).items()})
+    return out
+
+
+# ------------------------------------------------------------------------------------------------- one scan
+
+
+def scan_metrics(vbrep: VBRep, scan: Any, config: MetricConfig = MetricConfig(),
+                 timings: dict[str, float] | None = None) -> dict[str, Any]:
+    """Every BENCHMARK.md metric of one VB-Rep against its synthetic scan's ground truth (module docstring).
+    Lengths are divided by the ground-truth part size. ValueError without ground truth."""
+    if getattr(scan, "gt", None) is None:
+        raise ValueError(f"{getattr(scan, 'path', 'scan')}: metrics need gt/ (a synthetic scan)")
+    size = part_size(scan)
+    V, T, _ = vbrep_mesh(vbrep)
+    caster = MeshCaster(V, T)
+    rendering = render_vbrep(vbrep, caster)
+    rng = np.random.default_rng(config.seed)
+    G = gt_points(scan, config.n_points, config.seed)
+    eps = config.visibility_eps_rel * size
+    R_vis = reconstruction_points(vbrep, config.n_points, rng, caster, True, eps, config.max_draw_rounds)
+    R_all = reconstruction_points(vbrep, config.n_points, rng, caster, False)
+    out: dict[str, Any] = {
+        "chamfer": chamfer_distance(R_vis, G, size),
+        "chamfer_all": chamfer_distance(R_all, G, size),
+        "n_visible_points": len(R_vis),
+        "n_faces": len(vbrep.faces),
+    }
+    out.update(face_matching(vbrep, scan, rendering, config))
+    out["depth_error"], out["depth_coverage"] = depth_error(rendering, scan)
+    if config.edge_types:
+        try:
+            et = edge_type_accuracy(vbrep, scan, tol_px=config.edge_tol_px)
+            out["edge_type_accuracy"] = et["accuracy"]
+            out["edge_type"] = et
+        except Exception as exc:  # noqa: BLE001 - another stage's metric must not hide the others; reported
+            out["edge_type_accuracy"] = float("nan")
+            out["edge_type_error"] = f"{type(exc).__name__}: {exc}"
+    out["runtime"] = runtime_split(vbrep, timings)
+    return out
+
+
+# ---------------------------------------------------------------------------------- ground-truth VB-Rep
+
+
+def _corner_mesh(region: np.ndarray, depth: np.ndarray, prim: dict | None, K: np.ndarray,
+                 window: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh of one pixel region: every pixel becomes the quad of its four corners (u +- 0.5, v +- 0.5), each corner
+    at the depth of the primitive's crossing nearest the mean clean depth of the region's pixels around it (that
+    mean itself without a primitive or a crossing). Pixel centres fall strictly inside their quads, so rendering
+    the mesh gives back exactly the region."""
+    h, w = region.shape
+    vs, us = np.nonzero(region)
+    if len(us) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    dsum = np.zeros((h + 1, w + 1))
+    dcnt = np.zeros((h + 1, w + 1))
+    z = np.where(region, depth, 0.0)
+    m = region.astype(float)
+    for dv in (0, 1):
+        for du in (0, 1):
+            dsum[dv:dv + h, du:du + w] += z
+            dcnt[dv:dv + h, du:du + w] += m
+    used = dcnt > 0
+    cv, cu = np.nonzero(used)
+    prior = dsum[cv, cu] / dcnt[cv, cu]
+    rays = pixel_rays(np.stack([cu - 0.5, cv - 0.5], 1).astype(float), K)
+    zc = prior.copy()
+    if prim is not None:
+        hits = intersect(prim, rays, window).depths
+        dd = np.abs(hits - prior[:, None])
+        ok = np.isfinite(dd).any(1)
+        k = np.argmin(np.where(np.isfinite(dd), dd, np.inf), 1)
+        best = hits[np.arange(len(hits)), k]
+        close = ok & (np.abs(best - prior) < 0.05 * prior)  # a crossing of the same sheet, not a far one
+        zc[close] = best[close]
+    idx = np.full((h + 1, w + 1), -1, np.int64)
+    idx[cv, cu] = np.arange(len(cv))
+    a, b, c, d = idx[vs, us], idx[vs, us + 1], idx[vs + 1, us + 1], idx[vs + 1, us]
+    tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return rays * zc[:, None], tris
+
+
+def vbrep_from_gt(scan: Any, tilt: dict[int, tuple[np.ndarray, float]] | None = None) -> VBRep:
+    """The ideal VB-Rep of a synthetic scan: one face per analytic ground-truth face seen in gt/faces.png, its
+    primitive the exact one of primitives.json, its mesh the pixel-corner mesh of its pixels on that surface
+    (`_corner_mesh`). ``tilt`` = {faces.png value: (rotation axis, angle in radians)} rotates that face's
+    primitive axis (normal) about its origin, leaving the mesh, to test alignment. No edges; camera frame."""
+    gt = scan.gt
+    prims, gt_map = _gt_tables(scan)
+    clean = np.asarray(gt.depth_clean, float)
+    K = np.asarray(scan.K, float)
+    z = clean[clean > 0]
+    window = (0.5 * float(z.min()), 1.5 * float(z.max())) if len(z) else (0.05, 5.0)
+    axes_cam = np.asarray(gt.meta["axes_cam"], float)
+    faces: list[VFace] = []
+    for v in sorted(int(x) for x in np.unique(gt_map) if x > 0):
+        p = prims[v]
+        region = (gt_map == v) & (clean > 0)
+        verts, tris = _corner_mesh(region, clean, p, K, window)
+        prim = {"type": p["type"], "params": {k: (list(map(float, x)) if isinstance(x, (list, tuple)) else x)
+                                              for k, x in p["params"].items()}}
+        if tilt and v in tilt:
+            axis, angle = tilt[v]
+            key = "normal" if p["type"] == "plane" else "axis"
+            prim["params"][key] = _rotate(np.asarray(prim["params"][key], float), np.asarray(axis, float),
+                                          float(angle)).tolist()
+        a = _axis(prim)
+        label = None if a is None else axis_class(a, axes_cam).value
+        faces.append(VFace(id=len(faces), instance=v, primitive=prim, axis_label=label, mesh_vertices=verts,
+                           mesh_triangles=tris))
+    h, w = clean.shape
+    return VBRep(faces=faces, edges=[], vertices=[], frame=axes_cam.copy(), K=K.copy(), image_size=(w, h),
+                 scale=part_size(scan), meta={"source": "ground truth"})
+
+
+def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues rotation of ``v`` about unit ``axis`` by ``angle`` radians."""
+    k = axis / np.linalg.norm(axis)
+    return v * np.cos(angle) + np.cross(k, v) * np.sin(angle) + k * (k @ v) * (1 - np.cos(angle))

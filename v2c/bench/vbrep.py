@@ -1,0 +1,221 @@
+"""Metrics of a reconstructed VB-Rep against a synthetic scan's ground truth (BENCHMARK.md; docs/vbrep.md).
+
+- `chamfer(vbrep, scan, n=20000, seed=0)`: BENCHMARK.md's Chamfer distance, scaled by the part size.
+- `edge_type_accuracy(vbrep, scan)`: the share of ground-truth boundary records (v2c.vbrep.gt_types) whose
+  nearest predicted edge on the same face (within ``tol_px``) has the same type.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from v2c.vbrep.gt_types import GTEdgeSamples, GTTypeConfig, gt_edge_samples
+from v2c.vbrep.mesh import sample_surface
+from v2c.vbrep.model import EdgeType, VBRep
+from v2c.vbrep.raycast import project
+
+
+def part_size(scan: Any) -> float:
+    """Ground-truth part size (metres): meta.json part_size_m, else the clean point cloud's largest extent."""
+    size = scan.gt.meta.get("part_size_m")
+    if size:
+        return float(size)
+    pts = gt_points(scan, None, 0)
+    return float(np.max(pts.max(0) - pts.min(0)))
+
+
+def gt_points(scan: Any, n: int | None = 20000, seed: int = 0) -> np.ndarray:
+    """Ground truth surface G: clean depth back-projected on the part's pixels (gt faces > 0), n drawn at random
+    (seeded; all if n is None). Camera frame, metres."""
+    gt = scan.gt
+    depth = np.asarray(gt.depth_clean, float)
+    vs, us = np.nonzero((np.asarray(gt.faces) > 0) & (depth > 0))
+    if n is not None and len(us) > n:
+        idx = np.random.default_rng(seed).choice(len(us), n, replace=False)
+        vs, us = vs[idx], us[idx]
+    z = depth[vs, us]
+    Kinv = np.linalg.inv(np.asarray(scan.K, float))
+    rays = np.stack([us, vs, np.ones_like(us)], 1).astype(float) @ Kinv.T
+    return rays / rays[:, 2:3] * z[:, None]
+
+
+def _all_mesh(vbrep: VBRep) -> tuple[np.ndarray, np.ndarray]:
+    verts, tris, off = [], [], 0
+    for f in vbrep.faces:
+        if len(f.mesh_triangles):
+            verts.append(np.asarray(f.mesh_vertices, float))
+            tris.append(np.asarray(f.mesh_triangles, np.int64) + off)
+            off += len(f.mesh_vertices)
+    if not verts:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    return np.concatenate(verts), np.concatenate(tris)
+
+
+def camera_visible(points: np.ndarray, vbrep: VBRep, rng: np.random.Generator, tol: float,
+                   n_zbuf: int = 200000) -> np.ndarray:
+    """(N,) bool: points not hidden behind the reconstruction itself, seen from the camera. The z-buffer is
+    splatted from ``n_zbuf`` area-uniform samples of all face meshes; ``tol`` metres of slack."""
+    V, T = _all_mesh(vbrep)
+    w, h = vbrep.image_size
+    zbuf = np.full(h * w, np.inf)
+    pts = np.concatenate([sample_surface(V, T, n_zbuf, rng), points])
+    uv = np.rint(project(pts, vbrep.K)).astype(np.int64)
+    ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h) & (pts[:, 2] > 0)
+    np.minimum.at(zbuf, uv[ok, 1] * w + uv[ok, 0], pts[ok, 2])
+    uv = np.rint(project(points, vbrep.K)).astype(np.int64)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    vis = np.ones(len(points), bool)
+    zb = zbuf[np.clip(uv[:, 1], 0, h - 1) * w + np.clip(uv[:, 0], 0, w - 1)]
+    vis[inside] = points[inside, 2] <= zb[inside] + tol
+    return vis
+
+
+def chamfer(vbrep: VBRep, scan: Any, n: int = 20000, seed: int = 0, visible_only: bool = True) -> float:
+    """BENCHMARK.md Chamfer distance, divided by the ground-truth part size: 0.5 * (mean over R of the distance
+    to G + mean over G of the distance to R), G = ``n`` clean-depth points of the part, R = ``n`` points drawn
+    area-uniformly on the reconstructed face meshes, keeping those the camera sees (``visible_only``; else all of
+    R, BENCHMARK.md's chamfer_all). Returns inf for an empty reconstruction."""
+    rng = np.random.default_rng(seed)
+    size = part_size(scan)
+    G = gt_points(scan, n, seed)
+    V, T = _all_mesh(vbrep)
+    if len(T) == 0 or len(G) == 0:
+        return float("inf")
+    R = sample_surface(V, T, n if not visible_only else 2 * n, rng)
+    if visible_only:
+        R = R[camera_visible(R, vbrep, rng, tol=0.005 * size)][:n]
+        if len(R) == 0:
+            return float("inf")
+    d_rg = cKDTree(G).query(R)[0]
+    d_gr = cKDTree(R).query(G)[0]
+    return float(0.5 * (d_rg.mean() + d_gr.mean()) / size)
+
+
+def face_to_gt(vbrep: VBRep, scan: Any) -> dict[int, int]:
+    """Predicted face id -> ground-truth faces.png value it covers most (0 if none), from its projected mesh."""
+    faces = np.asarray(scan.gt.faces)
+    h, w = faces.shape
+    out = {}
+    for f in vbrep.faces:
+        if len(f.mesh_vertices) == 0:
+            out[f.id] = 0
+            continue
+        uv = np.rint(project(np.asarray(f.mesh_vertices, float), vbrep.K)).astype(int)
+        ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+        vals = faces[uv[ok, 1], uv[ok, 0]]
+        vals = vals[vals > 0]
+        out[f.id] = int(np.bincount(vals).argmax()) if len(vals) else 0
+    return out
+
+
+def _edge_points(vbrep: VBRep, step_px: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Projected edge polylines densified to ``step_px``: points (N, 2), edge index (N,), edge type (N,) str."""
+    pts, eid, typ = [], [], []
+    for k, e in enumerate(vbrep.edges):
+        uv = project(np.asarray(e.polyline, float), vbrep.K)
+        if len(uv) == 1:
+            dense = uv
+        else:
+            seg = np.linalg.norm(np.diff(uv, axis=0), axis=1)
+            s = np.concatenate([[0], np.cumsum(seg)])
+            t = np.linspace(0, s[-1], max(2, int(s[-1] / step_px) + 1))
+            dense = np.stack([np.interp(t, s, uv[:, 0]), np.interp(t, s, uv[:, 1])], 1)
+        pts.append(dense)
+        eid.append(np.full(len(dense), k))
+        typ.append(np.full(len(dense), EdgeType(e.type).value, dtype=object))
+    if not pts:
+        return np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, object)
+    return np.concatenate(pts), np.concatenate(eid), np.concatenate(typ)
+
+
+def edge_type_accuracy(vbrep: VBRep, scan: Any, tol_px: float = 3.0, gt: GTEdgeSamples | None = None,
+                       gt_config: GTTypeConfig | None = None) -> dict[str, Any]:
+    """Edge-type accuracy against the ground-truth rule (v2c.vbrep.gt_types).
+
+    Every ground-truth record (a boundary pixel crack and the face it bounds) looks for the nearest predicted edge
+    point within ``tol_px`` pixels among the edges bounding the predicted face(s) mapped to that ground-truth face
+    (`face_to_gt`); it is correct when that edge's type equals the record's. Returns ``accuracy`` (correct / all
+    records), ``matched_accuracy`` (correct / records with a predicted edge in reach), ``coverage`` (records with
+    one in reach / all), ``n`` and per-type ``accuracy_<type>`` and ``share_<type>`` (of the ground truth)."""
+    gt = gt if gt is not None else gt_edge_samples(scan, gt_config or GTTypeConfig())
+    fmap = face_to_gt(vbrep, scan)
+    pts, eid, typ = _edge_points(vbrep)
+    n = len(gt.type)
+    pred = np.full(n, "", dtype=object)
+    for gface in np.unique(gt.face):
+        pf = {fid for fid, g in fmap.items() if g == gface}
+        sel_e = np.array([any(f in pf for f in vbrep.edges[k].faces) for k in eid], bool) if len(eid) else \
+            np.zeros(0, bool)
+        rec = np.flatnonzero(gt.face == gface)
+        if not sel_e.any():
+            continue
+        d, j = cKDTree(pts[sel_e]).query(gt.uv[rec], distance_upper_bound=tol_px)
+        hit = np.isfinite(d)
+        pred[rec[hit]] = typ[sel_e][j[hit]]
+    matched = pred != ""
+    correct = pred == gt.type
+    out: dict[str, Any] = {
+        "accuracy": float(correct.mean()) if n else float("nan"),
+        "matched_accuracy": float(correct[matched].mean()) if matched.any() else float("nan"),
+        "coverage": float(matched.mean()) if n else float("nan"),
+        "n": int(n),
+    }
+    for t in EdgeType:
+        s = gt.type == t.value
+        out[f"share_{t.value}"] = float(s.mean()) if n else 0.0
+        out[f"accuracy_{t.value}"] = float(correct[s].mean()) if s.any() else float("nan")
+    return out
+
+
+def evaluate(scan_dirs: list[str], segmentation: str = "oracle", ablation: str = "full") -> list[dict[str, Any]]:
+    """Reconstruct each scan and measure it: one row per scan (chamfer, chamfer_all, the edge-type accuracy
+    fields, seconds per stage)."""
+    from v2c.pipeline import reconstruct
+    from v2c.scan import load_scan
+
+    rows = []
+    for d in scan_dirs:
+        scan = load_scan(d)
+        v = reconstruct(scan, segmentation, ablation)
+        acc = edge_type_accuracy(v, scan)
+        rows.append({"scan": str(d), "family": scan.gt.meta.get("family"), "chamfer": chamfer(v, scan),
+                     "chamfer_all": chamfer(v, scan, visible_only=False), **acc,
+                     **{f"t_{k}": float(t) for k, t in v.meta["timings"].items()}})
+    return rows
+
+
+def summarize(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """Means over scans (and the median of the seconds per scan)."""
+    keys = ["chamfer", "chamfer_all", "accuracy", "matched_accuracy", "coverage"]
+    out = {k: float(np.nanmean([r[k] for r in rows])) for k in keys}
+    out["chamfer_max"] = float(np.max([r["chamfer"] for r in rows]))
+    for k in ("t_segment", "t_fit", "t_vbrep", "t_total"):
+        out[f"{k}_median"] = float(np.median([r[k] for r in rows]))
+    out["scans"] = len(rows)
+    return out
+
+
+if __name__ == "__main__":  # python -m v2c.bench.vbrep DIR [--n 30] [--json out.json]
+    import argparse
+    import json
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description="VB-Rep chamfer and edge-type accuracy over a folder of scans")
+    ap.add_argument("folder", type=Path)
+    ap.add_argument("--n", type=int, default=None, help="first n scans (sorted by name)")
+    ap.add_argument("--segmentation", default="oracle")
+    ap.add_argument("--json", type=Path, default=None)
+    a = ap.parse_args()
+    dirs = sorted(p for p in a.folder.iterdir() if (p / "camera.json").exists())[: a.n]
+    rows = evaluate([str(p) for p in dirs], a.segmentation)
+    for r in rows:
+        print(f"{Path(r['scan']).name} {r['family'] or '':8s} chamfer {r['chamfer']:.4f} "
+              f"edge-type acc {r['matched_accuracy']:.3f} (strict {r['accuracy']:.3f}, coverage {r['coverage']:.3f})"
+              f" {r['t_total']:.1f} s")
+    s = summarize(rows)
+    print(json.dumps(s, indent=1))
+    if a.json:
+        a.json.write_text(json.dumps({"summary": s, "rows": rows}, indent=1))

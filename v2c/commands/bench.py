@@ -1,0 +1,105 @@
+"""`v2c bench`: every metric of BENCHMARK.md per ablation on synthetic scans, as a table like the paper's Table 1
+(docs/bench.md); ``--real DIR``: `v2c to-step` on real frames with regions of interest."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+
+def _csv(allowed: tuple[str, ...]):
+    def parse(ctx: click.Context, param: click.Parameter, value: str) -> tuple[str, ...]:
+        items = tuple(dict.fromkeys(v.strip() for v in value.split(",") if v.strip()))
+        bad = [v for v in items if v not in allowed]
+        if bad or not items:
+            raise click.BadParameter(f"{', '.join(bad) or 'nothing'}: choose from {', '.join(allowed)}",
+                                     ctx=ctx, param=param)
+        return items
+    return parse
+
+
+def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in value.lower().split("x"))
+        if w < 32 or h < 32:
+            raise ValueError
+    except ValueError:
+        raise click.BadParameter(f"{value!r}: expected WxH in pixels, e.g. 640x480 (at least 32x32)",
+                                 ctx=ctx, param=param) from None
+    return w, h
+
+
+@click.command("bench")
+@click.option("--n", "n", default=10, show_default=True, type=click.IntRange(1), help="Number of scans.")
+@click.option("--seed", default=0, show_default=True, help="Seed of the generated scans.")
+@click.option("--noise", default="sensor", show_default=True, type=click.Choice(["sensor", "paper"]),
+              help="Noise profile of the generated scans (BENCHMARK.md).")
+@click.option("--segmentation", default="learned", show_default=True,
+              callback=_csv(("learned", "geometric", "oracle")),
+              help="Segmentation method(s), comma-separated: learned, geometric, oracle.")
+@click.option("--ablation", default="full,no-axis,no-int,fit-only", show_default=True,
+              callback=_csv(("full", "no-axis", "no-int", "fit-only", "gt")),
+              help="Ablations, comma-separated; 'gt' adds the ideal VB-Rep built from the ground truth "
+                   "(the metrics' floor).")
+@click.option("--cad", "cad_dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="Render the STEP files of this folder as scans instead of the procedural part families.")
+@click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WxH (pixels).")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the summary and every per-scan row here.")
+@click.option("--jobs", default=2, show_default=True, type=click.IntRange(1),
+              help="Worker processes (one thread each).")
+@click.option("--scans", "scans_dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="Use the scan folders in DIR (the first N) instead of generating scans.")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Folder of generated scans (default $V2C_BENCH_CACHE or ~/.cache/v2c/bench).")
+@click.option("--no-step", is_flag=True, help="Skip the (timed) STEP export of every reconstruction.")
+@click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="Instead: run to-step on the real frames in DIR with the regions of interest of --rois and "
+                   "report box angles and can radii.")
+@click.option("--rois", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="ROI file for --real (default: v2c/bench/real_rois.json).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Where --real writes its STEP files, VB-Reps and figures (default: a temporary folder).")
+@click.option("--figures", "figure_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Write each scan's result figure (first column) and grid.png of the first 12 here.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
+            cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
+            cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
+            out_dir: Path | None, figure_dir: Path | None, quiet: bool) -> None:
+    """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
+    face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
+    as a Markdown table next to the paper's numbers (docs/bench.md)."""
+    from v2c.bench import run
+
+    if real_dir is not None:
+        report = run.real_frames_report(real_dir, rois or run.DEFAULT_ROIS, segmentation[0], out_dir,
+                                        progress=not quiet)
+        click.echo(run.format_real_table(report))
+        click.echo(f"outputs in {report['out_dir']}")
+        _write_json(json_out, report)
+        return
+    order = ("full", "no-axis", "no-int", "fit-only", "gt")
+    cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
+                          ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
+                          scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir)
+    try:
+        result = run.run_benchmark(cfg, progress=not quiet)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+    what = f"{len(result['scans'])} {'CAD-part' if cad_dir else 'synthetic'} scans, {noise} noise, " \
+           f"{size[0]}x{size[1]}, seed {seed}, segmentation {','.join(segmentation)}"
+    click.echo(what)
+    click.echo(run.format_table(result))
+    click.echo(run.format_notes(result))
+    _write_json(json_out, result)
+
+
+def _write_json(path: Path | None, data: dict) -> None:
+    if path is None:
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
+    click.echo(f"wrote {path}")

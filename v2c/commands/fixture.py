@@ -1,0 +1,61 @@
+"""`v2c fixture SCAN --kind corner|pin|cradle|nest`: a fixture on the scan's sure edges (docs/fixtures.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("fixture")
+@click.argument("scan", type=click.Path(path_type=Path))
+@click.option("--kind", type=click.Choice(["corner", "pin", "cradle", "nest"]), required=True,
+              help="corner: L block on a convex edge; pin: locating pin in a hole; cradle: U block under a "
+                   "horizontal cylinder; nest: plate with a pocket following the visible footprint.")
+@click.option("-o", "--output", "out", type=click.Path(path_type=Path), default=None,
+              help="Output folder. Default: SCAN/fixtures (or <stem>_fixtures next to a VB-Rep JSON or STEP).")
+@click.option("--frame", type=click.Choice(["part", "camera"]), default="part", show_default=True,
+              help="part: recovered axes on X/Y/Z, origin at the bottom centre of the visible part (as to-step); "
+                   "camera: the camera frame. Millimetres either way.")
+@click.option("--min-confidence", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
+              help="Intersection edges under this confidence are never used as references.")
+@click.option("--segmentation", type=click.Choice(["learned", "geometric", "oracle"]), default="learned",
+              show_default=True, help="Segmentation used by the pipeline (oracle needs a synthetic scan's gt/).")
+@click.option("--clearance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
+              help="Gap between fixture and part in millimetres (default: the fixture kind's, 0.1-0.2 mm). "
+                   "Raise it to absorb reconstruction error.")
+@click.option("--part", "part", type=click.Choice(["reconstructed", "true", "none"]), default="reconstructed",
+              show_default=True, help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).")
+def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence: float, segmentation: str,
+            clearance: float | None, part: str) -> None:
+    """Design a fixture for SCAN (a scan folder, a VB-Rep JSON, or a STEP written by `v2c to-step`) and write
+    <kind> STEP, STL and assembly STEP. A STEP input keeps its own frame.
+
+    Only intersection edges at or above --min-confidence are used as references; when none qualifies the
+    command says what was needed and lists the edges, and writes nothing.
+    """
+    import dataclasses
+
+    from fixtures_design.design import DEFAULT_PARAMS
+    from fixtures_design.model import FixtureKind
+    from fixtures_design.references import NoReferenceError
+    from fixtures_design.run import fixture_for_scan
+    from v2c.scan import ScanError
+
+    params = DEFAULT_PARAMS[FixtureKind(kind)]
+    if clearance is not None:
+        params = dataclasses.replace(params, clearance=clearance)
+    try:
+        res = fixture_for_scan(scan, kind, out, frame=frame, min_confidence=min_confidence,
+                               segmentation=segmentation, part=part, params=params)
+    except (ScanError, NoReferenceError, FileNotFoundError) as exc:
+        raise click.ClickException(str(exc)) from None
+    except ValueError as exc:
+        raise click.ClickException(f"{scan}: {exc}") from None
+    fx = res.fixture
+    ref = fx.reference
+    what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f})" if hasattr(
+        ref, "edge_id") else f"footprint ({len(ref.outlines)} outline(s))"
+    click.echo(f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces")
+    for p in (res.files.step, res.files.stl, res.files.assembly):
+        click.echo(f"  {p}")

@@ -1,0 +1,80 @@
+"""`v2c synth OUT`: generate synthetic RGB-D scans with exact ground truth (SCAN_FORMAT.md layout)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+PROCEDURAL = ("block", "shaft", "flange", "knob", "turned", "bracket")
+NOISE_PROFILES = ("sensor", "paper", "none")
+
+
+def _parse_size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT (e.g. 640x480)", ctx=ctx, param=param) from None
+    if not (16 <= w <= 4096 and 16 <= h <= 4096):
+        raise click.BadParameter(f"{value!r}: width and height must be 16..4096 pixels", ctx=ctx, param=param)
+    return w, h
+
+
+def _parse_families(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, ...] | None:
+    if value is None:
+        return None
+    names = tuple(dict.fromkeys(v.strip() for v in value.split(",") if v.strip()))
+    unknown = [v for v in names if v not in (*PROCEDURAL, "cad")]
+    if unknown or not names:
+        raise click.BadParameter(f"unknown family {', '.join(unknown) or '(none)'}; choose from "
+                                 f"{', '.join((*PROCEDURAL, 'cad'))}", ctx=ctx, param=param)
+    return names
+
+
+@click.command("synth")
+@click.argument("out", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--n", "n", type=click.IntRange(min=1), default=10, show_default=True, help="Number of scans.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Run seed; scan i depends on (seed, i) only, so a seed always gives the same files.")
+@click.option("--noise", type=click.Choice(NOISE_PROFILES), default="sensor", show_default=True,
+              help="Depth noise profile (BENCHMARK.md).")
+@click.option("--size", default="640x480", show_default=True, callback=_parse_size, help="Image size WxH (pixels).")
+@click.option("--cad", type=click.Path(exists=True, path_type=Path), default=None,
+              help="Directory of STEP files (or one STEP file) added as the part family 'cad'.")
+@click.option("--families", default=None, callback=_parse_families,
+              help=f"Comma-separated part families to draw from: {', '.join((*PROCEDURAL, 'cad'))} "
+                   "[default: all procedural ones, plus cad with --cad].")
+@click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Worker processes.")
+@click.option("--start", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Index of the first scan (extends a set: scans start..start+n-1).")
+@click.option("--png-compression", type=click.IntRange(0, 9), default=1, show_default=True,
+              help="PNG compression level (9 = smallest files, slower).")
+@click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write a PNG with color | depth | labels of the first (up to 4) scans.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
+            families: tuple[str, ...] | None, jobs: int, start: int, png_compression: int, preview: Path | None,
+            quiet: bool) -> None:
+    """Render N synthetic scans of random CAD parts into OUT/scan_XXXXX (color, depth, camera, mask, gt/)."""
+    from v2c.synth.dataset import SynthConfig, generate_dataset
+    from v2c.synth.parts import list_cad_files
+
+    cad_files: tuple[str, ...] = ()
+    if cad is not None:
+        files = [cad] if cad.is_file() else list_cad_files(cad)
+        if not files:
+            raise click.ClickException(f"{cad}: no STEP files (*.step, *.stp) found")
+        cad_files = tuple(str(f.resolve()) for f in files)
+    if families is None:
+        families = PROCEDURAL + (("cad",) if cad_files else ())
+    if "cad" in families and not cad_files:
+        raise click.ClickException("family 'cad' needs --cad DIR")
+    cfg = SynthConfig(width=size[0], height=size[1], noise=noise, families=families, cad_files=cad_files,
+                      png_compression=png_compression)
+    folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start)
+    if preview is not None:
+        from v2c.synth.preview import write_preview
+
+        write_preview(folders[:4], preview)
+    if not quiet:
+        click.echo(f"wrote {len(folders)} scans to {out}")

@@ -1,0 +1,91 @@
+"""`v2c to-step SCAN...`: reconstruct scans and write STEP AP242 files with typed edges (docs/step.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
+    from v2c.scan import ScanError, parse_roi
+
+    try:
+        return parse_roi(value)
+    except ScanError as e:
+        raise click.BadParameter(str(e), ctx=ctx, param=param) from None
+
+
+def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
+    """Where one scan's STEP goes: -o as given for one scan; for several, -o is a folder of <name>.step."""
+    if out is None:
+        return None
+    if batch or out.is_dir() or str(out).endswith(("/", "\\")):
+        return out / f"{scan.name}.step"
+    return out
+
+
+@click.command("to-step")
+@click.argument("scans", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("-o", "--output", "out", type=click.Path(path_type=Path), default=None,
+              help="STEP file (one scan) or folder (several scans: <scan name>.step each). "
+                   "Default: SCAN/reconstruction.step.")
+@click.option("--frame", type=click.Choice(["part", "camera"]), default="part", show_default=True,
+              help="part: recovered axes on X/Y/Z, origin at the bottom centre of the visible part; "
+                   "camera: the camera frame. Millimetres either way.")
+@click.option("--segmentation", type=click.Choice(["learned", "geometric", "oracle"]), default="learned",
+              show_default=True, help="Segmentation of the pipeline (oracle needs a synthetic scan's gt/).")
+@click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
+@click.option("--roi", callback=_roi_option, default=None, metavar="X0,Y0,X1,Y1",
+              help="Restrict the reconstruction to this pixel box (x1/y1 exclusive).")
+def command(scans: tuple[Path, ...], out: Path | None, frame: str, segmentation: str, no_extras: bool,
+            roi: tuple[int, int, int, int] | None) -> None:
+    """Reconstruct each SCAN folder (or every scan folder inside a folder) and write its STEP.
+
+    One failing scan does not stop the others; the exit status is non-zero if any failed.
+    """
+    from tqdm import tqdm
+
+    from v2c.api import expand_scans, scan_to_step
+    from v2c.scan import ScanError
+
+    paths = expand_scans(list(scans))
+    batch = len(paths) > 1
+    if batch and out is not None:
+        if out.exists() and not out.is_dir():
+            raise click.ClickException(f"{out}: -o must be a folder when several scans are given")
+        names = [p.name for p in paths]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise click.ClickException(f"scans with the same folder name ({', '.join(dup)}) would write "
+                                       f"the same {out}/<name>.step; give them separately")
+    done, failed = [], []
+    bar = tqdm(paths, desc="to-step", unit="scan", disable=not batch, leave=False)
+    for scan in bar:
+        bar.set_postfix_str(scan.name)
+        try:
+            res = scan_to_step(scan, _output_for(scan, out, batch), frame=frame, segmentation=segmentation,
+                               extras=not no_extras, roi=roi)
+        except Exception as exc:  # noqa: BLE001 - one failing scan must not stop the rest
+            msg = str(exc) if isinstance(exc, ScanError) else f"{scan}: {type(exc).__name__}: {exc}"
+            failed.append((scan, msg))
+            if batch:
+                tqdm.write(f"error: {msg}")
+            continue
+        done.append(res)
+        r = res.report
+        outline = f", {len(r.fallback_faces)} bounded by their mesh outline" if r.fallback_faces else ""
+        tqdm.write(f"{res.step}: {r.n_faces} faces{outline}, {r.n_edges} edges ({len(r.free_edges)} free), "
+                   f"written in {r.seconds:.2f} s")
+        for w in res.warnings:
+            tqdm.write(f"  warning: {w}")
+    bar.close()
+    if not batch and failed:
+        raise click.ClickException(failed[0][1])
+    if batch:
+        tail = f", {len(failed)} failed:" if failed else "."
+        click.echo(f"{len(done)} of {len(paths)} scans written{tail}")
+        for _, msg in failed:
+            click.echo(f"  {msg}")
+        if failed:
+            raise click.ClickException(f"{len(failed)} of {len(paths)} scans failed")

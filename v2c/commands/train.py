@@ -1,0 +1,42 @@
+"""`v2c train`: train the segmentation U-Net on `v2c synth` scans and write its weights."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from v2c.segment.train import TrainConfig
+
+
+@click.command("train")
+@click.option("--data", "data_dir", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Folder holding `v2c synth` scans (searched recursively for scans with gt/).")
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Weights file to write (the best checkpoint by validation mIoU).")
+@click.option("--seed", default=0, show_default=True, help="Seed of the weights and of the crop sequence.")
+@click.option("--steps", default=TrainConfig.steps, show_default=True, help="Optimiser steps (schedule length).")
+@click.option("--stop-step", type=int, default=None,
+              help="Stop after this many steps (a prefix of the --steps schedule; reproduces a capped run).")
+@click.option("--minutes", type=float, default=None, help="Wall-clock cap in minutes (the schedule is unchanged).")
+@click.option("--batch", default=TrainConfig.batch, show_default=True, help="Crops per step.")
+@click.option("--crop", "crop_px", default=TrainConfig.crop_px, show_default=True, help="Crop side (pixels).")
+@click.option("--lr", default=TrainConfig.lr, show_default=True, help="Peak learning rate.")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Feature cache folder (default DATA/.cache).")
+@click.option("--threads", default=TrainConfig.threads, show_default=True, help="torch CPU threads.")
+@click.option("--fp32", is_flag=True, help="Disable bf16 autocast even where the CPU supports it.")
+def command(data_dir: Path, out: Path, seed: int, steps: int, stop_step: int | None, minutes: float | None,
+            batch: int, crop_px: int, lr: float, cache_dir: Path | None, threads: int, fp32: bool) -> None:
+    """Train the segmentation network on the scans under DATA and write OUT (+ OUT.json, the training record)."""
+    from v2c.segment.train import train
+
+    cfg = TrainConfig(steps=steps, stop_step=stop_step, minutes=minutes, batch=batch, crop_px=crop_px, lr=lr,
+                      seed=seed, threads=threads, bf16=False if fp32 else None)
+    try:
+        rec = train(data_dir, out, cfg, cache_dir=cache_dir, log=lambda m: click.echo(m))
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+    best = rec.get("best") or {}
+    click.echo(f"wrote {out}: best mIoU {best.get('miou', float('nan')):.3f} at step {best.get('step')}, "
+               f"{rec['steps_done']} steps in {rec['minutes']:.1f} min")

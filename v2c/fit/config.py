@@ -1,0 +1,64 @@
+"""Every threshold of the geometry optimisation stage, with its unit (one place, ARCHITECTURE.md rule).
+
+"part-size units" are multiples of the part size estimated from the scan itself (`points.estimate_part_size`),
+never the ground truth's part_size_m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Thresholds and budgets of RANSAC, the aligned fit and the intersection refinement."""
+
+    # -- part size and normals ------------------------------------------------------------------------------------
+    scale_trim: float = 0.01            # fraction of points trimmed at each end of every axis of the part's extent
+    normal_window_px: int = 5           # box filter (pixels) smoothing an instance's point map before the gradient
+    normal_sobel_px: int = 5            # Sobel kernel size (pixels) of the point-map gradient
+    min_instance_px: int = 30           # instances with fewer valid pixels are not fitted (pixels)
+
+    # -- RANSAC per instance (Schnabel-style minimal sets) --------------------------------------------------------
+    d_inlier: float = 0.03              # inlier distance (part-size units), paper
+    normal_angle_deg: float = 30.0      # inlier normal deviation from the surface normal (degrees)
+    ransac_hypotheses: int = 48         # minimal samples drawn per type (count)
+    torus_radius_steps: int = 8         # minor-radius candidates tried per torus sample (count)
+    ransac_points: int = 1000           # points per instance used to score hypotheses (count)
+    ransac_prescore_points: int = 200   # points scoring every hypothesis first (count)
+    ransac_keep: int = 8                # hypotheses re-scored on all ransac_points (count)
+    refine_points: int = 1500           # inlier points per instance used by the local least-squares refinement
+    max_radius: float = 5.0             # larger radii/distances are rejected as degenerate (part-size units)
+    min_half_angle_deg: float = 3.0     # cone half angles outside [min, 90 - min] are rejected (degrees)
+    label_score_min: float = 0.5        # below this label confidence every primitive type is tried ([0, 1])
+    complexity_penalty: float = 0.02    # type search: inlier-fraction penalty per parameter beyond a plane's 3
+    seed: int = 0                       # seed of all random sampling
+
+    # -- global aligned fit (shared frame R) ----------------------------------------------------------------------
+    align_points: int = 400             # points per primitive in the joint least squares (count)
+    frame_outlier_deg: float = 8.0      # frame init: labelled axes further than this from their class consensus
+                                        # are ignored (degrees)
+    label_keep_ratio: float = 0.9       # an axis label stands if the axis-constrained fit keeps this share of the
+                                        # free fit's inliers (fraction)
+    snap_deg: float = 3.0               # type-searched (weak label) axes within this of a frame axis join the frame
+    recon_weighting: str = "sample"      # "all": a subsampled point counts for the inliers it stands for, so E_recon
+                                        # is the paper's sum over all inliers; "sample": every point counts once
+    loss: str = "soft_l1"               # robust loss of scipy least_squares
+    loss_scale: float = 0.005           # soft-l1 knee (part-size units): residuals beyond it count linearly
+    max_nfev: int = 40                  # function evaluations (excluding finite differences) per least squares
+    jacobian: str = "analytic"          # "analytic" or "fd" (sparse finite differences) for the joint fits
+    ftol: float = 1e-6                  # relative cost / step tolerance of the joint least squares
+
+    # -- iterative intersection refinement ------------------------------------------------------------------------
+    d_int: float = 0.05                 # vertex-to-surface distance for membership in I_i (part-size units), paper
+    d_int_second_factor: float = 0.2    # the second round uses d_int * this (paper: d_int / 5)
+    w_r: float = 1.0                    # weight of E_recon against E_int (paper: 0.1; see docs/geometry.md)
+    membership: str = "current"         # second round's I_i measured against "fitted" (before any intersection
+                                        # pull) or "current" surfaces (see intersect.py)
+    parallel_deg: float = 10.0          # planes with normals within this angle are never forced to meet (degrees)
+    coaxial_tol: float = 0.02           # nor are cylinders with parallel axes whose axis lines are closer than this
+                                        # (part-size units)
+    simplify_px: float = 1.0            # Douglas-Peucker tolerance of the edge graph (pixels)
+    edge_sample_px: float = 8.0         # intersection points are sampled along edges at this spacing (pixels)
+    depth_window_px: int = 2            # half window for the depth-map initialisation of vertex depths (pixels)
+    depth_search: float = 0.1           # vertex depth search range around the depth-map value (part-size units)

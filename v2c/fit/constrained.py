@@ -1,0 +1,98 @@
+"""Fits with a known axis direction (the shared frame's), used to test and apply axis labels.
+
+Closed-form starts, then the robust refinement of `ransac.refine_primitive` with the axis held fixed:
+- plane: offset = median of n . x.
+- cylinder: the axis line is the least-squares meeting point of the normal lines projected along the axis;
+  radius = median distance to it.
+- cone: half angle from the median normal-axis angle; axis line as for the cylinder; apex height from the
+  median of h - rho / tan(a) (axis flipped if the radius shrinks along it).
+- torus: axis line as for the cylinder; the tube's cross-section is a circle in the (rho, h) half-plane
+  (algebraic circle fit) giving major radius, height of the centre and minor radius.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from v2c.fit.config import FitConfig
+from v2c.fit.ransac import refine_primitive
+from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
+from v2c.primitives.directions import tangent_basis
+
+
+def _axis_line(x: np.ndarray, n: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(point on the axis line (3,), radial distances (N,), heights (N,)) for direction ``a``: the point
+    closest (least squares) to all normal lines projected onto the plane orthogonal to ``a``."""
+    t1, t2 = tangent_basis(a)
+    p2 = np.stack([x @ t1, x @ t2], axis=1)
+    e2 = np.stack([n @ t1, n @ t2], axis=1)
+    e2 = e2 / np.maximum(np.linalg.norm(e2, axis=1, keepdims=True), 1e-12)
+    proj = np.eye(2)[None] - e2[:, :, None] * e2[:, None, :]  # (N, 2, 2) projectors across each line
+    m = proj.sum(axis=0)
+    b = np.einsum("nij,nj->i", proj, p2)
+    c2 = np.linalg.lstsq(m, b, rcond=None)[0]
+    rho = np.linalg.norm(p2 - c2, axis=1)
+    return c2[0] * t1 + c2[1] * t2, rho, x @ a
+
+
+def _circle_2d(p: np.ndarray) -> tuple[np.ndarray, float]:
+    """Algebraic (Kasa) circle fit of 2D points (N, 2): centre (2,), radius."""
+    a = np.column_stack([2 * p, np.ones(len(p))])
+    b = np.sum(p * p, axis=1)
+    sol = np.linalg.lstsq(a, b, rcond=None)[0]
+    c = sol[:2]
+    return c, float(np.sqrt(max(sol[2] + c @ c, 0.0)))
+
+
+def _circle_axis(x: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Point on the axis line of direction ``a`` from a circle fit of the points projected along it."""
+    t1, t2 = tangent_basis(a)
+    c2, _ = _circle_2d(np.stack([x @ t1, x @ t2], axis=1))
+    return c2[0] * t1 + c2[1] * t2
+
+
+def start_with_axis(ptype: str, x: np.ndarray, n: np.ndarray, a: np.ndarray,
+                    by_points: bool = False) -> Primitive | None:
+    """Closed-form primitive of ``ptype`` with axis direction ``a`` (unit, camera frame) for points/normals.
+
+    by_points: place the axis line of a cylinder or torus by a circle fit of the projected points instead of the
+    normal lines (better where normals are poor: small patches)."""
+    if ptype == "plane":
+        return Plane(np.median(x @ a) * a, a)
+    if ptype == "sphere":
+        return None
+    c, rho, h = _axis_line(x, n, a)
+    if by_points and ptype in ("cylinder", "torus"):
+        c = _circle_axis(x, a)
+        rho = np.linalg.norm((x - c) - np.outer((x - c) @ a, a), axis=1)
+    if ptype == "cylinder":
+        return Cylinder(c, a, float(np.median(rho)))
+    if ptype == "cone":
+        s = np.clip(np.median(np.abs(n @ a)), np.sin(np.deg2rad(2.0)), np.cos(np.deg2rad(2.0)))
+        half = float(np.arcsin(s))
+        if len(h) > 2 and np.corrcoef(h, rho)[0, 1] < 0:
+            a, h = -a, -h
+        h0 = float(np.median(h - rho / np.tan(half)))
+        return Cone(c + (h0 - c @ a) * a, a, half)
+    if ptype == "torus":
+        cc, r = _circle_2d(np.stack([rho, h], axis=1))
+        return Torus(c + (cc[1] - c @ a) * a, a, float(cc[0]), r)
+    raise ValueError(ptype)
+
+
+def fit_with_axis(prim: Primitive, x: np.ndarray, n: np.ndarray, a: np.ndarray, scale: float,
+                  config: FitConfig) -> Primitive:
+    """``prim``'s type refitted to points ``x`` / normals ``n`` with its axis fixed to ``a`` (sign kept from
+    the start where the type defines it). Spheres are returned unchanged."""
+    if isinstance(prim, Sphere):
+        return prim
+    best, cost = prim, np.inf
+    for by_points in (False, True) if prim.type in ("cylinder", "torus") else (False,):
+        start = start_with_axis(prim.type, x, n, a, by_points)
+        if start is None:
+            continue
+        q = refine_primitive(start, x, scale, config, axis=start.axis_vector)
+        c = float(np.median(np.abs(q.signed_distance(x))))
+        if c < cost:
+            best, cost = q, c
+    return best

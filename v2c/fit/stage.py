@@ -1,0 +1,223 @@
+"""`fit_scan`: the whole geometry optimisation stage on one scan (RANSAC per instance -> frame -> aligned joint
+fit -> two rounds of intersection refinement), following the paper's "Geometry Optimization" section."""
+
+from __future__ import annotations
+
+from time import perf_counter, process_time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from v2c.fit.align import AXIS_NAMES, Term, align_fit, init_frame
+from v2c.fit.config import FitConfig
+from v2c.fit.constrained import fit_with_axis
+from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
+from v2c.fit.points import InstancePoints, backproject, estimate_part_size, instance_points
+from v2c.fit.ransac import fit_instance, inlier_mask
+from v2c.fit.result import ABLATIONS, FitResult
+from v2c.labels import type_axis_of
+from v2c.primitives import Cylinder, Plane, Primitive
+from v2c.primitives.directions import unit
+from v2c.segment.graph import build_edge_graph
+from v2c.segment.types import Segmentation
+
+if TYPE_CHECKING:
+    from v2c.scan import Scan
+
+
+def _label_of(seg: Segmentation, i: int, config: FitConfig) -> tuple[str | None, int | None | str]:
+    """(type or None for a type search, axis index 0/1/2, -1 unaligned, None sphere, "?" decide later)."""
+    lab = int(seg.labels[i]) if i < len(seg.labels) else 0
+    score = float(seg.scores[i]) if i < len(seg.scores) else 0.0
+    if not 1 <= lab <= 17 or score < config.label_score_min:
+        return None, "?"
+    ptype, ax = type_axis_of(lab)
+    if ax is None:
+        return ptype.value, None
+    return ptype.value, {"X": 0, "Y": 1, "Z": 2, "U": -1}[ax.value]
+
+
+def _inliers(prim: Primitive, ip: InstancePoints, scale: float, config: FitConfig) -> np.ndarray:
+    """(n,) bool inliers of an instance: distance and normal test; where no point passes (tiny patches with
+    poor normals), the distance test alone; where none passes that either, every point."""
+    eps = config.d_inlier * scale
+    m = inlier_mask(prim, ip.points, ip.normals, eps, float(np.cos(np.deg2rad(config.normal_angle_deg))))
+    if not m.any():
+        m = inlier_mask(prim, ip.points, ip.normals, eps, -1.0)
+    return m if m.any() else np.ones(len(ip.points), bool)
+
+
+def _canonical(prim: Primitive, x: np.ndarray) -> Primitive:
+    """Same surface, origin moved next to the data (plane: centroid projected; cylinder: onto the axis) and plane
+    normal facing the camera."""
+    c = x.mean(axis=0)
+    if isinstance(prim, Plane):
+        n = prim.normal_vec if prim.normal_vec @ prim.origin <= 0 else -prim.normal_vec
+        return Plane(c - ((c - prim.origin) @ n) * n, n)
+    if isinstance(prim, Cylinder):
+        return Cylinder(prim.origin + ((c - prim.origin) @ prim.axis) * prim.axis, prim.axis, prim.radius)
+    return prim
+
+
+def _assign_axes(fits: dict[int, Primitive], want: dict[int, int | None | str], weights: dict[int, float],
+                 ipts: dict[int, InstancePoints], view_dir: np.ndarray, scale: float,
+                 config: FitConfig) -> tuple[np.ndarray, dict[int, int | None], dict[int, Primitive]]:
+    """Initial frame from the labelled axes, then each instance's final axis index (0/1/2, -1 free, None none).
+
+    A label is tested, not trusted blindly: the instance is refitted with its axis held on the frame axis
+    (`constrained.fit_with_axis`); the label stands if that fit keeps label_keep_ratio of the free fit's inliers
+    (a small patch's free RANSAC axis can be far off while the labelled axis fits it just as well). Otherwise the
+    other frame axes are tried the same way, else the axis stays free. Type-searched (weak label) instances try
+    the frame axis nearest their own when it is within snap_deg. Returns (frame, axis indices, primitives, with
+    the constrained refits in place)."""
+    lab_ids = [i for i in fits if isinstance(want[i], int) and want[i] >= 0]
+    frame = init_frame([fits[i].axis_vector for i in lab_ids], [want[i] for i in lab_ids],
+                       [weights[i] for i in lab_ids], view_dir, config.frame_outlier_deg)
+    eps = config.d_inlier * scale
+    out: dict[int, int | None] = {}
+    prims = dict(fits)
+    for i, p in fits.items():  # loop over instances
+        a = p.axis_vector
+        w = want[i]
+        if a is None:
+            out[i] = None
+            continue
+        out[i] = -1
+        cos = np.abs(frame @ a)
+        if w == "?":
+            k = int(np.argmax(cos))
+            tries = [k] if cos[k] > np.cos(np.deg2rad(config.snap_deg)) else []
+        elif w is None or w < 0:
+            tries = []
+        else:
+            tries = [w] + [k for k in np.argsort(-cos) if k != w]
+        ip = ipts[i]
+        x, n = ip.points, ip.normals
+        if len(x) > config.refine_points:
+            sel = np.random.default_rng([config.seed, i, 2]).choice(len(x), config.refine_points, replace=False)
+            x, n = x[sel], n[sel]
+        # distance-only inliers: on small patches the depth-gradient normals are too poor to judge a label
+        free = np.count_nonzero(inlier_mask(p, x, n, eps, -1.0))
+        for k in tries:
+            ax = frame[k] * (np.sign(a @ frame[k]) or 1.0)
+            q = fit_with_axis(p, x, n, ax, scale, config)
+            if np.count_nonzero(inlier_mask(q, x, n, eps, -1.0)) >= config.label_keep_ratio * free:
+                out[i], prims[i] = int(k), _canonical(q, x)
+                break
+    return frame, out, prims
+
+
+def fit_scan(scan: Scan, seg: Segmentation, config: FitConfig | None = None, ablation: str = "full") -> FitResult:
+    """Fit one primitive per segmented instance of ``scan`` (camera frame, metres).
+
+    ablation: "full" (shared frame + intersections), "no-axis" (free axes), "no-int" (no intersection term),
+    "fit-only" (RANSAC with its local refinement only).
+    """
+    if ablation not in ABLATIONS:
+        raise ValueError(f"unknown ablation {ablation!r}; choose from {', '.join(ABLATIONS)}")
+    config = config or FitConfig()
+    t_start, cpu_start = perf_counter(), process_time()
+    timings: dict[str, float] = {}
+    depth = np.asarray(scan.depth, float)
+    inst = np.asarray(seg.instances)
+    valid = np.asarray(scan.valid, bool) & (inst > 0)
+    pts = backproject(depth, np.asarray(scan.K, float))
+    scale = estimate_part_size(pts[valid], config.scale_trim)
+    counts = np.bincount(inst[valid], minlength=int(inst.max()) + 1)
+    ids = np.flatnonzero(counts >= config.min_instance_px)
+    ids = ids[ids > 0]
+    ipts: dict[int, InstancePoints] = instance_points(pts, valid, inst, ids, config.normal_window_px,
+                                                      config.normal_sobel_px)
+    t = perf_counter()
+    timings["normals"] = t - t_start
+
+    # 1. RANSAC per instance
+    fits: dict[int, Primitive] = {}
+    want: dict[int, int | None | str] = {}
+    weights: dict[int, float] = {}
+    inl: dict[int, np.ndarray] = {}
+    searched: list[int] = []
+    for i, ip in ipts.items():  # loop over instances
+        ptype, ax = _label_of(seg, i, config)
+        rng = np.random.default_rng([config.seed, i])
+        got_type, f = fit_instance(ip.points, ip.normals, ptype, scale, config, rng)
+        if f is None:
+            continue
+        if not f.inliers.any():
+            f.inliers = _inliers(f.primitive, ip, scale, config)
+        if ptype is None:
+            searched.append(i)
+            ax = None if got_type == "sphere" else "?"
+        fits[i] = _canonical(f.primitive, ip.points[f.inliers])
+        want[i], weights[i], inl[i] = ax, float(np.count_nonzero(f.inliers)), f.inliers
+    timings["ransac"] = perf_counter() - t
+    t = perf_counter()
+
+    # 2. shared frame and the aligned joint fit
+    view_dir = unit(pts[valid].mean(axis=0)) if valid.any() else np.array([0.0, 0.0, 1.0])
+    frame, axis_idx, fixed = _assign_axes(fits, want, weights, ipts, view_dir, scale, config)
+    if ablation in ("full", "no-int"):  # with the shared frame, aligned instances start from their axis refit
+        for i, p in fixed.items():
+            if p is not fits[i]:
+                fits[i] = p
+                inl[i] = _inliers(p, ipts[i], scale, config)
+    use_frame = ablation in ("full", "no-int")
+    terms: list[Term] = []
+    order = sorted(fits)
+    for i in order:
+        x = ipts[i].points[inl[i]]
+        rng = np.random.default_rng([config.seed, i, 1])
+        if len(x) > config.align_points:
+            x = x[rng.choice(len(x), config.align_points, replace=False)]
+        k = axis_idx[i]
+        if k is not None and (k < 0 or not use_frame):
+            k = -1
+        sign = 1.0 if k is None or k < 0 else float(np.sign(fits[i].axis_vector @ frame[k]) or 1.0)
+        n_in = int(np.count_nonzero(inl[i]))
+        weight = float(np.sqrt(n_in / max(len(x), 1))) if config.recon_weighting == "all" else 1.0
+        terms.append(Term(fits[i], x, k, sign, weight))
+    prims = [tm.prim for tm in terms]
+    if ablation != "fit-only":
+        frame, prims = align_fit(terms, frame, scale, config.loss, config.loss_scale, config.max_nfev, config.ftol,
+                                 config.jacobian)
+    timings["align"] = perf_counter() - t
+    t = perf_counter()
+
+    # 3. edge graph and intersection refinement
+    graph = build_edge_graph(inst, config.simplify_px)
+    term_of = {i: k for k, i in enumerate(order)}
+    lifted = boundary_points(graph, term_of, np.asarray(scan.K, float), config.edge_sample_px)
+    timings["graph"] = perf_counter() - t
+    t = perf_counter()
+    lifted.s = init_depths(lifted, prims, depth, valid, scale, config)
+    n_int = 0
+    if ablation in ("full", "no-axis") and prims:
+        fitted = list(prims)
+        for rnd, thr in enumerate((config.d_int, config.d_int * config.d_int_second_factor)):
+            terms = [Term(p, tm.points, tm.axis_index, tm.axis_sign, tm.weight) for p, tm in zip(prims, terms,
+                                                                                                strict=True)]
+            member = fitted if (rnd > 0 and config.membership == "fitted") else None
+            frame, prims, lifted.s, n_int = refine_intersections(terms, frame, lifted, scale, config, thr, member)
+    timings["intersect"] = perf_counter() - t
+
+    # 4. final inliers and residuals on all points of each instance
+    out_prims: dict[int, Primitive] = {}
+    inliers: dict[int, np.ndarray] = {}
+    resid: dict[int, float] = {}
+    labels: dict[int, str | None] = {}
+    for i, p in zip(order, prims, strict=True):
+        ip = ipts[i]
+        m = _inliers(p, ip, scale, config)
+        out_prims[i] = _canonical(p, ip.points[m])
+        inliers[i] = ip.pixels[m]
+        resid[i] = float(np.sqrt(np.mean(p.signed_distance(ip.points[m]) ** 2)))
+        k = axis_idx[i]
+        labels[i] = None if k is None else ("U" if k < 0 else AXIS_NAMES[k])
+    vd = np.zeros(len(graph.vertices))
+    vsel = lifted.vertex >= 0
+    vd[lifted.vertex[vsel]] = lifted.s[vsel]
+    timings["total"] = perf_counter() - t_start
+    timings["total_cpu"] = process_time() - cpu_start  # CPU seconds of this process (all its threads)
+    return FitResult(primitives=out_prims, frame=frame, axis_labels=labels, inliers=inliers, residuals=resid,
+                     vertex_depths=vd, graph=graph, scale=scale, timings=timings, types_searched=searched,
+                     n_intersections=n_int, ablation=ablation)

@@ -1,0 +1,227 @@
+"""Training of the segmentation U-Net on `v2c synth` scans (CPU; bf16 autocast + channels_last where supported).
+
+Deterministic given the seed and the step count (one process, fixed thread count): the crop sequence comes
+from one ``np.random.Generator`` and the weights from ``torch.manual_seed``. ``minutes`` only caps the run; the
+learning-rate schedule depends on ``steps`` alone, so a capped run is a prefix of the full one.
+
+Losses: cross-entropy over the 18 labels (255 ignored, classes weighted by frequency^-``class_weight_power``) plus
+``boundary_weight`` x binary cross-entropy of the face-boundary map.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from v2c.labels import IGNORE, NUM_CLASSES
+from v2c.segment.data import CachedScans, build_cache, dequantise, find_scans
+from v2c.segment.net import NetConfig, UNet, bf16_supported, save_weights
+
+#: The shipped training set: (width, height, noise profile, scans, `v2c synth` seed), generated into
+#: DATA/<width>x<height>_<noise>_s<seed>/. Validation uses seed 9000 and later, never these.
+TRAINING_RECIPE: tuple[tuple[int, int, str, int, int], ...] = (
+    (256, 256, "sensor", 700, 101),
+    (256, 256, "paper", 500, 102),
+    (320, 240, "sensor", 400, 103),
+    (320, 240, "paper", 300, 104),
+    (640, 480, "sensor", 150, 105),
+    (640, 480, "paper", 60, 106),
+)
+
+
+def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
+                           recipe: tuple = TRAINING_RECIPE) -> list[Path]:
+    """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
+
+    Equivalent to one `v2c synth` run per recipe row.
+    """
+    from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
+
+    done: list[Path] = []
+    for w, h, noise, n, seed in recipe:
+        sub = Path(out_dir) / f"{w}x{h}_{noise}_s{seed}"
+        n = max(1, round(n * scale))
+        have = 0  # resume: scans are pure functions of (seed, index) and meta.json is written last
+        while have < n and (sub / scan_name(have) / "gt" / "meta.json").is_file():
+            have += 1
+        done += [sub / scan_name(i) for i in range(have)]
+        if have < n:
+            done += generate_dataset(sub, n - have, seed, SynthConfig(width=w, height=h, noise=noise), jobs=jobs,
+                                     progress=False, start=have)
+    return done
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    steps: int = 6000  # optimiser steps (the schedule length)
+    stop_step: int | None = None  # stop after this many steps (a reproducible prefix of the schedule)
+    minutes: float | None = None  # wall-clock cap (minutes); the best checkpoint so far is kept
+    batch: int = 8  # crops per step
+    crop_px: int = 192  # square crop side (pixels)
+    lr: float = 2e-3  # peak AdamW learning rate
+    weight_decay: float = 1e-4
+    warmup_steps: int = 200
+    final_lr_frac: float = 0.03  # cosine decays to lr * final_lr_frac
+    boundary_weight: float = 1.0  # weight of the boundary BCE against the label CE
+    boundary_pos_weight: float = 3.0  # BCE pos_weight of boundary pixels
+    class_weight_power: float = 0.3  # class weights = frequency^-power, normalised to mean 1 over present classes
+    flip: bool = True  # random horizontal mirrors (label-safe, see data.CachedScans.crop)
+    val_scans: int = 24  # held-out cached scans for the checkpoint metric (evenly spread over the sorted list)
+    eval_every: int = 500  # steps between validation + checkpoint
+    seed: int = 0
+    threads: int = 2  # torch CPU threads
+    bf16: bool | None = None  # None = when the CPU supports it
+
+
+def _lr_at(step: int, cfg: TrainConfig) -> float:
+    if step < cfg.warmup_steps:
+        return cfg.lr * (step + 1) / cfg.warmup_steps
+    t = (step - cfg.warmup_steps) / max(cfg.steps - cfg.warmup_steps, 1)
+    return cfg.lr * (cfg.final_lr_frac + (1 - cfg.final_lr_frac) * 0.5 * (1 + math.cos(math.pi * min(t, 1.0))))
+
+
+def class_weights(data: CachedScans, ids: list[int], power: float) -> np.ndarray:
+    """(18,) float32 weights = frequency^-power over the training scans (mean 1 over present classes)."""
+    hist = np.zeros(256, np.int64)
+    for i in ids[:: max(1, len(ids) // 300)]:
+        hist += np.bincount(np.asarray(data.full(i)[1]).ravel(), minlength=256)
+    f = hist[:NUM_CLASSES].astype(np.float64)
+    with np.errstate(divide="ignore"):
+        w = np.where(f > 0, (f / max(f.sum(), 1)) ** -power, 0.0)
+    present = f > 0
+    w[present] /= w[present].mean()
+    w[~present] = 1.0
+    return w.astype(np.float32)
+
+
+def _batch(data: CachedScans, ids: list[int], cfg: TrainConfig, rng: np.random.Generator
+           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    xs, ys, bs = [], [], []
+    for _ in range(cfg.batch):
+        i = ids[int(rng.integers(len(ids)))]
+        x, y, b = data.crop(i, cfg.crop_px, rng, flip=cfg.flip and bool(rng.random() < 0.5))
+        xs.append(x)
+        ys.append(y)
+        bs.append(b)
+    x = torch.from_numpy(dequantise(np.stack(xs))).contiguous(memory_format=torch.channels_last)
+    return x, torch.from_numpy(np.stack(ys).astype(np.int64)), torch.from_numpy(np.stack(bs).astype(np.float32))
+
+
+def losses(model: UNet, x: torch.Tensor, y: torch.Tensor, b: torch.Tensor, cw: torch.Tensor, cfg: TrainConfig,
+           bf16: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """(label CE, boundary BCE) of one batch."""
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        lab, bnd = model(x)
+    ce = F.cross_entropy(lab.float(), y, weight=cw, ignore_index=IGNORE)
+    bce = F.binary_cross_entropy_with_logits(bnd.float()[:, 0], b, pos_weight=torch.tensor(cfg.boundary_pos_weight))
+    return ce, bce
+
+
+@torch.no_grad()
+def evaluate(model: UNet, data: CachedScans, ids: list[int], bf16: bool) -> dict:
+    """Pixel metrics on whole cached scans: mean IoU over the 18 classes present, pixel accuracy, boundary F1."""
+    model.eval()
+    conf = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
+    tp = fp = fn = 0
+    for i in ids:
+        xq, y, b = data.full(i)
+        x = torch.from_numpy(dequantise(np.asarray(xq))[None]).contiguous(memory_format=torch.channels_last)
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            lab, bnd = model(x)
+        pred = lab[0].float().argmax(0).numpy()
+        y = np.asarray(y)
+        ok = y != IGNORE
+        conf += np.bincount(y[ok].astype(np.int64) * NUM_CLASSES + pred[ok], minlength=NUM_CLASSES ** 2
+                            ).reshape(NUM_CLASSES, NUM_CLASSES)
+        pb, gb = bnd[0, 0].float().numpy() > 0, np.asarray(b) > 0
+        tp += int((pb & gb).sum())
+        fp += int((pb & ~gb).sum())
+        fn += int((~pb & gb).sum())
+    model.train()
+    inter = np.diag(conf)
+    union = conf.sum(0) + conf.sum(1) - inter
+    present = conf.sum(1) > 0
+    iou = np.where(union > 0, inter / np.maximum(union, 1), 0.0)
+    return {"miou": float(iou[present].mean()), "pixel_acc": float(inter.sum() / max(conf.sum(), 1)),
+            "boundary_f1": 2 * tp / max(2 * tp + fp + fn, 1),
+            "iou": {int(k): round(float(iou[k]), 4) for k in np.nonzero(present)[0]}}
+
+
+def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig = TrainConfig(), cache_dir: str | Path | None = None,
+          net_cfg: NetConfig | None = None, log=print) -> dict:
+    """Train on the scans under ``data_dir``; write the best checkpoint (by validation mIoU) to ``out``.
+
+    Returns the training record (also written next to ``out`` as ``<out>.json``).
+    """
+    net_cfg = net_cfg or NetConfig()
+    torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    scans = find_scans(data_dir)
+    if len(scans) <= cfg.val_scans:
+        raise ValueError(f"{data_dir}: {len(scans)} scans with gt/ found; need more than {cfg.val_scans}")
+    cache = Path(cache_dir) if cache_dir else Path(data_dir) / ".cache"
+    t0 = time.time()
+    build_cache(scans, cache)
+    data = CachedScans(cache)
+    log(f"cache ready: {len(data)} scans in {time.time() - t0:.0f} s")
+    val_ids = list(range(0, len(data), len(data) // cfg.val_scans))[: cfg.val_scans]  # spread over the groups
+    train_ids = sorted(set(range(len(data))) - set(val_ids))
+    cw = torch.from_numpy(class_weights(data, train_ids, cfg.class_weight_power))
+    bf16 = bf16_supported() if cfg.bf16 is None else cfg.bf16
+    model = UNet(net_cfg).to(memory_format=torch.channels_last)
+    model.train()
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    sizes = sorted({(e["w"], e["h"]) for e in data.entries})
+    record = {"config": asdict(cfg), "net": asdict(net_cfg), "train_scans": len(train_ids),
+              "val_scans": len(val_ids), "sizes": [list(s) for s in sizes], "bf16": bf16, "history": [],
+              "best": None, "data_dir": str(data_dir)}
+    best = -1.0
+    t_start = time.time()
+    run_ce = run_bce = 0.0
+    step = 0
+    for step in range(cfg.steps):
+        for g in opt.param_groups:
+            g["lr"] = _lr_at(step, cfg)
+        x, y, b = _batch(data, train_ids, cfg, rng)
+        ce, bce = losses(model, x, y, b, cw, cfg, bf16)
+        loss = ce + cfg.boundary_weight * bce
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        run_ce += ce.item()
+        run_bce += bce.item()
+        elapsed = (time.time() - t_start) / 60
+        capped = (cfg.minutes is not None and elapsed >= cfg.minutes) or step + 1 == cfg.stop_step
+        if (step + 1) % 50 == 0:
+            log(f"step {step + 1}/{cfg.steps} ce {run_ce / 50:.3f} bce {run_bce / 50:.3f} "
+                f"lr {_lr_at(step, cfg):.2e} {elapsed:.1f} min")
+            run_ce = run_bce = 0.0
+        if (step + 1) % cfg.eval_every == 0 or step + 1 == cfg.steps or capped:
+            ev = evaluate(model, data, val_ids, bf16)
+            entry = {"step": step + 1, "minutes": round(elapsed, 2), "miou": ev["miou"],
+                     "pixel_acc": ev["pixel_acc"], "boundary_f1": ev["boundary_f1"]}
+            record["history"].append(entry)
+            log(f"eval {entry}")
+            save_weights(model, out.with_suffix(".last.pt"), {**record, "step": step + 1})
+            if ev["miou"] > best:
+                best = ev["miou"]
+                record["best"] = {**entry, "iou": ev["iou"]}
+                save_weights(model, out, {**record, "step": step + 1})
+            Path(str(out) + ".json").write_text(json.dumps(record, indent=1))
+        if capped:
+            log(f"stopped at step {step + 1} ({elapsed:.1f} min)")
+            break
+    record["steps_done"] = step + 1
+    record["minutes"] = round((time.time() - t_start) / 60, 2)
+    Path(str(out) + ".json").write_text(json.dumps(record, indent=1))
+    return record

@@ -1,0 +1,196 @@
+"""Generate synthetic scans in the folder layout of SCAN_FORMAT.md.
+
+Scan i of a run is a pure function of (seed, i): its generator is `np.random.default_rng([seed, i])`, so the same
+seed gives byte-identical files whatever the number of worker processes.
+
+Depth files use DEPTH_SCALE = 0.0001 m per unit (0.1 mm; uint16 reaches 6.5535 m, beyond the 4 m range kept).
+gt/depth_clean.png is quantised to that unit like depth.png; gt/depth_clean.npy keeps the exact float32 metres
+(the 0.05 mm quantisation of the PNG would exceed the 1e-4 part-size exactness of the ground truth).
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from v2c.labels import IGNORE, axis_class, label_of
+from v2c.synth import noise as noise_mod
+from v2c.synth import occ, parts
+from v2c.synth.render import ANALYTIC, RenderConfig, render
+from v2c.synth.scene import SceneConfig, sample_scene
+
+GENERATOR = "v2c.synth/1"
+DEPTH_SCALE = 1e-4  # metres per depth unit in depth.png and gt/depth_clean.png
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """One generator run (sizes in pixels, deflections relative to the part size)."""
+
+    width: int = 640
+    height: int = 480
+    noise: str = "sensor"
+    families: tuple[str, ...] = tuple(parts.FAMILIES)  # drawn uniformly; "cad" draws one of `cad_files`
+    cad_files: tuple[str, ...] = ()  # STEP files (paths) of the family "cad"
+    linear_deflection_rel: float = 0.002  # tessellation chord error / part size
+    angular_deflection_rad: float = 0.5
+    png_compression: int = 1  # cv2 PNG level 0-9 (fixed, so files are reproducible)
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+
+
+def scan_name(index: int) -> str:
+    """Folder name of scan `index` inside the output directory."""
+    return f"scan_{index:05d}"
+
+
+def _pick_part(rng: np.random.Generator, cfg: SynthConfig) -> parts.RestPart:
+    family = cfg.families[int(rng.integers(len(cfg.families)))]
+    if family == "cad":
+        if not cfg.cad_files:
+            raise ValueError("family 'cad' needs STEP files (--cad DIR)")
+        return parts.load_cad(Path(cfg.cad_files[int(rng.integers(len(cfg.cad_files)))]))
+    return parts.make_procedural(family, rng)
+
+
+def face_labels(primitives: list[dict], axes_cam: np.ndarray) -> list[dict]:
+    """Add `axis_label` and the 18-class `label` to primitives.json entries (in place; returned)."""
+    for p in primitives:
+        kind = p["type"]
+        if kind not in ANALYTIC:
+            p["axis_label"], p["label"] = None, IGNORE
+        elif kind == "sphere":
+            p["axis_label"], p["label"] = None, label_of("sphere", None)
+        else:
+            axis = p["params"]["normal"] if kind == "plane" else p["params"]["axis"]
+            cls = axis_class(np.asarray(axis), axes_cam)
+            p["axis_label"], p["label"] = cls.value, label_of(kind, cls)
+    return primitives
+
+
+def _write_png(path: Path, image: np.ndarray, level: int) -> None:
+    if not cv2.imwrite(str(path), image, [cv2.IMWRITE_PNG_COMPRESSION, level]):
+        raise OSError(f"{path}: could not write the PNG")
+
+
+def _write_json(path: Path, obj) -> None:
+    path.write_text(json.dumps(obj, sort_keys=True, indent=1) + "\n")
+
+
+def _to_units(depth_m: np.ndarray) -> np.ndarray:
+    return np.clip(np.round(depth_m / DEPTH_SCALE), 0, 65535).astype(np.uint16)
+
+
+def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = SynthConfig()) -> Path:
+    """Render scan `index` of run `seed` into out_dir/scan_XXXXX and return that folder."""
+    rng = np.random.default_rng([seed, index])
+    rest = _pick_part(rng, cfg)
+    lo, hi = rest.bbox
+    scene = sample_scene(rng, lo, hi, cfg.width, cfg.height, cfg.scene)
+    rot, trans = scene.world_to_cam[:, :3], scene.world_to_cam[:, 3]
+    rest_to_cam_mm = 1000.0 * np.hstack([rot @ scene.rest_to_world[:, :3],
+                                         (rot @ scene.rest_to_world[:, 3] + trans)[:, None]])
+
+    folder = Path(out_dir) / scan_name(index)
+    gt = folder / "gt"
+    gt.mkdir(parents=True, exist_ok=True)
+    step_path = gt / "part.step"
+    occ.write_step(occ.transform_shape(rest.shape, rest_to_cam_mm), step_path)
+    shape = occ.read_step(step_path)  # face order and surfaces exactly as a reader of part.step sees them
+    faces = occ.faces_of(shape)
+    primitives = [dict(id=i, pixel_value=i + 1, **occ.face_primitive(f, 1e-3)) for i, f in enumerate(faces)]
+    face_labels(primitives, scene.axes_cam)
+    deflection_mm = cfg.linear_deflection_rel * scene.part_size_m * 1000.0
+    mesh = occ.tessellate(shape, faces, deflection_mm, cfg.angular_deflection_rad)
+    ren = render(scene, mesh.vertices * 1e-3, mesh.triangles, mesh.face_of_triangle, primitives,
+                 deflection_mm * 1e-3, cfg.render)
+
+    lut = np.zeros(len(primitives) + 1, np.uint8)
+    lut[1:] = [p["label"] for p in primitives]
+    labels = lut[ren.faces]
+    depth = noise_mod.apply_depth_noise(cfg.noise, ren.depth, ren.cos_incidence, rng)
+    color = noise_mod.finish_color(ren.color, rng, cfg.noise)
+
+    level = cfg.png_compression
+    _write_png(folder / "color.png", cv2.cvtColor(color, cv2.COLOR_RGB2BGR), level)
+    _write_png(folder / "depth.png", _to_units(depth), level)
+    _write_png(folder / "mask.png", np.where(ren.faces > 0, 255, 0).astype(np.uint8), level)
+    _write_json(folder / "camera.json", {"width": cfg.width, "height": cfg.height, "K": scene.K.tolist(),
+                                         "depth_scale": DEPTH_SCALE})
+    _write_png(gt / "faces.png", ren.faces, level)
+    _write_png(gt / "labels.png", labels, level)
+    _write_png(gt / "depth_clean.png", _to_units(ren.depth), level)
+    np.save(gt / "depth_clean.npy", ren.depth.astype(np.float32))
+    _write_json(gt / "primitives.json", primitives)
+    meta = {
+        "generator": GENERATOR,
+        "seed": int(seed),
+        "index": int(index),
+        "family": rest.family,
+        "part": rest.info,
+        "noise": {"profile": cfg.noise, "params": noise_mod.noise_params(cfg.noise)},
+        "part_size_m": scene.part_size_m,
+        "axes_cam": scene.axes_cam.tolist(),
+        "depth_scale": DEPTH_SCALE,
+        "scene": {**scene.info, "material": scene.material.name, "ground": scene.ground.kind},
+        "mesh_deflection_m": deflection_mm * 1e-3,
+        "dropped_pixels": ren.dropped,
+        "units": "camera frame (OpenCV), metres; part.step in millimetres",
+    }
+    _write_json(gt / "meta.json", _plain(meta))
+    return folder
+
+
+def _plain(obj):
+    """JSON-ready copy: numpy scalars/arrays to Python numbers/lists."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def _worker_init() -> None:
+    cv2.setNumThreads(1)
+    occ.silence_occt()
+
+
+def _job(args: tuple[Path, int, int, SynthConfig]) -> Path:
+    return generate_scan(*args)
+
+
+def generate_dataset(out_dir: Path, n: int, seed: int, cfg: SynthConfig = SynthConfig(), jobs: int = 1,
+                     progress: bool = True, start: int = 0) -> list[Path]:
+    """Generate scans start..start+n-1 of run `seed` into `out_dir`, `jobs` processes in parallel."""
+    from tqdm import tqdm
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tasks = [(out_dir, seed, i, cfg) for i in range(start, start + n)]
+    done: list[Path] = []
+    if jobs <= 1:
+        occ.silence_occt()
+        with tqdm(total=n, unit="scan", disable=not progress) as bar:
+            for t in tasks:
+                done.append(_job(t))
+                bar.update()
+        return done
+    # Spawned, not forked, workers: forking a process whose embree/OCCT thread pools already run deadlocks.
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init, mp_context=ctx) as pool:
+        results = pool.map(_job, tasks, chunksize=1)
+        with tqdm(total=n, unit="scan", disable=not progress) as bar:
+            for path in results:
+                done.append(path)
+                bar.update()
+    return done

@@ -1,0 +1,73 @@
+"""Thresholds of VB-Rep extraction, each with its unit.
+
+"scale units" are fractions of the part size estimate (FitResult.scale, metres), as in the paper, where models are
+scaled to unit size: a threshold ``x`` in scale units is ``x * scale`` metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class VBRepConfig:
+    # --- vertices: intersection optimisation (paper: d_int, 5 px)
+    d_int: float = 0.05  # scale units: an optimised vertex must lie within this of each of its surfaces and move
+    #                      at most this far from its initial lift
+    vertex_px: float = 5.0  # pixels: an optimised vertex must reproject within this of its image position
+    vertex_iters: int = 12  # Gauss-Newton iterations of the vertex solves
+
+    # --- edge typing
+    sample_step_px: float = 1.0  # pixels: spacing of the samples along each 2D edge
+    side_probe_px: float = 2.0  # pixels: how far to each side of an edge the instance map is read
+    int_band_px: float = 3.0  # pixels: two surfaces meeting within this of the 2D edge make it an intersection
+    int_gap: float = 0.005  # scale units: ... or coming closer than this (in depth) within the band
+    int_gap_min_m: float = 0.0007  # metres: floor of the depth-gap threshold (sensor noise)
+    vis_px: float = 5.0  # pixels: a curved near face whose contour generator lies within this is a visibility edge
+    vis_angle_deg: float = 30.0  # degrees: ... and the edge runs along that contour (image tangents this close)
+    vis_step_px: float = 0.5  # pixels: step of the contour search
+    smooth_uv_px: float = 5.0  # pixels: moving-average window over the edge samples' image positions before
+    #                            lifting (removes the pixel staircase; the ends stay)
+    smooth_samples: int = 5  # samples: mode filter window over the per-sample edge types
+    min_run_px: float = 6.0  # pixels: type runs shorter than this are merged into their neighbours
+
+    # --- projection onto the intersection curve
+    curve_iters: int = 8  # Gauss-Newton iterations projecting samples onto both surfaces
+    perpendicular_deg: float = 1.0  # degrees: plane normal and axis within this count as perpendicular (circle)
+    parallel_deg: float = 1.0  # degrees: plane-plane normals within this have no line of intersection
+
+    # --- post-processing (supplement)
+    simplify_deg: float = 36.0  # degrees: two same-type edges of the same faces meeting at a vertex no other
+    #                             edge uses (and that is not an outline corner) are merged into one when the
+    #                             polyline turns there by less than this
+    corner_scale_px: float = 5.0  # pixels: arm length of the turn measured along an edge to find its corners
+    corner_deg: float = 20.0  # degrees: an edge whose image polyline turns by more than this at one point (a
+    #                           corner of the outline) is split there
+    corner_concentration: float = 0.7  # ratio: ... when that turn is at least this share of the turn over arms
+    #                                    twice as long (arcs turn in proportion to the arm, corners do not)
+    polyline_px: float = 0.5  # pixels: Ramer-Douglas-Peucker tolerance of non-analytic edge polylines in the image
+    min_edge_px: float = 5.0  # pixels: edges shorter than this in the image are dropped
+
+    # --- ambiguity (which sheet of a surface the face is: boss or hole)
+    sheet_max_pixels: int = 4000  # pixels: at most this many (seeded sample) per face to score the sheets
+
+    # --- faces the geometry stage left without a primitive
+    fallback_min_px: int = 10  # pixels: such an instance this large gets a least-squares plane through its depth
+    #                            points and its boundaries lifted onto its fitted neighbours (else: background)
+    fallback_rms: float = 0.01  # scale units: ... if the plane fits that evidence this well
+    fallback_flatness: float = 0.05  # ratio of singular values: ... and the evidence is not all on one line
+    fallback_min_angle_deg: float = 5.0  # degrees: ... and the plane does not coincide with a fitted plane (within
+    #                                      this angle and fallback_rms; evidence from at least two sources: its own
+    #                                      depth, or a neighbour's edge each)
+
+    # --- meshes
+    mesh_stride_px: int = 2  # pixels: spacing of the back-projected pixel grid of each face mesh
+    mesh_max_edge: float = 0.2  # scale units: triangles with a longer side (jumps between crossings) are dropped
+
+    # --- confidence (docs/vbrep.md)
+    conf_residual: float = 0.01  # scale units: fit residual at which the residual factor is exp(-1)
+    conf_length_px: float = 15.0  # pixels: edge length at which the length factor is 1 - exp(-1)
+    conf_angle_deg: float = 20.0  # degrees: surface angle at which the angle factor saturates to 1
+    conf_depth: float = 0.02  # scale units: edge-to-depth disagreement at which the depth factor is exp(-1)
+
+    seed: int = 0

@@ -1,0 +1,103 @@
+"""Surface mesh extraction: each face's visible region as a triangle mesh on its surface.
+
+The face's pixel region (its instance mask) is sampled on a regular pixel grid (``stride`` pixels); grid points
+up to one step outside the region are pulled onto the region's outline (the nearest region pixel, moved half a
+pixel outwards), so that the mesh reaches the face's edges. Every grid point is back-projected onto the face's
+surface sheet by ray-surface intersection (exact on the surface, covering exactly what the camera sees of the
+face), and the grid is triangulated: two triangles per grid square whose four corners are present, one where three
+are. Triangles with a side longer than ``max_edge`` metres (a jump between crossings where the sheet is absent) are
+dropped. Triangles are wound to face the camera.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from v2c.primitives.base import Primitive
+from v2c.vbrep.raycast import intersect, pixel_rays, sheet_depth
+
+
+def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray, K: np.ndarray,
+              window: tuple[float, float], stride: int = 2, max_edge: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh of one face. region: (H, W) bool pixels of the face; depth: (H, W) observed depth (metres, 0 = none)
+    used to pick the crossing where the sheet is absent. Returns vertices (n, 3) camera-frame metres and triangles
+    (m, 3) int64."""
+    vs, us = np.nonzero(region)
+    if len(us) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    u0, v0 = us.min() - us.min() % stride, vs.min() - vs.min() % stride
+    gu = np.arange(u0, us.max() + stride, stride)
+    gv = np.arange(v0, vs.max() + stride, stride)
+    gu = np.concatenate([[gu[0] - stride], gu, [gu[-1] + stride]])
+    gv = np.concatenate([[gv[0] - stride], gv, [gv[-1] + stride]])
+    h, w = region.shape
+    GU, GV = np.meshgrid(gu, gv, indexing="xy")
+    ok = (GU >= 0) & (GU < w) & (GV >= 0) & (GV < h)
+    inside = np.zeros(GU.shape, bool)
+    inside[ok] = region[GV[ok], GU[ok]]
+    # grid points one step outside the region: snapped onto its outline
+    near = np.zeros(GU.shape, bool)
+    near[:-1] |= inside[1:]
+    near[1:] |= inside[:-1]
+    near[:, :-1] |= inside[:, 1:]
+    near[:, 1:] |= inside[:, :-1]
+    near &= ~inside
+    keep = inside | near
+    idx = np.full(GU.shape, -1, np.int64)
+    idx[keep] = np.arange(keep.sum())
+    uv = np.stack([GU[keep], GV[keep]], 1).astype(float)
+    out = ~inside[keep]
+    if out.any():
+        y0, x0 = max(0, gv[0]), max(0, gu[0])
+        sub = ~region[y0:gv[-1] + 1, x0:gu[-1] + 1]
+        _, (iy, ix) = distance_transform_edt(sub, return_indices=True)
+        q = uv[out]
+        qi = np.clip(np.rint(q[:, 1]).astype(int) - y0, 0, sub.shape[0] - 1)
+        qj = np.clip(np.rint(q[:, 0]).astype(int) - x0, 0, sub.shape[1] - 1)
+        nearest = np.stack([ix[qi, qj] + x0, iy[qi, qj] + y0], 1).astype(float)
+        d = q - nearest
+        uv[out] = nearest + 0.5 * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    pix = np.clip(np.rint(uv).astype(int), 0, [w - 1, h - 1])
+    prior = depth[pix[:, 1], pix[:, 0]].astype(float)
+    rays = pixel_rays(uv, K)
+    z = sheet_depth(intersect(prim, rays, window), sheet, np.where(prior > 0, prior, np.nan))
+    verts = rays * z[:, None]
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    tris = []
+    full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
+    tris += [np.stack([a, b, c], 1)[full], np.stack([a, c, d], 1)[full]]
+    for t0, t1, t2, miss in ((b, c, d, a), (a, c, d, b), (a, b, d, c), (a, b, c, d)):
+        three = (t0 >= 0) & (t1 >= 0) & (t2 >= 0) & (miss < 0)
+        tris.append(np.stack([t0, t1, t2], 1)[three])
+    tri = np.concatenate(tris).astype(np.int64)
+    if len(tri) == 0:
+        return verts, tri
+    p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
+    longest = np.max(np.stack([np.linalg.norm(p1 - p0, axis=1), np.linalg.norm(p2 - p1, axis=1),
+                               np.linalg.norm(p0 - p2, axis=1)]), 0)
+    tri = tri[np.isfinite(longest) & (longest <= max_edge)]
+    p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
+    facing_away = np.einsum("ij,ij->i", np.cross(p1 - p0, p2 - p0), p0) > 0
+    tri[facing_away] = tri[facing_away][:, [0, 2, 1]]
+    used = np.unique(tri)
+    remap = np.full(len(verts), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return verts[used], remap[tri]
+
+
+def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int,
+                   rng: np.random.Generator) -> np.ndarray:
+    """n points drawn area-uniformly on a triangle mesh (metres, same frame as the vertices)."""
+    if len(triangles) == 0 or n <= 0:
+        return np.zeros((0, 3))
+    p0, p1, p2 = (vertices[triangles[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
+    if area.sum() <= 0:
+        return np.zeros((0, 3))
+    t = rng.choice(len(triangles), n, p=area / area.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    flip = r1 + r2 > 1
+    r1, r2 = np.where(flip, 1 - r1, r1), np.where(flip, 1 - r2, r2)
+    return p0[t] + r1[:, None] * (p1[t] - p0[t]) + r2[:, None] * (p2[t] - p0[t])

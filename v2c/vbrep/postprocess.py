@@ -1,0 +1,237 @@
+"""Post-processing of the extracted edges and vertices (the supplement's clean-up), and face loops.
+
+Rules, in order:
+1. labelling: an intersection edge needs two faces, every other type one; an occluded edge must have a partner
+   silhouette or visibility edge over the same image samples (it is dropped otherwise);
+2. corner correction: vertices of one kind optimised onto the same point merge; short edges (image length
+   < ``min_edge_px``) are contracted: their end vertex merges into their start vertex (the kind with the higher
+   priority, corner first, survives); closed loops shorter than 4 ``min_edge_px`` are dropped;
+3. simplification: two edges of the same type and faces meeting at a vertex no other edge uses are merged into one
+   when the polyline turns there by less than ``simplify_deg`` degrees;
+4. polylines are thinned with Ramer-Douglas-Peucker in the image (``polyline_px``), keeping both ends;
+5. unused vertices are removed and ids compacted.
+Camera frame, metres; pixels (u, v).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from v2c.vbrep.config import VBRepConfig
+from v2c.vbrep.model import EdgeType, VertexKind
+from v2c.vbrep.raycast import project
+
+
+@dataclass
+class ProtoEdge:
+    """An edge under construction: ``faces`` are instance ids; pts (K, 3) camera metres; uv (K, 2) pixels."""
+
+    type: EdgeType
+    faces: tuple[int, ...]
+    pts: np.ndarray
+    uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    key0: Any = None
+    key1: Any = None
+    graph_edge: int = -1
+    curve: dict | None = None
+    stats: dict = field(default_factory=dict)
+    v0: int = -1
+    v1: int = -1
+
+
+@dataclass
+class ProtoVertex:
+    kind: VertexKind
+    position: np.ndarray
+    pixel: np.ndarray
+    outline_corner: bool = False  # a corner of an image outline (never merged away)
+
+
+_KIND_PRIORITY = {VertexKind.CORNER: 0, VertexKind.INTERSECTION_VISIBILITY: 1, VertexKind.OCCLUSION: 2,
+                  VertexKind.OTHER: 3}
+
+
+def image_length(pts: np.ndarray, K: np.ndarray) -> float:
+    """Length (pixels) of a 3D polyline's projection."""
+    if len(pts) < 2:
+        return 0.0
+    return float(np.sum(np.linalg.norm(np.diff(project(pts, K), axis=0), axis=1)))
+
+
+def rdp_indices(pts: np.ndarray, tol: float) -> np.ndarray:
+    """Indices kept by Ramer-Douglas-Peucker on (K, 2) points (both ends kept)."""
+    n = len(pts)
+    if n <= 2:
+        return np.arange(n)
+    keep = np.zeros(n, bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j <= i + 1:
+            continue
+        seg = pts[j] - pts[i]
+        rel = pts[i + 1:j] - pts[i]
+        ln = float(np.hypot(*seg))
+        d = np.abs(seg[0] * rel[:, 1] - seg[1] * rel[:, 0]) / ln if ln > 0 else np.linalg.norm(rel, axis=1)
+        k = int(np.argmax(d))
+        if d[k] > tol:
+            keep[i + 1 + k] = True
+            stack += [(i, i + 1 + k), (i + 1 + k, j)]
+    return np.flatnonzero(keep)
+
+
+def _labelling(protos: list[ProtoEdge]) -> list[ProtoEdge]:
+    near = {(p.graph_edge, p.key0, p.key1) for p in protos if p.type in (EdgeType.SILHOUETTE, EdgeType.VISIBILITY)}
+    out = []
+    for p in protos:
+        if p.type is EdgeType.INTERSECTION and len(p.faces) != 2:
+            continue
+        if p.type is not EdgeType.INTERSECTION and len(p.faces) != 1:
+            continue
+        if p.type is EdgeType.OCCLUDED and (p.graph_edge, p.key0, p.key1) not in near:
+            continue
+        out.append(p)
+    return out
+
+
+def _contract_short(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray,
+                    min_px: float, same_m: float) -> list[ProtoEdge]:
+    parent = list(range(len(verts)))
+    # vertices optimised onto the same 3D point (junction clutter of the 2D graph) are one vertex
+    pos = np.array([v.position for v in verts]) if verts else np.zeros((0, 3))
+    for i in range(len(verts)):
+        d = np.linalg.norm(pos[i + 1:] - pos[i], axis=1)
+        for j in np.flatnonzero(d < same_m) + i + 1:
+            if verts[j].kind is verts[i].kind and parent[j] == j:
+                parent[j] = i
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    keep = []
+    for p in protos:
+        a, b = find(p.v0), find(p.v1)
+        length = image_length(p.pts, K)
+        short = length < min_px
+        if a == b and length < 4 * min_px:  # a tiny closed loop (junction clutter)
+            continue
+        if a != b and short:
+            # the higher-priority kind survives (corner correction)
+            if _KIND_PRIORITY[verts[b].kind] < _KIND_PRIORITY[verts[a].kind]:
+                a, b = b, a
+            parent[b] = a
+            continue
+        keep.append(p)
+    for p in keep:
+        p.v0, p.v1 = find(p.v0), find(p.v1)
+        p.pts[0], p.pts[-1] = verts[p.v0].position, verts[p.v1].position
+    return keep
+
+
+def _end_dir(p: ProtoEdge, at_start: bool) -> np.ndarray:
+    """Unit tangent of the polyline leaving vertex (v0 if at_start else v1) into the edge."""
+    pts = p.pts if at_start else p.pts[::-1]
+    k = min(len(pts) - 1, max(1, len(pts) // 4))
+    d = pts[k] - pts[0]
+    return d / max(np.linalg.norm(d), 1e-12)
+
+
+def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplify_deg: float) -> list[ProtoEdge]:
+    cos_lim = np.cos(np.deg2rad(simplify_deg))
+    changed = True
+    while changed:
+        changed = False
+        inc: dict[int, list[tuple[int, bool]]] = {}
+        for i, p in enumerate(protos):
+            inc.setdefault(p.v0, []).append((i, True))
+            inc.setdefault(p.v1, []).append((i, False))
+        for v, ends in inc.items():
+            if len(ends) != 2 or ends[0][0] == ends[1][0] or verts[v].outline_corner:
+                continue
+            (i, si), (j, sj) = ends
+            p, q = protos[i], protos[j]
+            if p.type is not q.type or tuple(sorted(p.faces)) != tuple(sorted(q.faces)):
+                continue
+            # leaving v into p and into q: a straight continuation has these opposite
+            if -_end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
+                continue
+            a = p.pts[::-1] if si else p.pts  # ends at v
+            b = q.pts if sj else q.pts[::-1]  # starts at v
+            ua = p.uv[::-1] if si else p.uv
+            ub = q.uv if sj else q.uv[::-1]
+            v_start = p.v1 if si else p.v0
+            v_end = q.v1 if sj else q.v0
+            n_a, n_b = len(a), len(b)
+            stats = {k: (p.stats[k] * n_a + q.stats[k] * n_b) / (n_a + n_b)
+                     if k in q.stats and np.isfinite(p.stats[k]) and np.isfinite(q.stats[k]) else p.stats[k]
+                     for k in p.stats}
+            merged = ProtoEdge(p.type, p.faces, np.concatenate([a, b[1:]]),
+                               np.concatenate([ua, ub[1:]]) if len(ua) and len(ub) else ua, p.key0, q.key1,
+                               p.graph_edge, p.curve, stats, v_start, v_end)
+            protos = [x for k, x in enumerate(protos) if k not in (i, j)] + [merged]
+            changed = True
+            break
+    return protos
+
+
+def postprocess(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, cfg: VBRepConfig,
+                same_m: float = 1e-4) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
+    """Apply the rules of the module docstring; returns edges and vertices with compact vertex ids.
+    same_m: vertices of one kind closer than this (metres) are merged first."""
+    protos = _labelling(protos)
+    protos = _contract_short(protos, verts, K, cfg.min_edge_px, same_m)
+    protos = _merge_degree_two(protos, verts, cfg.simplify_deg)
+    for p in protos:
+        if len(p.pts) > 2:
+            idx = rdp_indices(project(p.pts, K), cfg.polyline_px)
+            if len(p.uv) == len(p.pts):
+                p.uv = p.uv[idx]
+            p.pts = p.pts[idx]
+    used = sorted({p.v0 for p in protos} | {p.v1 for p in protos})
+    remap = {v: k for k, v in enumerate(used)}
+    for p in protos:
+        p.v0, p.v1 = remap[p.v0], remap[p.v1]
+    return protos, [verts[v] for v in used]
+
+
+def build_loops(protos: list[ProtoEdge], fid: dict[int, int], K: np.ndarray) -> dict[int, list[list[tuple[int, bool]]]]:
+    """Boundary loops of each face (face id -> loops of (edge id, reversed)), chained through shared vertices;
+    the loop with the largest image area first (outer loop). A chain that cannot close is kept as it is."""
+    by_face: dict[int, list[int]] = {}
+    for k, p in enumerate(protos):
+        for f in p.faces:
+            by_face.setdefault(fid[f], []).append(k)
+    out: dict[int, list[list[tuple[int, bool]]]] = {}
+    for f, eids in by_face.items():
+        unused = list(eids)
+        loops = []
+        while unused:
+            e0 = unused.pop(0)
+            loop = [(e0, False)]
+            start, cur = protos[e0].v0, protos[e0].v1
+            while cur != start:
+                nxt = next(((e, False) for e in unused if protos[e].v0 == cur), None) or \
+                    next(((e, True) for e in unused if protos[e].v1 == cur), None)
+                if nxt is None:
+                    break
+                unused.remove(nxt[0])
+                loop.append(nxt)
+                cur = protos[nxt[0]].v0 if nxt[1] else protos[nxt[0]].v1
+            loops.append(loop)
+
+        def area(loop: list[tuple[int, bool]]) -> float:
+            pts = np.concatenate([protos[e].pts[::-1] if r else protos[e].pts for e, r in loop])
+            uv = project(pts, K)
+            x, y = uv[:, 0], uv[:, 1]
+            return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+        loops.sort(key=area, reverse=True)
+        out[f] = loops
+    return out
