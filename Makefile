@@ -7,7 +7,6 @@ PY := $(VENV)/bin/python
 V2C := $(VENV)/bin/v2c
 # pytest-xdist workers: 2 fits the 2-core machine; override with `make test JOBS=auto` (or JOBS=0 for none)
 JOBS ?= 2
-DEMO_OUT ?= out/demo
 
 .PHONY: all setup test demo lint clean
 
@@ -19,16 +18,14 @@ setup:
 test: setup
 	$(PY) -m pytest -n $(JOBS) -q tests
 
-# For now: generate one synthetic scan and describe it. Becomes `v2c to-step samples/<name>/` once that exists.
+# The main job on a bundled sample: SCAN/reconstruction.step (+ .vbrep.json and the .png figure next to it).
+DEMO_SCAN ?= samples/bracket_planes_cylinders
 demo: setup
-	rm -rf $(DEMO_OUT)
-	$(V2C) synth $(DEMO_OUT) --n 1 --seed 0 --size 320x240 --noise sensor
-	scan=$$(dirname "$$(find $(DEMO_OUT) -name camera.json | sort | sed -n 1p)"); \
-	  test -n "$$scan" && test "$$scan" != . || { echo "no scan written under $(DEMO_OUT)" >&2; exit 1; }; \
-	  $(V2C) info "$$scan"
+	$(V2C) to-step $(DEMO_SCAN)/
+	@echo "open $(DEMO_SCAN)/reconstruction.step in FreeCAD; the figure is $(DEMO_SCAN)/reconstruction.png"
 
 lint: setup
 	$(VENV)/bin/ruff check .
 
 clean:
-	rm -rf out .pytest_cache .ruff_cache
+	rm -rf out .pytest_cache .ruff_cache samples/*/reconstruction.*

@@ -221,6 +221,9 @@ def test_v2c_bench_end_to_end(tmp_path):
     assert ideal["precision"] == ideal["recall"] == 1.0 and ideal["alignment"] == 0.0
     rows = [r for r in data["rows"] if r["ablation"] == "full"]
     assert len(rows) == 2 and all(r["ok"] and r["runtime"]["to_step"] > 0 for r in rows)
+    for r in rows:  # the to-step time is the sum of its stages (plus the pipeline's own bookkeeping)
+        rt = r["runtime"]
+        assert rt["to_step"] == pytest.approx(sum(rt[s] for s in R.STAGES), rel=0.05, abs=0.05)
     # a second run reuses the cached scans (same folders, nothing regenerated)
     mtime = Path(data["scans"][0], "gt", "meta.json").stat().st_mtime
     assert R.prepare_scans(R.BenchConfig(n=2, size=(320, 240), cache_dir=tmp_path / "c"), progress=False) == \

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from test_fit_helpers import make_scan, turned_box_scene
 
 from v2c.fit import FitConfig, fit_scan
@@ -50,3 +51,22 @@ def test_init_frame_from_two_classes_and_signs() -> None:
     assert max(np.rad2deg(angle_between_axes(frame[k], true[k])) for k in range(3)) < 1e-6
     assert frame[2] @ [0, 0, 1.0] <= 0 and frame[0] @ [0, 0, 1.0] >= 0  # Z towards the camera, X away
     assert np.linalg.det(frame) > 0
+
+
+@pytest.mark.parametrize("missing", [False, True])
+def test_weak_labels_still_find_the_frame(missing: bool) -> None:
+    """Scores 0: types from the type search; the frame from the weak labels' axis classes, or (labels missing)
+    from the fitted axes themselves."""
+    depth, inst, labels, planes, r = turned_box_scene(noise_m=0.001, seed=4)
+    scan, seg = make_scan(depth, inst, labels)
+    seg.scores[:] = 0.0
+    if missing:
+        seg.labels[1:] = 0
+    res = fit_scan(scan, seg, FitConfig(), "full")
+    assert sorted(res.types_searched) == sorted(res.primitives)
+    assert all(p.type == "plane" for p in res.primitives.values())
+    assert all(res.axis_labels[i] in ("X", "Y", "Z") for i in res.primitives)
+    for k in range(3):  # every box axis is one of the frame's (naming is a heuristic without labels)
+        assert min(np.rad2deg(angle_between_axes(res.frame[j], r[:, k])) for j in range(3)) < 0.5
+    for i, p in res.primitives.items():
+        assert np.rad2deg(angle_between_axes(p.axis_vector, planes[i][1])) < 0.5

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-
 from conftest import TINY
+
 from v2c.cli import main
 from v2c.fit import FitConfig, fit_scan
 from v2c.primitives import from_dict

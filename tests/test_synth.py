@@ -110,6 +110,8 @@ def test_depth_png_and_npy_agree_and_mask_is_faces(scans):
         depth = _read(folder / "depth.png")
         assert depth.dtype == np.uint16 and depth.shape == faces.shape
         assert 0.02 <= (mask > 0).mean() <= 0.6
+        # The whole part is in view (bounding sphere <= 0.7 of the smaller side, look-at jitter <= 0.08).
+        assert not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
 
 
 def test_labels_agree_with_primitives(scans):
@@ -119,6 +121,12 @@ def test_labels_agree_with_primitives(scans):
         axes = np.asarray(meta["axes_cam"], float)
         np.testing.assert_allclose(axes @ axes.T, np.eye(3), atol=1e-9)
         assert np.linalg.det(axes) == pytest.approx(1.0)
+        assert axes[0, 2] >= 0  # X points away from the camera
+        # Z is the part's up axis: the ground (z_world = 0) is a plane normal to it, below the camera.
+        pts, faces_img = _points(folder)
+        ground = pts[(faces_img == 0) & (pts[..., 2] > 0)]
+        height = ground @ axes[2]
+        assert np.abs(height - np.median(height)).max() < 1e-5 and np.median(height) < 0
         lut = np.zeros(len(prims) + 1, np.uint8)
         for k, prim in enumerate(prims):
             assert prim["id"] == k and prim["pixel_value"] == k + 1

@@ -1,0 +1,26 @@
+"""v2c: view-centric CAD (VB-Rep, STEP) from a single RGB-D scan, after View2CAD (Noeckel et al.).
+
+Scripting entry points (imported lazily, so `import v2c` stays cheap):
+
+    >>> import v2c
+    >>> vbrep = v2c.reconstruct("samples/bracket_planes_cylinders")    # -> v2c.vbrep.model.VBRep
+    >>> scan = v2c.load_scan("samples/bracket_planes_cylinders")
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["reconstruct", "load_scan"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "reconstruct":
+        from v2c.pipeline import reconstruct
+
+        return reconstruct
+    if name == "load_scan":
+        from v2c.scan import load_scan
+
+        return load_scan
+    raise AttributeError(f"module 'v2c' has no attribute {name!r}")

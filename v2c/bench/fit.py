@@ -6,6 +6,8 @@ instance's pixels). Definitions (BENCHMARK.md where it has one):
 - alignment: min(|a - b|, |a + b|) of the unit axes (plane normal; cylinder, cone, torus axis) of every fitted
   instance whose face has an axis; mean over the scan, then mean over scans.
 - radius error: |r_fit - r_gt| of cylinders and spheres, divided by the gt part size (and, also reported, by r_gt).
+- torus errors: |R_fit - R_gt| (major) and |r_fit - r_gt| (minor) of tori, divided by the gt radius (and, for
+  the minor radius, also reported in millimetres: fillet tubes are a few millimetres).
 - plane offset error: distance from the gt face's centroid (noise-free depth, back-projected) to the fitted
   plane, divided by the gt part size.
 - fit time: fit_scan's own wall clock and CPU time (normals, RANSAC, aligned fit, edge graph, intersection
@@ -74,6 +76,7 @@ def scan_metrics(scan, seg, res) -> dict[str, Any]:
     match = _face_of_instances(np.asarray(seg.instances), faces)
     clean = backproject(np.asarray(gt.depth_clean, float), np.asarray(scan.K, float))
     align, rad_size, rad_rel, off = [], [], [], []
+    tor_major, tor_minor, tor_minor_mm = [], [], []
     for i, p in res.primitives.items():
         g = by_id.get(match.get(i, -1))
         if g is None or g.get("type") not in ("plane", "cylinder", "cone", "sphere", "torus"):
@@ -87,6 +90,10 @@ def scan_metrics(scan, seg, res) -> dict[str, Any]:
         if p.type in ("cylinder", "sphere"):
             rad_size.append(abs(p.radius - gp.radius) / size)
             rad_rel.append(abs(p.radius - gp.radius) / gp.radius)
+        if p.type == "torus":
+            tor_major.append(abs(p.radius - gp.radius) / gp.radius)
+            tor_minor.append(abs(p.minor_radius - gp.minor_radius) / gp.minor_radius)
+            tor_minor_mm.append(1000 * abs(p.minor_radius - gp.minor_radius))
         if p.type == "plane":
             m = (faces == int(g["id"]) + 1) & (gt.depth_clean > 0)
             if m.any():
@@ -94,6 +101,7 @@ def scan_metrics(scan, seg, res) -> dict[str, Any]:
                 off.append(abs(float(p.signed_distance(c[None])[0])) / size)
     return {"scan": str(scan.path), "n_primitives": len(res.primitives), "alignment": align,
             "radius_err_size": rad_size, "radius_err_rel": rad_rel, "plane_offset_err": off,
+            "torus_major_err_rel": tor_major, "torus_minor_err_rel": tor_minor, "torus_minor_err_mm": tor_minor_mm,
             "time_s": float(res.timings["total"]), "cpu_s": float(res.timings["total_cpu"]),
             "scale_est_over_gt": float(res.scale / size)}
 
@@ -104,6 +112,8 @@ def _summary(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
 
     per_scan_align = [float(np.mean(r["alignment"])) for r in rows if r["alignment"]]
     rad, rel, off = pooled("radius_err_size"), pooled("radius_err_rel"), pooled("plane_offset_err")
+    tmaj, tmin, tmm = (pooled(k) if all(k in r for r in rows) else np.zeros(0)
+                       for k in ("torus_major_err_rel", "torus_minor_err_rel", "torus_minor_err_mm"))
     return {
         "scans": len(rows),
         "alignment": float(np.mean(per_scan_align)) if per_scan_align else float("nan"),
@@ -114,6 +124,12 @@ def _summary(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
         "radius_count": len(rad),
         "plane_offset_err_median_pct": 100 * float(np.median(off)) if len(off) else float("nan"),
         "plane_count": len(off),
+        "torus_major_err_median_pct": 100 * float(np.median(tmaj)) if len(tmaj) else float("nan"),
+        "torus_minor_err_median_pct": 100 * float(np.median(tmin)) if len(tmin) else float("nan"),
+        "torus_minor_err_median_mm": float(np.median(tmm)) if len(tmm) else float("nan"),
+        "torus_minor_err_max_mm": float(np.max(tmm)) if len(tmm) else float("nan"),
+        "torus_major_err_max_pct": 100 * float(np.max(tmaj)) if len(tmaj) else float("nan"),
+        "torus_count": len(tmaj),
         "time_median_s": float(np.median([r["time_s"] for r in rows])),
         "time_max_s": float(np.max([r["time_s"] for r in rows])),
         "cpu_median_s": float(np.median([r["cpu_s"] for r in rows])),
@@ -149,12 +165,17 @@ def fit_benchmark(scans: Sequence[str | Path], ablations: Sequence[str] = ABLATI
 def format_table(summary: dict[str, dict[str, float]]) -> str:
     """Markdown table of the per-ablation summary."""
     head = ("| ablation | scans | alignment (mean) | pairs | radius err (median, % size) | radius err (% r) "
-            "| plane offset err (median, % size) | fit time median: wall / CPU (s) |")
-    lines = [head, "|" + " --- |" * 8]
+            "| plane offset err (median, % size) | torus R / r err (median, % R / % r) | torus r err (median / max, mm) "
+            "| fit time median: wall / CPU (s) |")
+    lines = [head, "|" + " --- |" * 10]
     for a, s in summary.items():
         lines.append(f"| {a} | {s['scans']} | {s['alignment']:.4f} | {s['pairs']} | "
                      f"{s['radius_err_median_pct_size']:.2f} | {s['radius_err_median_pct_radius']:.2f} | "
-                     f"{s['plane_offset_err_median_pct']:.2f} | {s['time_median_s']:.2f} / {s['cpu_median_s']:.2f} |")
+                     f"{s['plane_offset_err_median_pct']:.2f} | "
+                     f"{s.get('torus_major_err_median_pct', float('nan')):.1f} / "
+                     f"{s.get('torus_minor_err_median_pct', float('nan')):.1f} ({s.get('torus_count', 0)}) | "
+                     f"{s.get('torus_minor_err_median_mm', float('nan')):.2f} / "
+                     f"{s.get('torus_minor_err_max_mm', float('nan')):.2f} | {s['time_median_s']:.2f} / {s['cpu_median_s']:.2f} |")
     return "\n".join(lines)
 
 

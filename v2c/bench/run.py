@@ -81,6 +81,7 @@ class BenchConfig:
     step: bool = True  # export (and time) the STEP file as `v2c to-step` does
     metrics: MetricConfig = field(default_factory=MetricConfig)
     figure_dir: Path | None = None  # result figure per scan (first column) and grid.png of them here
+    weights: Path | None = None  # learned segmenter weights (None: the shipped v2c/segment/weights/unet.pt)
 
 
 # ---------------------------------------------------------------------------------------------------- scans
@@ -172,14 +173,8 @@ def limit_threads() -> None:
     import cv2
 
     cv2.setNumThreads(1)
-    if "torch" in sys.modules or _torch_wanted():
-        import torch
-
-        torch.set_num_threads(1)
-
-
-def _torch_wanted() -> bool:
-    return os.environ.get("V2C_BENCH_TORCH", "") == "1"
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
 
 
 def _error_text(exc: BaseException) -> str:
@@ -190,10 +185,11 @@ def _error_text(exc: BaseException) -> str:
 
 def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations: Sequence[str],
                   metrics: MetricConfig | None = None, step: bool = True,
-                  figure_dir: str | Path | None = None) -> list[dict[str, Any]]:
+                  figure_dir: str | Path | None = None, weights: str | None = None) -> list[dict[str, Any]]:
     """Rows (one per segmentation x ablation, plus one ``gt`` row if asked) of one scan: every metric and the
     to-step time split by stage (seconds). A failing stage gives a row with ``ok`` False and its ``error``.
-    ``figure_dir``: the result figure of the first (segmentation, ablation) goes there as ``<scan>.png``."""
+    ``figure_dir``: the result figure of the first (segmentation, ablation) goes there as ``<scan>.png``;
+    ``weights``: the learned segmenter's weights file (None: the shipped one)."""
     from dataclasses import replace
 
     from v2c.bench.metrics import scan_metrics, vbrep_from_gt
@@ -222,7 +218,7 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
         for method in segmentations:
             t, c = time.perf_counter(), time.process_time()
             try:
-                seg = segment(scan, method)
+                seg = segment(scan, method, **({"weights": weights} if method == "learned" and weights else {}))
                 seg_error = None
             except Exception as exc:  # noqa: BLE001
                 seg, seg_error = None, _error_text(exc)
@@ -236,9 +232,11 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
                 try:
                     c = time.process_time()
                     vbrep = reconstruct(scan, segmentation=seg, ablation=ablation)
-                    tim = vbrep.meta.get("timings", {})
+                    tim = dict(vbrep.meta.get("timings", {}))
                     split = {"load": t_load, "segment": t_seg, "fit": float(tim.get("fit", math.nan)),
                              "vbrep": float(tim.get("vbrep", math.nan))}
+                    # the pipeline got a ready segmentation: its own "segment" time is ~0; ours is t_seg
+                    pipeline_rest = float(tim.get("total", 0.0)) - float(tim.get("segment", 0.0))
                     vbrep.meta.setdefault("timings", {})["segment"] = t_seg
                     if step:
                         from exporters.step import write
@@ -249,7 +247,6 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
                         split["step"] = time.perf_counter() - t
                         row["step_faces"] = report.n_faces
                         row["step_warnings"] = len(report.warnings)
-                    pipeline_rest = float(tim.get("total", 0.0)) - float(tim.get("segment", 0.0))
                     split["to_step"] = t_load + t_seg + pipeline_rest + split.get("step", 0.0)
                     # CPU seconds of the same work: what a free core would take (the machine may be shared)
                     split["to_step_cpu"] = c_load + c_seg + time.process_time() - c
@@ -287,11 +284,11 @@ def figure_grid(paths: Sequence[str | Path], out: Path, columns: int = 3, width:
     tiles = [np.pad(t, ((0, h - t.shape[0]), (0, 0), (0, 0)), constant_values=255) for t in tiles]
     tiles += [np.full_like(tiles[0], 255)] * (-len(tiles) % columns)
     rows = [np.concatenate(tiles[i:i + columns], 1) for i in range(0, len(tiles), columns)]
-    cv2.imwrite(str(out), np.concatenate(rows, 0))
+    cv2.imwrite(str(out), np.concatenate(rows, 0), [cv2.IMWRITE_PNG_COMPRESSION, 9])
     return out
 
 
-def warm_up(segmentations: Sequence[str]) -> None:
+def warm_up(segmentations: Sequence[str], weights: str | None = None) -> None:
     """Import what `v2c to-step` needs and load the learned model, so that per-scan times leave out the process
     start (measured once by `process_start_seconds`)."""
     import exporters.step  # noqa: F401
@@ -301,14 +298,16 @@ def warm_up(segmentations: Sequence[str]) -> None:
     if "learned" in segmentations:
         from v2c.segment import learned
 
-        if learned.weights_available():
-            learned._model(str(learned.DEFAULT_WEIGHTS))
+        path = weights or str(learned.DEFAULT_WEIGHTS)
+        if learned.weights_available(Path(path)):
+            learned._model(path)
 
 
-def _worker_init(segmentations: Sequence[str] = ()) -> None:
+def _worker_init(segmentations: Sequence[str] = (), weights: str | None = None) -> None:
     limit_threads()
     with contextlib.suppress(Exception):  # a failing import is reported by the scan that needs it
-        warm_up(segmentations)
+        warm_up(segmentations, weights)
+    limit_threads()  # again, for torch imported by the warm-up
 
 
 def _worker(args: tuple) -> list[dict[str, Any]]:
@@ -318,14 +317,16 @@ def _worker(args: tuple) -> list[dict[str, Any]]:
 # ------------------------------------------------------------------------------------------------ the run
 
 
-def process_start_seconds(segmentations: Sequence[str]) -> float:
+def process_start_seconds(segmentations: Sequence[str], weights: str | None = None) -> float:
     """Wall time (s) of a fresh interpreter importing what `v2c to-step` needs (the CLI, the pipeline, the STEP
     writer, the segmenters used; the learned model loaded when its weights exist): the once-per-set start."""
     code = ["import v2c.cli, v2c.pipeline, exporters.step, v2c.fit, v2c.vbrep.extract"]
     for m in segmentations:
         if m == "learned":
+            path = repr(weights or "")
             code.append("from v2c.segment import learned as L\n"
-                        "if L.weights_available(): L._model(str(L.DEFAULT_WEIGHTS))")
+                        f"p = {path} or str(L.DEFAULT_WEIGHTS)\n"
+                        "if L.weights_available(p): L._model(p)")
         elif m in ("geometric", "oracle"):
             code.append(f"import v2c.segment.{m}")
     t = time.perf_counter()
@@ -351,12 +352,13 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True,
 
     t0 = time.perf_counter()
     dirs = prepare_scans(cfg, progress)
+    weights = str(cfg.weights) if cfg.weights else None
     tasks = [(str(d), tuple(cfg.segmentations), tuple(cfg.ablations), cfg.metrics, cfg.step,
-              str(cfg.figure_dir) if cfg.figure_dir else None) for d in dirs]
+              str(cfg.figure_dir) if cfg.figure_dir else None, weights) for d in dirs]
     rows: list[dict[str, Any]] = []
     bar = tqdm(total=len(tasks), unit="scan", desc="bench", disable=not progress)
     if cfg.jobs <= 1:
-        _worker_init(cfg.segmentations)
+        _worker_init(cfg.segmentations, weights)
         for task in tasks:
             rows += _worker(task)
             bar.update()
@@ -367,7 +369,7 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True,
 
         ctx = mp.get_context("spawn")  # a clean interpreter per worker: no forked torch / OCCT state
         with ProcessPoolExecutor(max_workers=cfg.jobs, mp_context=ctx, initializer=_worker_init,
-                                 initargs=(tuple(cfg.segmentations),)) as pool:
+                                 initargs=(tuple(cfg.segmentations), weights)) as pool:
             futures = {pool.submit(_worker, task): task for task in tasks}
             for fut in as_completed(futures):
                 try:
@@ -381,12 +383,12 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True,
     grid = None
     if cfg.figure_dir is not None:
         grid = figure_grid([r["figure"] for r in rows if r.get("figure")][:12], Path(cfg.figure_dir) / "grid.png")
-    start = process_start_seconds([s for s in cfg.segmentations if s != GT])
+    start = process_start_seconds([s for s in cfg.segmentations if s != GT], weights)
     cols = columns_of(cfg)
     summary = {f"{s}/{a}": summarise([r for r in rows if r["segmentation"] == s and r["ablation"] == a], start)
                for s, a in cols}
     conf = asdict(cfg)
-    conf.update(cad_dir=str(cfg.cad_dir) if cfg.cad_dir else None, cache_dir=str(scan_cache_dir(cfg))
+    conf.update(weights=weights, cad_dir=str(cfg.cad_dir) if cfg.cad_dir else None, cache_dir=str(scan_cache_dir(cfg))
                 if cfg.scans_dir is None else None, scans_dir=str(cfg.scans_dir) if cfg.scans_dir else None)
     return _jsonable({"config": conf, "scans": [str(d) for d in dirs], "columns": [f"{s}/{a}" for s, a in cols],
                       "summary": summary, "paper": PAPER, "process_start_s": start,

@@ -64,11 +64,13 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
               help="Where --real writes its STEP files, VB-Reps and figures (default: a temporary folder).")
 @click.option("--figures", "figure_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Write each scan's result figure (first column) and grid.png of the first 12 here.")
+@click.option("--weights", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Weights of the learned segmenter (default: the shipped v2c/segment/weights/unet.pt).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
             cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
-            out_dir: Path | None, figure_dir: Path | None, quiet: bool) -> None:
+            out_dir: Path | None, figure_dir: Path | None, weights: Path | None, quiet: bool) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md)."""
@@ -84,7 +86,7 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     order = ("full", "no-axis", "no-int", "fit-only", "gt")
     cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
                           ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
-                          scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir)
+                          scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
     try:
         result = run.run_benchmark(cfg, progress=not quiet)
     except ValueError as e:

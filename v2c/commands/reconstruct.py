@@ -32,7 +32,7 @@ def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no
         vbrep, seg, _ = reconstruct(scan, segmentation=method, ablation=ablation, return_stages=True)
     except ScanError as e:
         raise click.ClickException(str(e)) from None
-    except ValueError as e:  # e.g. oracle segmentation of a scan without gt/
+    except (ValueError, FileNotFoundError) as e:  # oracle without gt/, learned without weights
         raise click.ClickException(f"{scan_dir}: {e}") from None
     out = out_dir or scan_dir
     out.mkdir(parents=True, exist_ok=True)

@@ -19,22 +19,27 @@ from v2c.segment.train import TrainConfig
 @click.option("--stop-step", type=int, default=None,
               help="Stop after this many steps (a prefix of the --steps schedule; reproduces a capped run).")
 @click.option("--minutes", type=float, default=None, help="Wall-clock cap in minutes (the schedule is unchanged).")
+@click.option("--warmup", "warmup_steps", default=TrainConfig.warmup_steps, show_default=True,
+              help="Linear learning-rate warm-up steps.")
 @click.option("--batch", default=TrainConfig.batch, show_default=True, help="Crops per step.")
 @click.option("--crop", "crop_px", default=TrainConfig.crop_px, show_default=True, help="Crop side (pixels).")
 @click.option("--lr", default=TrainConfig.lr, show_default=True, help="Peak learning rate.")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Feature cache folder (default DATA/.cache).")
+@click.option("--init", "init", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Start from these weights (a second training stage with a fresh schedule).")
 @click.option("--threads", default=TrainConfig.threads, show_default=True, help="torch CPU threads.")
 @click.option("--fp32", is_flag=True, help="Disable bf16 autocast even where the CPU supports it.")
 def command(data_dir: Path, out: Path, seed: int, steps: int, stop_step: int | None, minutes: float | None,
-            batch: int, crop_px: int, lr: float, cache_dir: Path | None, threads: int, fp32: bool) -> None:
+            warmup_steps: int, batch: int, crop_px: int, lr: float, cache_dir: Path | None, init: Path | None,
+            threads: int, fp32: bool) -> None:
     """Train the segmentation network on the scans under DATA and write OUT (+ OUT.json, the training record)."""
     from v2c.segment.train import train
 
-    cfg = TrainConfig(steps=steps, stop_step=stop_step, minutes=minutes, batch=batch, crop_px=crop_px, lr=lr,
-                      seed=seed, threads=threads, bf16=False if fp32 else None)
+    cfg = TrainConfig(steps=steps, stop_step=stop_step, minutes=minutes, warmup_steps=warmup_steps, batch=batch,
+                      crop_px=crop_px, lr=lr, seed=seed, threads=threads, bf16=False if fp32 else None)
     try:
-        rec = train(data_dir, out, cfg, cache_dir=cache_dir, log=lambda m: click.echo(m))
+        rec = train(data_dir, out, cfg, cache_dir=cache_dir, init=init, log=lambda m: click.echo(m))
     except ValueError as e:
         raise click.ClickException(str(e)) from None
     best = rec.get("best") or {}

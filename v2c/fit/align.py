@@ -4,9 +4,12 @@ a tangent-plane update of their RANSAC axis: the supplement's reparameterisation
 
 E_recon = sum over primitives and their (subsampled) points of rho(d(x, P)^2 / scale^2), solved with scipy
 ``least_squares(method="trf", loss="soft_l1")``: 'trf' because it is the method that takes both a robust loss and
-a sparse Jacobian structure (``jac_sparsity``: a primitive's residuals depend only on its own parameters and R, so
-finite differences need only a handful of grouped evaluations), soft-l1 because its quadratic core keeps the
-least-squares accuracy on inliers while boundary points and flying pixels count only linearly.
+a sparse Jacobian (a primitive's residuals depend only on its own parameters and R), soft-l1 because its quadratic
+core keeps the least-squares accuracy on inliers while boundary points and flying pixels count only linearly.
+The Jacobian is analytic (`Layout.term_jacobian`: each primitive's `local_jacobian` and `rotation_gradient`,
+chained through the axis parameterisation and SO(3)'s left Jacobian), dense with the exact trust-region solver
+for small problems and sparse with lsmr for large ones; ``jacobian="fd"`` falls back to scipy's grouped sparse
+finite differences (``jac_sparsity``).
 """
 
 from __future__ import annotations
@@ -196,6 +199,38 @@ def init_frame(axes: Sequence[np.ndarray], labels: Sequence[int], weights: Seque
     return orient_frame(r, view_dir)
 
 
+def frame_from_axes(axes: Sequence[np.ndarray], weights: Sequence[float], view_dir: np.ndarray,
+                    tol_deg: float) -> np.ndarray | None:
+    """A frame from unlabelled axes (weak labels: the geometric segmenter): the weighted-consensus direction, then
+    the consensus direction among the axes orthogonal to it (within ``tol_deg``), completed by their cross product.
+    Naming follows SCAN_FORMAT.md's conventions as far as a camera can tell: Z is the direction closest to the
+    image's up (-y), X the remaining one closer to the viewing direction. None without axes."""
+    a = np.asarray([unit(x) for x in axes]).reshape(-1, 3)
+    w = np.asarray(weights, float)
+    if len(a) == 0:
+        return None
+    cos_tol = np.cos(np.deg2rad(tol_deg))
+
+    def consensus(sel: np.ndarray) -> np.ndarray:
+        agree = (np.abs(a @ a.T) > cos_tol) & sel[None, :]
+        seed = int(np.argmax(np.where(sel, agree @ w, -1.0)))
+        m = agree[seed]
+        am = a[m] * np.sign(a[m] @ a[seed])[:, None]
+        e = np.linalg.eigh((am * w[m][:, None]).T @ am)[1][:, -1]
+        return e if e @ a[seed] >= 0 else -e
+
+    e1 = consensus(np.ones(len(a), bool))
+    ortho = np.abs(a @ e1) < np.sin(np.deg2rad(tol_deg))
+    e2 = consensus(ortho) if ortho.any() else tangent_basis(e1)[0]
+    e2 = unit(e2 - (e2 @ e1) * e1)
+    dirs = [e1, e2, np.cross(e1, e2)]
+    kz = int(np.argmax([abs(d[1]) for d in dirs]))
+    rest = [d for k, d in enumerate(dirs) if k != kz]
+    kx = int(np.argmax([abs(d @ view_dir) for d in rest]))
+    z, x = dirs[kz], rest[kx]
+    return orient_frame(np.array([x, np.cross(z, x), z]), view_dir)
+
+
 def orient_frame(r: np.ndarray, view_dir: np.ndarray) -> np.ndarray:
     """Flip pairs of rows (keeping det = +1) so that Z . view_dir < 0 and then X . view_dir >= 0."""
     r = np.array(r, float)
@@ -229,7 +264,8 @@ def recon_residuals(prims: Sequence[Primitive], terms: Sequence[Term], scale: fl
 
 
 def align_fit(terms: Sequence[Term], frame0: np.ndarray, scale: float, loss: str, loss_scale: float,
-              max_nfev: int, ftol: float = 1e-8, jacobian: str = "analytic") -> tuple[np.ndarray, list[Primitive]]:
+              max_nfev: int, ftol: float = 1e-8, jacobian: str = "analytic",
+              lsmr_tol: float = 1e-5) -> tuple[np.ndarray, list[Primitive]]:
     """Minimise E_recon over R and every primitive jointly (see module docstring). Returns (frame, primitives).
 
     jacobian: "analytic" (each primitive's `local_jacobian` and `rotation_gradient`, chained through the axis
@@ -240,7 +276,8 @@ def align_fit(terms: Sequence[Term], frame0: np.ndarray, scale: float, loss: str
     counts = [len(t.points) for t in terms]
     if layout.size == 0 or sum(counts) <= layout.size:
         return frame0, [t.prim for t in terms]
-    dense = layout.size <= 200  # small problems: the exact trust-region solver on a dense Jacobian is fastest
+    # small problems: the exact trust-region solver on a dense Jacobian is fastest; large ones: lsmr, sparse
+    dense = layout.size * int(sum(counts)) <= 500_000
 
     def fun(x: np.ndarray) -> np.ndarray:
         _, prims = layout.primitives(x)
@@ -257,7 +294,8 @@ def align_fit(terms: Sequence[Term], frame0: np.ndarray, scale: float, loss: str
         jac_kw: dict = {"jac_sparsity": sparsity([(c, layout.columns(i)) for i, c in enumerate(counts)],
                                                  layout.size)}
     else:
-        jac_kw = {"jac": jac, "tr_solver": "exact" if dense else "lsmr"}
+        jac_kw = {"jac": jac, "tr_solver": "exact"} if dense else {
+            "jac": jac, "tr_solver": "lsmr", "tr_options": {"atol": lsmr_tol, "btol": lsmr_tol}}
     res = least_squares(fun, np.zeros(layout.size), method="trf", loss=loss, f_scale=loss_scale, x_scale="jac",
                         max_nfev=max_nfev, ftol=ftol, xtol=ftol, **jac_kw)
     return layout.primitives(res.x)

@@ -24,14 +24,31 @@ class FitConfig:
     normal_angle_deg: float = 30.0      # inlier normal deviation from the surface normal (degrees)
     ransac_hypotheses: int = 48         # minimal samples drawn per type (count)
     torus_radius_steps: int = 8         # minor-radius candidates tried per torus sample (count)
+    torus_minor_range: tuple[float, float] = (0.02, 0.6)  # minor-radius candidates, fractions of the patch extent
+    torus_min_ratio: float = 1.0        # tori need major radius > this * minor radius (ratio): ring tori, the
+                                        # fillets and rounds CAD makes; a spindle "blob" can wrap a thin band
+    torus_normal_axis_deg: float = 20.0  # torus hypotheses: the sample normals must lie within this of the
+                                        # planes through the axis (degrees)
+    torus_minor_span: tuple[float, float] = (0.3, 1.5)  # torus minor radius bounds, multiples of the patch's
+                                        # cross-section span (its extent in the torus' own (rho, h) half-plane;
+                                        # a quarter-circle fillet has r = 0.71 span) (ratio)
+    torus_span_pct: float = 5.0         # the span and the radial range are taken between these percentiles (%)
+    torus_minor_prior: float = 0.8      # weak prior of the torus refinement: r = this * cross-section span (ratio)
+    torus_prior_weight: float = 0.2    # its residual weight per point ((r - r0) vs point distances; 0 = off)
+    min_normal_angle_deg: float = 3.0   # minimal samples whose normals are closer than this are degenerate (deg)
     ransac_points: int = 1000           # points per instance used to score hypotheses (count)
     ransac_prescore_points: int = 200   # points scoring every hypothesis first (count)
     ransac_keep: int = 8                # hypotheses re-scored on all ransac_points (count)
     refine_points: int = 1500           # inlier points per instance used by the local least-squares refinement
     max_radius: float = 5.0             # larger radii/distances are rejected as degenerate (part-size units)
     min_half_angle_deg: float = 3.0     # cone half angles outside [min, 90 - min] are rejected (degrees)
-    label_score_min: float = 0.5        # below this label confidence every primitive type is tried ([0, 1])
-    complexity_penalty: float = 0.02    # type search: inlier-fraction penalty per parameter beyond a plane's 3
+    label_score_min: float = 0.6        # below this label confidence every type is tried ([0, 1]); the geometric
+                                        # segmenter's 0.5 counts as weak (docs/geometry.md)
+    type_selection: str = "gric"        # type search rule: "gric" (ransac.select_type) or "inliers" (inlier
+                                        # fraction minus complexity_penalty per parameter beyond a plane's 3)
+    complexity_penalty: float = 0.02    # "inliers" rule: inlier-fraction penalty per parameter (fraction)
+    gric_trunc: float = 4.0             # GRIC: squared residuals are truncated at this many sigma^2 (ratio)
+    gric_min_sigma: float = 0.0005      # GRIC: floor of the noise level (part-size units)
     seed: int = 0                       # seed of all random sampling
 
     # -- global aligned fit (shared frame R) ----------------------------------------------------------------------
@@ -47,6 +64,7 @@ class FitConfig:
     loss_scale: float = 0.005           # soft-l1 knee (part-size units): residuals beyond it count linearly
     max_nfev: int = 40                  # function evaluations (excluding finite differences) per least squares
     jacobian: str = "analytic"          # "analytic" or "fd" (sparse finite differences) for the joint fits
+    lsmr_tol: float = 1e-5              # relative tolerance of the iterative (lsmr) trust-region steps
     ftol: float = 1e-6                  # relative cost / step tolerance of the joint least squares
 
     # -- iterative intersection refinement ------------------------------------------------------------------------

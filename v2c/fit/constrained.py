@@ -7,7 +7,8 @@ Closed-form starts, then the robust refinement of `ransac.refine_primitive` with
 - cone: half angle from the median normal-axis angle; axis line as for the cylinder; apex height from the
   median of h - rho / tan(a) (axis flipped if the radius shrinks along it).
 - torus: axis line as for the cylinder; the tube's cross-section is a circle in the (rho, h) half-plane
-  (algebraic circle fit) giving major radius, height of the centre and minor radius.
+  (algebraic circle fit) giving major radius, height of the centre and minor radius; also the free fit's torus
+  turned onto the axis. The refinement keeps the radii within `ransac.torus_limits`.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from v2c.fit.config import FitConfig
-from v2c.fit.ransac import refine_primitive
+from v2c.fit.ransac import refine_primitive, torus_msac
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.directions import tangent_basis
 
@@ -68,7 +69,7 @@ def start_with_axis(ptype: str, x: np.ndarray, n: np.ndarray, a: np.ndarray,
     if ptype == "cylinder":
         return Cylinder(c, a, float(np.median(rho)))
     if ptype == "cone":
-        s = np.clip(np.median(np.abs(n @ a)), np.sin(np.deg2rad(2.0)), np.cos(np.deg2rad(2.0)))
+        s = np.clip(np.median(np.abs(n @ a)), 0.035, 0.999)  # keep the start half angle in (2, 87.5) degrees
         half = float(np.arcsin(s))
         if len(h) > 2 and np.corrcoef(h, rho)[0, 1] < 0:
             a, h = -a, -h
@@ -87,12 +88,24 @@ def fit_with_axis(prim: Primitive, x: np.ndarray, n: np.ndarray, a: np.ndarray, 
     if isinstance(prim, Sphere):
         return prim
     best, cost = prim, np.inf
-    for by_points in (False, True) if prim.type in ("cylinder", "torus") else (False,):
-        start = start_with_axis(prim.type, x, n, a, by_points)
+    starts = [start_with_axis(prim.type, x, n, a, by_points)
+              for by_points in ((False, True) if prim.type in ("cylinder", "torus") else (False,))]
+    if isinstance(prim, Torus):  # the free fit turned onto the axis: the closed-form cross-section circle of a
+        # noisy arc can be far off (a 11 mm tube started at 27 mm) while the free fit's radii are good
+        starts.append(prim.from_local(np.zeros(prim.local_size), a))
+    for start in starts:
         if start is None:
             continue
-        q = refine_primitive(start, x, scale, config, axis=start.axis_vector)
-        c = float(np.median(np.abs(q.signed_distance(x))))
+        if isinstance(prim, Torus):  # on the start's distance inliers (even soft-l1 tails let a few far points
+            # fatten a thin tube), chosen by MSAC with the refinement's prior on the minor radius
+            m = np.abs(start.signed_distance(x)) < config.d_inlier * scale
+            if np.count_nonzero(m) < max(start.local_size + 2, len(x) // 4):
+                continue
+            q = refine_primitive(start, x[m], scale, config, axis=start.axis_vector)
+            c = torus_msac(q, x, scale, config)
+        else:
+            q = refine_primitive(start, x, scale, config, axis=start.axis_vector)
+            c = float(np.median(np.abs(q.signed_distance(x))))
         if c < cost:
             best, cost = q, c
     return best

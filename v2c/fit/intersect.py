@@ -5,12 +5,14 @@ Lifted points are the graph's vertices plus samples every edge_sample_px along t
 instances. Point i sits at s_i * ray_i (s_i = z-depth, metres; ray_i has z = 1). Its candidate surfaces are the
 fitted instances that meet there in the image; I_i keeps those within d_int * scale of the point, except that of
 two near-parallel planes (normals within parallel_deg) only the nearer stays (supplement's parallel-plane
-rejection: a step between parallel faces is an occlusion, not an intersection). Then
+rejection: a step between parallel faces is an occlusion, not an intersection), and likewise of two coaxial
+cylinders. Then
 
-    E = E_int + w_r E_recon,   E_int = sum_i sum_{j in I_i} d(s_i ray_i, P_j)^2 / scale^2
+    E = E_int + w_r E_recon,   E_int = sum_i sum_{j in I_i} rho(d(s_i ray_i, P_j)^2 / scale^2)
 
-is minimised over all s_i, the primitives and R (same Layout and solver as `align`), and the whole is repeated with
-d_int * d_int_second_factor (paper: d_int / 5).
+(E_recon as in `align`, rho the soft-l1 loss) is minimised over all s_i, the primitives and R with the same Layout,
+solver and analytic Jacobian as `align` (the depth column of an E_int row is n_j . ray_i), and the whole is repeated
+with I_i recomputed at d_int * d_int_second_factor (paper: d_int / 5). See docs/geometry.md for w_r.
 """
 
 from __future__ import annotations
@@ -220,7 +222,7 @@ def refine_intersections(terms: Sequence[Term], frame0: np.ndarray, lifted: Lift
         blocks += [(c, layout.columns(i)) for i, c in enumerate(counts)]
         jac_kw: dict = {"jac_sparsity": sparsity(blocks, n0 + ns)}
     else:
-        jac_kw = {"jac": jac, "tr_solver": "lsmr"}
+        jac_kw = {"jac": jac, "tr_solver": "lsmr", "tr_options": {"atol": config.lsmr_tol, "btol": config.lsmr_tol}}
     res = least_squares(fun, x0, method="trf", loss=config.loss, f_scale=config.loss_scale, x_scale="jac",
                         max_nfev=config.max_nfev, ftol=config.ftol, xtol=config.ftol, **jac_kw)
     frame, prims = layout.primitives(res.x[:n0])

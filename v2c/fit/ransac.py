@@ -12,6 +12,24 @@ Minimal sets (camera frame, metres; normals from the depth gradient):
   p - r n lie on the major circle, which the three of them define (centre, axis, major radius).
 Every hypothesis is scored on a random subset of the instance; the best is refined on its inliers by
 `refine_primitive` and its inliers recounted on all points.
+
+Tori are scored by MSAC (the sum of squared distances truncated at d_inlier) instead of the inlier count: on a
+fillet a few millimetres wide d_inlier exceeds the tube itself and the normals are 20-30 degrees off, so a
+loose, tilted, fat torus counts as many inliers as the right one; the truncated squared distance prefers the
+tight fit. Normal-free "ring" hypotheses (`_hyp_torus_rings`: the axis line from the circle through three
+points, the cross-section from the points' (rho, h) cloud) join the minimal-set ones for the same reason.
+
+Torus bounds (`torus_limits`): a small fillet's tube is a few pixels wide and its cross-section is an arc barely
+above the noise, so an unconstrained fit can trade a tilted axis or a giant tube for the same distances (a
+1.9 mm fillet came back as r = 11.6 mm, another as a 280 mm torus). The data do fix the patch's cross-section
+*span* (its extent in the torus' own (rho, h) half-plane) and its radial range: the minor radius is held within
+`torus_minor_span` times the span and the tube centre circle within the points' radial range widened by the
+largest allowed r. Hypotheses outside are dropped, the refinement is bounded, and `torus_ok` lets the joint
+solves reject a torus that ran away. Within those bounds a thin tube's cross-section is still a flat valley (a
+90-degree arc of a 2 mm tube with 0.3 mm noise is matched as well by a 3.7 mm tube centred further in), so the
+local refinement adds a weak prior residual pulling r towards `torus_minor_prior` times the span (a fillet's
+quarter arc: r = 0.80 span on every torus of the benchmark sets), weighted `torus_prior_weight` per point, which
+decides only where the points cannot.
 """
 
 from __future__ import annotations
@@ -23,6 +41,7 @@ from scipy.optimize import least_squares
 
 from v2c.fit.config import FitConfig
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
+from v2c.primitives.base import radial_frame
 from v2c.primitives.directions import unit
 
 #: Degrees of freedom of each type (for the complexity penalty of the type search).
@@ -72,10 +91,11 @@ def _hyp_spheres(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float) -> 
     return [Sphere(c[k], r[k]) for k in np.flatnonzero(ok)]
 
 
-def _hyp_cylinders(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float) -> list[Primitive]:
+def _hyp_cylinders(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float,
+                   min_sin: float) -> list[Primitive]:
     p1, p2, n1, n2 = x[idx[:, 0]], x[idx[:, 1]], n[idx[:, 0]], n[idx[:, 1]]
     ax = np.cross(n1, n2)
-    ok = np.linalg.norm(ax, axis=1) > np.sin(np.deg2rad(3.0))
+    ok = np.linalg.norm(ax, axis=1) > min_sin  # near-parallel normals give no axis
     a = unit(ax)
 
     def proj(v: np.ndarray) -> np.ndarray:
@@ -88,11 +108,12 @@ def _hyp_cylinders(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float) -
     return [Cylinder(c[k], a[k], r[k]) for k in np.flatnonzero(ok)]
 
 
-def _hyp_cones(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, amin: float) -> list[Primitive]:
+def _hyp_cones(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, amin: float,
+               min_sin: float) -> list[Primitive]:
     p, nn = x[idx], n[idx]  # (K, 3, 3)
     rhs = np.sum(p * nn, axis=2)
     det = np.linalg.det(nn)
-    ok = np.abs(det) > 1e-6
+    ok = np.abs(det) > min_sin**3  # three near-coplanar normals give no apex
     apex = np.full((len(idx), 3), np.nan)
     apex[ok] = np.linalg.solve(nn[ok], rhs[ok][..., None])[..., 0]
     u = unit(p - apex[:, None, :])
@@ -106,8 +127,9 @@ def _hyp_cones(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, amin:
 
 
 def _hyp_tori(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, extent: float,
-              steps: int) -> list[Primitive]:
-    radii = extent * np.geomspace(0.02, 0.6, steps)
+              config: FitConfig) -> list[Primitive]:
+    radii = extent * np.geomspace(*config.torus_minor_range, config.torus_radius_steps)
+    max_off = np.sin(np.deg2rad(config.torus_normal_axis_deg))
     out: list[Primitive] = []
     p, nn = x[idx], n[idx]  # (K, 3, 3)
     for sgn in (1.0, -1.0):  # tube centre behind (convex) or in front of (concave) the surface
@@ -120,14 +142,118 @@ def _hyp_tori(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, extent
             num = np.cross(np.sum(a * a, 1)[:, None] * b - np.sum(b * b, 1)[:, None] * a, ab)
             c = q[:, 0] + num / np.where(ok, den, 1.0)[:, None]
             big_r = np.linalg.norm(q[:, 0] - c, axis=1)
-            ok &= (big_r < rmax) & (big_r > 0.2 * r)
+            ok &= (big_r < rmax) & (big_r > config.torus_min_ratio * r)
             axis = unit(ab)
             # the normals must lie in the planes through the axis (a torus' normal lines cross its axis)
             rad = unit(q - c[:, None, :])
             off = np.abs(np.sum(nn * np.cross(axis[:, None, :], rad), axis=2)).max(axis=1)
-            ok &= off < np.sin(np.deg2rad(20.0))
+            ok &= off < max_off
             out += [Torus(c[k], axis[k], big_r[k], r) for k in np.flatnonzero(ok)]
     return out
+
+
+def _circle_2d(p: np.ndarray) -> tuple[np.ndarray, float]:
+    """Algebraic (Kasa) circle fit of 2D points (N, 2): centre (2,), radius."""
+    a = np.column_stack([2 * p, np.ones(len(p))])
+    sol = np.linalg.lstsq(a, np.sum(p * p, axis=1), rcond=None)[0]
+    return sol[:2], float(np.sqrt(max(sol[2] + sol[:2] @ sol[:2], 0.0)))
+
+
+def torus_from_axis_line(c: np.ndarray, a: np.ndarray, x: np.ndarray, config: FitConfig) -> Torus | None:
+    """Torus with axis line (point ``c``, unit direction ``a``) whose tube cross-section is the circle fitted to
+    the points' (rho, h) cloud, its radius held within `torus_limits` (the circle then keeps its direction from
+    the cloud's median point); None where degenerate."""
+    h, rho, _ = radial_frame(x - c, a)
+    m = np.stack([rho, h], axis=1)
+    cc, r = _circle_2d(m)
+    if not np.isfinite(r) or r <= 0:
+        return None
+    r_lo, r_hi, _, _ = torus_limits(Torus(c, a, 1.0, 1.0), x, config)
+    if not r_lo <= r <= r_hi:
+        med = np.median(m, axis=0)
+        r = float(np.clip(r, r_lo, r_hi))
+        cc = med + r * unit(cc - med)
+    if not cc[0] > 0:
+        return None
+    return Torus(c + cc[1] * a, a, float(cc[0]), r)
+
+
+def _hyp_torus_rings(x: np.ndarray, idx: np.ndarray, m: int, config: FitConfig) -> list[Primitive]:
+    """Normal-free torus hypotheses for thin tubes (a small fillet's normals are tens of degrees off): the circle
+    through three sample points gives the axis line (its centre and normal), the first ``m`` points' (rho, h)
+    cloud the tube's cross-section; plus one from the whole patch (best-fit plane normal as the axis, circle
+    fitted in that plane)."""
+    p = x[idx]  # (K, 3, 3)
+    u, v = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    w = np.cross(u, v)
+    den = 2 * np.sum(w * w, axis=1)
+    ok = den > 1e-18
+    num = np.cross(np.sum(u * u, 1)[:, None] * v - np.sum(v * v, 1)[:, None] * u, w)
+    c = p[:, 0] + num / np.where(ok, den, 1.0)[:, None]
+    axes = unit(w)
+    y = x[:m]
+    lines = [(c[k], axes[k]) for k in np.flatnonzero(ok)]
+    if len(x) >= 6:
+        mu = x.mean(axis=0)
+        a = np.linalg.eigh((x - mu).T @ (x - mu))[1][:, 0]
+        t1 = unit(np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0]))
+        t2 = np.cross(a, t1)
+        c2, _ = _circle_2d(np.stack([(x - mu) @ t1, (x - mu) @ t2], axis=1))
+        lines.append((mu + c2[0] * t1 + c2[1] * t2, a))
+    out: list[Primitive] = []
+    for cl, al in lines:
+        t = torus_from_axis_line(cl, al, y, config)
+        if t is not None:
+            out.append(t)
+    return out
+
+
+def torus_limits(prim: Torus, x: np.ndarray, config: FitConfig) -> tuple[float, float, float, float]:
+    """(r_lo, r_hi, R_lo, R_hi) (metres) for a torus with ``prim``'s centre and axis on points ``x`` (N, 3): the
+    minor radius within config.torus_minor_span times the cross-section span (the robust extent of the points'
+    (rho, h) cloud along its principal direction), the major radius within the points' radial range widened by
+    r_hi (the tube centre circle lies within r of every surface point), and above torus_min_ratio * r_lo."""
+    if len(x) < 3:  # nothing to measure: no bounds
+        return 0.0, np.inf, 1e-6, np.inf
+    h, rho, _ = radial_frame(np.asarray(x, float) - prim.origin, prim.axis)
+    m = np.stack([rho, h], axis=1)
+    m = m - np.median(m, axis=0)
+    u = np.linalg.eigh(m.T @ m)[1][:, -1]
+    q = config.torus_span_pct
+    lo, hi = np.percentile(m @ u, [q, 100 - q])
+    span = max(float(hi - lo), 1e-5)
+    r_lo, r_hi = config.torus_minor_span[0] * span, config.torus_minor_span[1] * span
+    rho_lo, rho_hi = np.percentile(rho, [q, 100 - q])
+    big_lo = max(float(rho_lo) - r_hi, config.torus_min_ratio * r_lo, 1e-6)
+    return r_lo, r_hi, big_lo, max(float(rho_hi) + r_hi, big_lo * (1 + 1e-6))
+
+
+def torus_ok(prim: Primitive, x: np.ndarray, config: FitConfig, slack: float = 1.0) -> bool:
+    """True unless ``prim`` is a torus outside `torus_limits` on its points ``x`` (``slack`` >= 1 widens them)."""
+    if not isinstance(prim, Torus) or len(x) < 3:
+        return True
+    r_lo, r_hi, big_lo, big_hi = torus_limits(prim, x, config)
+    return (r_lo / slack <= prim.minor_radius <= r_hi * slack and big_lo / slack <= prim.radius <= big_hi * slack
+            and prim.radius > config.torus_min_ratio * prim.minor_radius / slack and prim.radius > 0)
+
+
+def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: FitConfig) -> float:
+    """Comparable score of torus candidates on the same points ``x`` (lower is better): the truncated squared
+    distance (MSAC, in part-size units) plus the refinement's weak prior on the minor radius."""
+    eps = config.d_inlier * scale
+    d = np.minimum(np.abs(prim.signed_distance(x)), eps) / scale
+    near = x[np.abs(prim.signed_distance(x)) < eps]
+    r_lo = torus_limits(prim, near if len(near) >= 3 else x, config)[0]
+    r0 = config.torus_minor_prior * r_lo / config.torus_minor_span[0]
+    return float(np.sum(d * d) + len(x) * (config.torus_prior_weight * (prim.minor_radius - r0) / scale) ** 2)
+
+
+def clamp_torus(prim: Torus, x: np.ndarray, config: FitConfig) -> Torus:
+    """``prim`` with its radii clamped into `torus_limits` on ``x`` (slightly inside the bounds)."""
+    r_lo, r_hi, big_lo, big_hi = torus_limits(prim, x, config)
+    r = float(np.clip(prim.minor_radius, r_lo * 1.001, r_hi * 0.999))
+    big = float(np.clip(prim.radius, big_lo + 1e-3 * (big_hi - big_lo), big_hi - 1e-3 * (big_hi - big_lo)))
+    return Torus(prim.origin, prim.axis, big, r)
 
 
 def hypotheses(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: FitConfig,
@@ -139,16 +265,18 @@ def hypotheses(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: F
         return []
     idx = np.stack([rng.choice(len(x), size=size, replace=False) for _ in range(k)])
     rmax = config.max_radius * scale
+    min_sin = float(np.sin(np.deg2rad(config.min_normal_angle_deg)))
     if ptype == "plane":
         return _hyp_planes(x, n, idx)
     if ptype == "sphere":
         return _hyp_spheres(x, n, idx, rmax)
     if ptype == "cylinder":
-        return _hyp_cylinders(x, n, idx, rmax)
+        return _hyp_cylinders(x, n, idx, rmax, min_sin)
     if ptype == "cone":
-        return _hyp_cones(x, n, idx, rmax, np.deg2rad(config.min_half_angle_deg))
+        return _hyp_cones(x, n, idx, rmax, np.deg2rad(config.min_half_angle_deg), min_sin)
     extent = float(np.max(np.ptp(x, axis=0)))
-    return _hyp_tori(x, n, idx, rmax, extent, config.torus_radius_steps)
+    rings = _hyp_torus_rings(x, idx, config.ransac_prescore_points, config)
+    return _hyp_tori(x, n, idx, rmax, extent, config) + [t for t in rings if plausible(t, scale, config)]
 
 
 def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: FitConfig,
@@ -164,23 +292,45 @@ def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: FitCo
     if axis is not None and prim.axis_vector is not None:
         prim = prim.from_local(np.zeros(prim.local_size), axis)
     mode = None if prim.axis_vector is None else (-2 if axis is not None else -1)
+    lb = np.full(prim.local_size + (2 if mode == -1 else 0), -np.inf)
+    ub = -lb
+    prior = np.zeros((0, 2))  # rows (parameter index, target value) of weak priors (tori only)
+    if isinstance(prim, Torus):  # radii bounded by the data, a weak prior on the minor radius (module docstring)
+        prim = clamp_torus(prim, x, config)
+        r_lo, r_hi, big_lo, big_hi = torus_limits(prim, x, config)
+        lb[3], ub[3] = big_lo - prim.radius, big_hi - prim.radius
+        lb[4], ub[4] = r_lo - prim.minor_radius, r_hi - prim.minor_radius
+        if config.torus_prior_weight > 0:
+            r0 = config.torus_minor_prior * r_lo / config.torus_minor_span[0]  # prior ratio * span
+            prior = np.array([[4, r0 - prim.minor_radius]])
     terms = [Term(prim, x, mode)]
     layout = Layout(terms, np.eye(3))
+    w_prior = config.torus_prior_weight * np.sqrt(len(x)) / scale
 
     def fun(v: np.ndarray) -> np.ndarray:
-        return recon_residuals(layout.primitives(v)[1], terms, scale)
+        r = recon_residuals(layout.primitives(v)[1], terms, scale)
+        if len(prior):
+            r = np.concatenate([r, w_prior * (v[prior[:, 0].astype(int)] - prior[:, 1])])
+        return r
 
     def jac(v: np.ndarray) -> np.ndarray:
-        return recon_jacobian_blocks(layout, v, layout.primitives(v)[1], scale)[0][2]
+        j = recon_jacobian_blocks(layout, v, layout.primitives(v)[1], scale)[0][2]
+        if len(prior):
+            jp = np.zeros((len(prior), layout.size))
+            jp[np.arange(len(prior)), prior[:, 0].astype(int)] = w_prior
+            j = np.vstack([j, jp])
+        return j
 
     res = least_squares(fun, np.zeros(layout.size), jac=jac, method="trf", loss=config.loss,
                         f_scale=config.loss_scale, x_scale="jac", max_nfev=config.max_nfev, ftol=config.ftol,
-                        xtol=config.ftol)
+                        xtol=config.ftol, bounds=(lb, ub))
     out = layout.primitives(res.x)[1][0]
-    return out if _plausible(out, scale, config) else prim
+    # a free torus axis moves the (rho, h) half-plane its bounds were measured in: re-check with some slack
+    return out if plausible(out, scale, config) and torus_ok(out, x, config, 1.2) else prim
 
 
-def _plausible(prim: Primitive, scale: float, config: FitConfig) -> bool:
+def plausible(prim: Primitive, scale: float, config: FitConfig) -> bool:
+    """Finite parameters, radii in (0, max_radius * scale), cone half angle within its limits."""
     rmax = config.max_radius * scale
     p = prim.params()
     if not np.all(np.isfinite(np.concatenate([np.ravel(v) for v in p.values()]))):
@@ -212,12 +362,22 @@ def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: F
         return None
     # two-stage scoring: every hypothesis on a small subset, the most promising on the whole subset
     pre = slice(0, config.ransac_prescore_points)  # `sub` is a random permutation: its head is a random subset
-    counts = np.array([np.count_nonzero(inlier_mask(h, xs[pre], ns[pre], eps, cos_min)) for h in hyps])
+    if ptype == "torus":  # radii consistent with the patch (module docstring); else the nearest such radii
+        ok = [h for h in hyps if torus_ok(h, xs[pre], config)]
+        hyps = ok or [clamp_torus(h, xs[pre], config) for h in hyps]  # type: ignore[arg-type]
+    if ptype == "torus":  # MSAC: the truncated squared distance, with the refinement's prior (module docstring)
+        def score(h: Primitive, xq: np.ndarray, nq: np.ndarray) -> float:
+            return -torus_msac(h, xq, scale, config)  # type: ignore[arg-type]
+    else:
+        def score(h: Primitive, xq: np.ndarray, nq: np.ndarray) -> float:
+            return float(np.count_nonzero(inlier_mask(h, xq, nq, eps, cos_min)))
+    counts = np.array([score(h, xs[pre], ns[pre]) for h in hyps])
     top = np.argsort(-counts, kind="stable")[: config.ransac_keep]
-    counts = np.array([np.count_nonzero(inlier_mask(hyps[k], xs, ns, eps, cos_min)) for k in top])
+    counts = np.array([score(hyps[k], xs, ns) for k in top])
     best = hyps[int(top[int(np.argmax(counts))])]
+    cos_refine = -1.0 if ptype == "torus" else cos_min  # a thin tube's normals are too poor to select points
     for _ in range(2):
-        inl = inlier_mask(best, x, n, eps, cos_min)
+        inl = inlier_mask(best, x, n, eps, cos_refine)
         if np.count_nonzero(inl) < best.local_size + 2:
             break
         pts = x[inl]
@@ -230,16 +390,31 @@ def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: F
 
 def fit_instance(x: np.ndarray, n: np.ndarray, ptype: str | None, scale: float, config: FitConfig,
                  rng: np.random.Generator) -> tuple[str, RansacFit | None]:
-    """RANSAC with a known type, or (ptype None: missing/weak label) every type, choosing the best inlier fraction
-    minus complexity_penalty per parameter beyond a plane's. Returns (type, fit)."""
+    """RANSAC with a known type, or (ptype None: missing/weak label) every type, chosen by `select_type`.
+    Returns (type, fit)."""
     if ptype is not None:
         return ptype, ransac_fit(ptype, x, n, scale, config, rng)
-    best: tuple[float, str, RansacFit | None] = (-np.inf, "plane", None)
-    for t in TYPES:
-        f = ransac_fit(t, x, n, scale, config, rng)
-        if f is None:
-            continue
-        s = f.score - config.complexity_penalty * (TYPE_DOF[t] - TYPE_DOF["plane"])
-        if s > best[0]:
-            best = (s, t, f)
-    return best[1], best[2]
+    fits = {t: f for t in TYPES if (f := ransac_fit(t, x, n, scale, config, rng)) is not None}
+    if not fits:
+        return "plane", None
+    t = select_type(fits, x, scale, config)
+    return t, fits[t]
+
+
+def select_type(fits: dict[str, RansacFit], x: np.ndarray, scale: float, config: FitConfig) -> str:
+    """Model selection among fitted candidates of several types on points ``x``: Torr's GRIC,
+    sum_i min(d_i^2 / sigma^2, gric_trunc) + log(3 N) * (degrees of freedom), lowest wins; sigma is the robust
+    noise level (1.4826 * median |d|) of the best-fitting candidate, floored at gric_min_sigma part sizes.
+
+    An inlier count with a per-parameter penalty (the previous rule) cannot separate a short cylinder patch from
+    a sphere: both pass the inlier test (d_inlier is many times the noise) and the sphere is cheaper. The
+    truncated squared residual in noise units sees the sphere's systematic error, while the log(3N) per
+    parameter keeps a flexible type (cone, torus) from winning on noise alone."""
+    if config.type_selection == "inliers":  # the old rule: inlier fraction minus a penalty per parameter
+        return max(fits, key=lambda t: fits[t].score - config.complexity_penalty * (TYPE_DOF[t] - TYPE_DOF["plane"]))
+    d = {t: np.abs(f.primitive.signed_distance(x)) for t, f in fits.items()}
+    sigma = max(1.4826 * min(float(np.median(v)) for v in d.values()), config.gric_min_sigma * scale)
+    lam = np.log(3 * max(len(x), 1))
+    gric = {t: float(np.sum(np.minimum((v / sigma) ** 2, config.gric_trunc))) + lam * TYPE_DOF[t]
+            for t, v in d.items()}
+    return min(fits, key=lambda t: (gric[t], TYPE_DOF[t]))

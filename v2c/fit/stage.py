@@ -3,17 +3,19 @@ fit -> two rounds of intersection refinement), following the paper's "Geometry O
 
 from __future__ import annotations
 
+import contextlib
+from dataclasses import dataclass, field, replace
 from time import perf_counter, process_time
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from v2c.fit.align import AXIS_NAMES, Term, align_fit, init_frame
+from v2c.fit.align import AXIS_NAMES, Term, align_fit, frame_from_axes, init_frame
 from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.points import InstancePoints, backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import fit_instance, inlier_mask
+from v2c.fit.ransac import fit_instance, inlier_mask, plausible, torus_ok
 from v2c.fit.result import ABLATIONS, FitResult
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive
@@ -26,15 +28,18 @@ if TYPE_CHECKING:
 
 
 def _label_of(seg: Segmentation, i: int, config: FitConfig) -> tuple[str | None, int | None | str]:
-    """(type or None for a type search, axis index 0/1/2, -1 unaligned, None sphere, "?" decide later)."""
+    """(type, or None for a type search; wanted axis: 0/1/2 frame axis, -1 unaligned, None sphere, "?" decide
+    later). A weak label (score < label_score_min) still lends its axis class X/Y/Z: segmenters estimate the
+    part frame from the scene (the ground), which names axes better than the fit alone can."""
     lab = int(seg.labels[i]) if i < len(seg.labels) else 0
     score = float(seg.scores[i]) if i < len(seg.scores) else 0.0
-    if not 1 <= lab <= 17 or score < config.label_score_min:
+    if not 1 <= lab <= 17:
         return None, "?"
     ptype, ax = type_axis_of(lab)
-    if ax is None:
-        return ptype.value, None
-    return ptype.value, {"X": 0, "Y": 1, "Z": 2, "U": -1}[ax.value]
+    k = None if ax is None else {"X": 0, "Y": 1, "Z": 2, "U": -1}[ax.value]
+    if score < config.label_score_min:
+        return None, k if k is not None and k >= 0 else "?"
+    return ptype.value, k
 
 
 def _inliers(prim: Primitive, ip: InstancePoints, scale: float, config: FitConfig) -> np.ndarray:
@@ -73,6 +78,11 @@ def _assign_axes(fits: dict[int, Primitive], want: dict[int, int | None | str], 
     lab_ids = [i for i in fits if isinstance(want[i], int) and want[i] >= 0]
     frame = init_frame([fits[i].axis_vector for i in lab_ids], [want[i] for i in lab_ids],
                        [weights[i] for i in lab_ids], view_dir, config.frame_outlier_deg)
+    if not lab_ids:  # no confident axis label: a frame from the type-searched axes themselves
+        weak = [i for i in fits if want[i] == "?" and fits[i].axis_vector is not None]
+        found = frame_from_axes([fits[i].axis_vector for i in weak], [weights[i] for i in weak], view_dir,
+                                config.snap_deg)
+        frame = frame if found is None else found
     eps = config.d_inlier * scale
     out: dict[int, int | None] = {}
     prims = dict(fits)
@@ -107,36 +117,21 @@ def _assign_axes(fits: dict[int, Primitive], want: dict[int, int | None | str], 
     return frame, out, prims
 
 
-def fit_scan(scan: Scan, seg: Segmentation, config: FitConfig | None = None, ablation: str = "full") -> FitResult:
-    """Fit one primitive per segmented instance of ``scan`` (camera frame, metres).
+@dataclass
+class _Fits:
+    """RANSAC results per instance: primitive, wanted axis (see `_label_of`), inlier count weight, inlier mask."""
 
-    ablation: "full" (shared frame + intersections), "no-axis" (free axes), "no-int" (no intersection term),
-    "fit-only" (RANSAC with its local refinement only).
-    """
-    if ablation not in ABLATIONS:
-        raise ValueError(f"unknown ablation {ablation!r}; choose from {', '.join(ABLATIONS)}")
-    config = config or FitConfig()
-    t_start, cpu_start = perf_counter(), process_time()
-    timings: dict[str, float] = {}
-    depth = np.asarray(scan.depth, float)
-    inst = np.asarray(seg.instances)
-    valid = np.asarray(scan.valid, bool) & (inst > 0)
-    pts = backproject(depth, np.asarray(scan.K, float))
-    scale = estimate_part_size(pts[valid], config.scale_trim)
-    counts = np.bincount(inst[valid], minlength=int(inst.max()) + 1)
-    ids = np.flatnonzero(counts >= config.min_instance_px)
-    ids = ids[ids > 0]
-    ipts: dict[int, InstancePoints] = instance_points(pts, valid, inst, ids, config.normal_window_px,
-                                                      config.normal_sobel_px)
-    t = perf_counter()
-    timings["normals"] = t - t_start
+    prims: dict[int, Primitive] = field(default_factory=dict)
+    want: dict[int, int | None | str] = field(default_factory=dict)
+    weights: dict[int, float] = field(default_factory=dict)
+    inliers: dict[int, np.ndarray] = field(default_factory=dict)
+    searched: list[int] = field(default_factory=list)
 
-    # 1. RANSAC per instance
-    fits: dict[int, Primitive] = {}
-    want: dict[int, int | None | str] = {}
-    weights: dict[int, float] = {}
-    inl: dict[int, np.ndarray] = {}
-    searched: list[int] = []
+
+def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale: float,
+                      config: FitConfig) -> _Fits:
+    """Step 1: RANSAC per instance, typed by its label (or by the type search for weak labels)."""
+    out = _Fits()
     for i, ip in ipts.items():  # loop over instances
         ptype, ax = _label_of(seg, i, config)
         rng = np.random.default_rng([config.seed, i])
@@ -146,47 +141,113 @@ def fit_scan(scan: Scan, seg: Segmentation, config: FitConfig | None = None, abl
         if not f.inliers.any():
             f.inliers = _inliers(f.primitive, ip, scale, config)
         if ptype is None:
-            searched.append(i)
-            ax = None if got_type == "sphere" else "?"
-        fits[i] = _canonical(f.primitive, ip.points[f.inliers])
-        want[i], weights[i], inl[i] = ax, float(np.count_nonzero(f.inliers)), f.inliers
-    timings["ransac"] = perf_counter() - t
-    t = perf_counter()
+            out.searched.append(i)
+            ax = None if got_type == "sphere" else ax
+        out.prims[i] = _canonical(f.primitive, ip.points[f.inliers])
+        out.want[i], out.weights[i], out.inliers[i] = ax, float(np.count_nonzero(f.inliers)), f.inliers
+    return out
 
-    # 2. shared frame and the aligned joint fit
-    view_dir = unit(pts[valid].mean(axis=0)) if valid.any() else np.array([0.0, 0.0, 1.0])
-    frame, axis_idx, fixed = _assign_axes(fits, want, weights, ipts, view_dir, scale, config)
-    if ablation in ("full", "no-int"):  # with the shared frame, aligned instances start from their axis refit
-        for i, p in fixed.items():
-            if p is not fits[i]:
-                fits[i] = p
-                inl[i] = _inliers(p, ipts[i], scale, config)
-    use_frame = ablation in ("full", "no-int")
+
+def _joint_terms(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[int, int | None],
+                 frame: np.ndarray, use_frame: bool, config: FitConfig) -> tuple[list[int], list[Term]]:
+    """Step 2 set-up: one Term per fitted instance (subsampled inliers; frame axis or free axis)."""
+    order = sorted(fits.prims)
     terms: list[Term] = []
-    order = sorted(fits)
     for i in order:
-        x = ipts[i].points[inl[i]]
+        x = ipts[i].points[fits.inliers[i]]
         rng = np.random.default_rng([config.seed, i, 1])
         if len(x) > config.align_points:
             x = x[rng.choice(len(x), config.align_points, replace=False)]
         k = axis_idx[i]
         if k is not None and (k < 0 or not use_frame):
             k = -1
-        sign = 1.0 if k is None or k < 0 else float(np.sign(fits[i].axis_vector @ frame[k]) or 1.0)
-        n_in = int(np.count_nonzero(inl[i]))
+        p = fits.prims[i]
+        sign = 1.0 if k is None or k < 0 else float(np.sign(p.axis_vector @ frame[k]) or 1.0)
+        n_in = int(np.count_nonzero(fits.inliers[i]))
         weight = float(np.sqrt(n_in / max(len(x), 1))) if config.recon_weighting == "all" else 1.0
-        terms.append(Term(fits[i], x, k, sign, weight))
+        terms.append(Term(p, x, k, sign, weight))
+    return order, terms
+
+
+def _keep_plausible(new: list[Primitive], old: list[Primitive], terms: list[Term], frame: np.ndarray,
+                    scale: float, config: FitConfig) -> list[Primitive]:
+    """A joint solve has no bounds: a primitive it drove out of range (cone half angle beyond 90 degrees, negative
+    radius, a torus outside its data-derived radius bounds `ransac.torus_limits`) goes back to its value before
+    the solve, its axis re-set from the current frame when aligned."""
+    out = []
+    for p, q, tm in zip(new, old, terms, strict=True):
+        if plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2):
+            out.append(p)
+        elif tm.axis_index is not None and tm.axis_index >= 0:
+            out.append(q.from_local(np.zeros(q.local_size), tm.axis_sign * frame[tm.axis_index]))
+        else:
+            out.append(q)
+    return out
+
+
+def _one_blas_thread() -> contextlib.AbstractContextManager:
+    """Every matrix here is small: multi-threaded BLAS only adds overhead, and on a loaded machine
+    oversubscription made one fit 6x slower. threadpoolctl limits it where installed."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return contextlib.nullcontext()
+    return threadpool_limits(1, user_api="blas")
+
+
+def fit_scan(scan: Scan, seg: Segmentation, config: FitConfig | None = None, ablation: str = "full") -> FitResult:
+    """Fit one primitive per segmented instance of ``scan`` (camera frame, metres).
+
+    ablation: "full" (shared frame + intersections), "no-axis" (free axes), "no-int" (no intersection term),
+    "fit-only" (RANSAC with its local refinement only).
+    """
+    if ablation not in ABLATIONS:
+        raise ValueError(f"unknown ablation {ablation!r}; choose from {', '.join(ABLATIONS)}")
+    with _one_blas_thread():
+        return _fit_scan(scan, seg, config or FitConfig(), ablation)
+
+
+def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -> FitResult:
+    t_start, cpu_start = perf_counter(), process_time()
+    timings: dict[str, float] = {}
+    depth = np.asarray(scan.depth, float)
+    K = np.asarray(scan.K, float)
+    inst = np.asarray(seg.instances)
+    valid = np.asarray(scan.valid, bool) & (inst > 0)
+    pts = backproject(depth, K)
+    scale = estimate_part_size(pts[valid], config.scale_trim)
+    counts = np.bincount(inst[valid], minlength=int(inst.max()) + 1)
+    ids = np.flatnonzero(counts >= config.min_instance_px)
+    ipts = instance_points(pts, valid, inst, ids[ids > 0], config.normal_window_px, config.normal_sobel_px)
+    t = perf_counter()
+    timings["normals"] = t - t_start
+
+    # 1. RANSAC per instance
+    fits = _ransac_instances(ipts, seg, scale, config)
+    timings["ransac"] = perf_counter() - t
+    t = perf_counter()
+
+    # 2. shared frame, label test and the aligned joint fit
+    use_frame = ablation in ("full", "no-int")
+    view_dir = unit(pts[valid].mean(axis=0)) if valid.any() else np.array([0.0, 0.0, 1.0])
+    frame, axis_idx, fixed = _assign_axes(fits.prims, fits.want, fits.weights, ipts, view_dir, scale, config)
+    if use_frame:  # aligned instances start from their axis-constrained refit
+        for i, p in fixed.items():
+            if p is not fits.prims[i]:
+                fits.prims[i] = p
+                fits.inliers[i] = _inliers(p, ipts[i], scale, config)
+    order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
     prims = [tm.prim for tm in terms]
     if ablation != "fit-only":
         frame, prims = align_fit(terms, frame, scale, config.loss, config.loss_scale, config.max_nfev, config.ftol,
-                                 config.jacobian)
+                                 config.jacobian, config.lsmr_tol)
+        prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
     timings["align"] = perf_counter() - t
     t = perf_counter()
 
-    # 3. edge graph and intersection refinement
+    # 3. edge graph and the iterative intersection refinement (two rounds: d_int, then d_int / 5)
     graph = build_edge_graph(inst, config.simplify_px)
-    term_of = {i: k for k, i in enumerate(order)}
-    lifted = boundary_points(graph, term_of, np.asarray(scan.K, float), config.edge_sample_px)
+    lifted = boundary_points(graph, {i: k for k, i in enumerate(order)}, K, config.edge_sample_px)
     timings["graph"] = perf_counter() - t
     t = perf_counter()
     lifted.s = init_depths(lifted, prims, depth, valid, scale, config)
@@ -194,10 +255,10 @@ def fit_scan(scan: Scan, seg: Segmentation, config: FitConfig | None = None, abl
     if ablation in ("full", "no-axis") and prims:
         fitted = list(prims)
         for rnd, thr in enumerate((config.d_int, config.d_int * config.d_int_second_factor)):
-            terms = [Term(p, tm.points, tm.axis_index, tm.axis_sign, tm.weight) for p, tm in zip(prims, terms,
-                                                                                                strict=True)]
+            terms = [replace(tm, prim=p) for p, tm in zip(prims, terms, strict=True)]
             member = fitted if (rnd > 0 and config.membership == "fitted") else None
             frame, prims, lifted.s, n_int = refine_intersections(terms, frame, lifted, scale, config, thr, member)
+            prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
     timings["intersect"] = perf_counter() - t
 
     # 4. final inliers and residuals on all points of each instance
@@ -219,5 +280,5 @@ def fit_scan(scan: Scan, seg: Segmentation, config: FitConfig | None = None, abl
     timings["total"] = perf_counter() - t_start
     timings["total_cpu"] = process_time() - cpu_start  # CPU seconds of this process (all its threads)
     return FitResult(primitives=out_prims, frame=frame, axis_labels=labels, inliers=inliers, residuals=resid,
-                     vertex_depths=vd, graph=graph, scale=scale, timings=timings, types_searched=searched,
+                     vertex_depths=vd, graph=graph, scale=scale, timings=timings, types_searched=fits.searched,
                      n_intersections=n_int, ablation=ablation)

@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from v2c.labels import AxisClass, axis_class
-from v2c.primitives.directions import tangent_basis, unit
+from v2c.primitives.directions import cross3, tangent_basis, unit
 
 
 def _vec(v: Any) -> np.ndarray:
@@ -97,7 +97,7 @@ class Primitive(ABC):
         """(N, 3) derivative of ``signed_distance(x)`` with respect to a small rotation vector (radians, camera
         frame) turning the surface about its origin: n(x) x (x - origin)."""
         x = as_points(x)
-        return np.cross(self.normal(x), x - self.origin)
+        return cross3(self.normal(x), x - self.origin)
 
     def local_basis(self) -> tuple[np.ndarray, np.ndarray]:
         """Tangent basis of the reference axis (or of the camera z axis for axis-free primitives); cached, since

@@ -1,7 +1,8 @@
 """Per-pixel labels + face boundaries -> surface instances (the panoptic step of the learned segmenter).
 
 1. Core pixels: part pixels (label != 0) not on a predicted face boundary.
-2. Connected components (4-connected) of core pixels sharing one label.
+2. Connected components (4-connected) of core pixels sharing one label, after eroding the core by
+   ``core_erode_px`` (breaks thin bridges through gaps in the predicted boundary).
 3. Components under ``min_area_px`` are dissolved; every remaining part pixel (boundary band, dissolved bits) goes
    to the nearest kept component within ``max_fill_px``; what is still left forms instances of its own (per label,
    4-connected, at least ``min_area_px``).
@@ -27,6 +28,7 @@ from v2c.segment.types import Segmentation
 @dataclass(frozen=True)
 class InstanceConfig:
     boundary_threshold: float = 0.5  # boundary probability above which a pixel is on a face boundary
+    core_erode_px: int = 0  # core pixels are eroded by this much before the components are taken (pixels)
     min_area_px: int = 24  # components smaller than this are dissolved into their neighbours (pixels)
     max_fill_px: float = 6.0  # farthest a leftover part pixel is attached to an instance (pixels)
     merge_open_frac: float = 0.5  # merge two instances when this share of their contact is open (no boundary)
@@ -166,7 +168,10 @@ def extract_instances(labels: np.ndarray, boundary: np.ndarray, region: np.ndarr
     if region is not None:
         part &= region
     core = part & ~bnd
-    inst = _components_per_label(labels, core)
+    seeds = core
+    if cfg.core_erode_px > 0:  # break thin bridges through gaps of the predicted boundary
+        seeds = cv2.erode(core.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=cfg.core_erode_px) > 0
+    inst = _components_per_label(labels, seeds)
     inst = _drop_small(inst, cfg.min_area_px)
     inst = _fill(inst, part, cfg.max_fill_px)
     # part pixels still unassigned (e.g. a face wholly inside a thick predicted boundary) form their own instances

@@ -68,6 +68,11 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
     if weights is not None:
         cfg = LearnedConfig(weights=Path(weights), bf16=cfg.bf16, features=cfg.features, instances=cfg.instances)
     probs, bnd = predict(scan, cfg)
+    return instances_from_prediction(scan, probs, bnd, cfg.instances)
+
+
+def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig) -> Segmentation:
+    """Instances of a scan from the network's class probabilities (18, H, W) and boundary probability (H, W)."""
     labels = probs.argmax(axis=0).astype(np.uint8)
     region = None
     if scan.mask is not None or scan.roi is not None:
@@ -77,4 +82,4 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
             # with a part mask, a masked pixel is part even where the network says background
             fg = probs[1:].argmax(axis=0).astype(np.uint8) + 1
             labels = np.where(region, fg, 0).astype(np.uint8)
-    return extract_instances(labels, bnd, region=region, probs=probs, cfg=cfg.instances, method="learned")
+    return extract_instances(labels, bnd, region=region, probs=probs, cfg=cfg, method="learned")

@@ -22,7 +22,7 @@ import torch.nn.functional as F
 
 from v2c.labels import IGNORE, NUM_CLASSES
 from v2c.segment.data import CachedScans, build_cache, dequantise, find_scans
-from v2c.segment.net import NetConfig, UNet, bf16_supported, save_weights
+from v2c.segment.net import NetConfig, UNet, bf16_supported, load_weights, save_weights
 
 #: The shipped training set: (width, height, noise profile, scans, `v2c synth` seed), generated into
 #: DATA/<width>x<height>_<noise>_s<seed>/. Validation uses seed 9000 and later, never these.
@@ -155,10 +155,11 @@ def evaluate(model: UNet, data: CachedScans, ids: list[int], bf16: bool) -> dict
 
 
 def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig = TrainConfig(), cache_dir: str | Path | None = None,
-          net_cfg: NetConfig | None = None, log=print) -> dict:
+          net_cfg: NetConfig | None = None, init: str | Path | None = None, log=print) -> dict:
     """Train on the scans under ``data_dir``; write the best checkpoint (by validation mIoU) to ``out``.
 
-    Returns the training record (also written next to ``out`` as ``<out>.json``).
+    init: optional weights file to start from (a second stage: a fresh schedule over trained weights; its network
+    config is used). Returns the training record (also written next to ``out`` as ``<out>.json``).
     """
     net_cfg = net_cfg or NetConfig()
     torch.set_num_threads(cfg.threads)
@@ -178,13 +179,22 @@ def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig = TrainConfig(
     train_ids = sorted(set(range(len(data))) - set(val_ids))
     cw = torch.from_numpy(class_weights(data, train_ids, cfg.class_weight_power))
     bf16 = bf16_supported() if cfg.bf16 is None else cfg.bf16
-    model = UNet(net_cfg).to(memory_format=torch.channels_last)
+    if init is not None:
+        model, init_meta = load_weights(init)
+        net_cfg = model.cfg
+        model = model.to(memory_format=torch.channels_last)
+    else:
+        init_meta = None
+        model = UNet(net_cfg).to(memory_format=torch.channels_last)
     model.train()
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sizes = sorted({(e["w"], e["h"]) for e in data.entries})
     record = {"config": asdict(cfg), "net": asdict(net_cfg), "train_scans": len(train_ids),
               "val_scans": len(val_ids), "sizes": [list(s) for s in sizes], "bf16": bf16, "history": [],
-              "best": None, "data_dir": str(data_dir)}
+              "best": None, "data_dir": str(data_dir),
+              "init": None if init is None else {"path": str(init), "config": (init_meta or {}).get("config"),
+                                                 "steps_done": (init_meta or {}).get("step"),
+                                                 "best": (init_meta or {}).get("best")}}
     best = -1.0
     t_start = time.time()
     run_ce = run_bce = 0.0

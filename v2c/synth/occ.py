@@ -81,6 +81,18 @@ def bounding_box(shape: TopoDS_Shape) -> tuple[np.ndarray, np.ndarray]:
     return np.array([lo.X(), lo.Y(), lo.Z()]), np.array([hi.X(), hi.Y(), hi.Z()])
 
 
+#: STEP writer settings of gt/part.step (OCCT's defaults, pinned so the file does not depend on what else ran).
+_STEP_WRITE_STATICS = {
+    "write.step.schema": "AP214IS",
+    "write.step.unit": "MM",
+    "write.surfacecurve.mode": "On",
+    "write.precision.mode": "Average",
+    "write.step.assembly": "Auto",
+    "write.step.nonmanifold": "Off",
+    "write.step.vertex.mode": "Compound",
+}
+
+
 def write_step(shape: TopoDS_Shape, path: Path) -> None:
     """Write `shape` (millimetres) to `path` as STEP with a byte-reproducible header.
 
@@ -89,7 +101,11 @@ def write_step(shape: TopoDS_Shape, path: Path) -> None:
     """
     silence_occt()
     writer = STEPControl_Writer()
-    Interface_Static.SetCVal_s("write.step.unit", "MM")
+    # Every writer setting that shapes the bytes is set here: these statics are process-global, and another
+    # writer in the same process (the XCAF exporter sets AP242DIS) would otherwise change part.step.
+    for key, value in _STEP_WRITE_STATICS.items():
+        if not Interface_Static.SetCVal_s(key, value):
+            raise RuntimeError(f"OCCT does not know the STEP writer setting {key!r}")
     Interface_Static.SetCVal_s("write.step.product.name", STEP_PRODUCT_NAME)
     if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
         raise RuntimeError("OCCT could not translate the part to STEP")

@@ -92,6 +92,7 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
     tri_n /= np.maximum(np.linalg.norm(tri_n, axis=1, keepdims=True), 1e-300)
     with np.errstate(divide="ignore", invalid="ignore"):
         t_mesh = np.einsum("ij,ij->i", tri_n, v0) / np.einsum("ij,ij->i", tri_n, d)
+    t_mesh = np.where(np.isfinite(t_mesh), t_mesh, np.linalg.norm(v0, axis=1))  # degenerate triangles
     tri_n *= -np.sign(np.einsum("ij,ij->i", tri_n, d))[:, None]  # facing the camera
     t = t_mesh.copy()
     nrm = tri_n.copy()
@@ -121,7 +122,7 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
     d_up = rows_dot(dirs32, up.astype(np.float32))
     with np.errstate(divide="ignore", invalid="ignore"):
         t_ground = (up @ trans) / d_up
-    ground_mask = (prim < 0) & (t_ground > 0)
+    ground_mask = (prim < 0) & (t_ground > 0) & np.isfinite(t_ground)
     ground = np.flatnonzero(ground_mask)
     z_ground = t_ground[ground] * dirs32[ground, 2]
     in_range = ground[z_ground <= cfg.max_range_m]

@@ -25,7 +25,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from v2c.primitives import Plane
+from v2c.primitives import Plane, Sphere
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import KIND_INT, FaceGeom, classify_samples
 from v2c.vbrep.confidence import edge_confidence, face_confidence
@@ -35,12 +35,14 @@ from v2c.vbrep.lift import (
     project_to_intersection,
     sd_func,
     solve_vertex,
+    surfaces_meet,
     visibility_residual,
 )
 from v2c.vbrep.mesh import face_mesh
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, build_loops, postprocess
 from v2c.vbrep.raycast import as_primitive, intersect, pixel_rays, project, sheet_depth
+from v2c.vbrep.topology import drop_degenerate, snap_to_surfaces, valid_primitive
 
 # sample codes: intersection; near = first instance (silhouette / visibility); near = second (silhouette / vis)
 _C_INT, _C_A_SIL, _C_A_VIS, _C_B_SIL, _C_B_VIS = range(5)
@@ -155,6 +157,25 @@ def fit_plane_points(X: np.ndarray, trim: float = 0.8) -> tuple[Plane, float, fl
     return Plane(c, n), rms, float(sv[1] / max(sv[0], 1e-15))
 
 
+def fit_sphere_points(X: np.ndarray, trim: float = 0.8) -> tuple[Sphere, float] | None:
+    """Algebraic least-squares sphere through (N, 3) points (camera frame, metres), refitted on the ``trim``
+    share closest to the first fit. Returns the sphere and its RMS distance (metres); None with fewer than 10
+    points or a degenerate fit."""
+    if len(X) < 10:
+        return None
+    for _ in range(2):
+        A = np.concatenate([2 * X, np.ones((len(X), 1))], 1)
+        sol = np.linalg.lstsq(A, np.sum(X**2, 1), rcond=None)[0]
+        c = sol[:3]
+        r2 = float(sol[3] + c @ c)
+        if not (np.all(np.isfinite(sol)) and r2 > 0):
+            return None
+        d = np.abs(np.linalg.norm(X - c, axis=1) - np.sqrt(r2))
+        X = X[d <= np.quantile(d, trim)]
+    d = np.linalg.norm(X - c, axis=1) - np.sqrt(r2)
+    return Sphere(c, float(np.sqrt(r2))), float(np.sqrt(np.mean(d**2)))
+
+
 def fallback_plane_points(inst: int, inst_map: np.ndarray, depth: np.ndarray, K: np.ndarray,
                           faces: dict[int, FaceGeom], window: tuple[float, float]) -> list[np.ndarray]:
     """3D evidence (camera frame, metres) for an instance the geometry stage could not fit (e.g. a face seen at a
@@ -178,7 +199,10 @@ def fallback_plane_points(inst: int, inst_map: np.ndarray, depth: np.ndarray, K:
 
 
 def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tuple[float, float], scale: float,
-                cfg: VBRepConfig) -> tuple[dict[int, FaceGeom], dict[int, SheetChoice]]:
+                cfg: VBRepConfig, stats: dict[str, Any] | None = None,
+                ) -> tuple[dict[int, FaceGeom], dict[int, SheetChoice]]:
+    """Each face's geometry and sheet; fitted primitives with invalid parameters (`valid_primitive`) are
+    rejected (``stats["rejected_primitives"]``, instance ids) and treated like instances without a fit."""
     rng = np.random.default_rng(cfg.seed)
     faces: dict[int, FaceGeom] = {}
     sheets: dict[int, SheetChoice] = {}
@@ -193,7 +217,18 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
         faces[inst] = FaceGeom(inst, prim, ch.sheet, res, axl, extra)
         sheets[inst] = ch
 
+    rejected = []
     for inst in sorted(fit.primitives):
+        if not valid_primitive(as_primitive(fit.primitives[inst])):
+            rejected.append(int(inst))
+            # a curved face with invalid parameters (e.g. a torus with a negative major radius): the nearest
+            # valid surface, a least-squares sphere through its depth points, if it fits them; else it is left
+            # to the unfitted-face rule below
+            vs, us = np.nonzero((inst_map == inst) & (depth > 0))
+            got = fit_sphere_points(pixel_rays(np.stack([us, vs], 1).astype(float), K) * depth[vs, us, None])
+            if got is not None and got[1] <= cfg.fallback_rms * scale:
+                add(int(inst), got[0], got[1], None, {"refit": "sphere"})
+            continue
         add(int(inst), as_primitive(fit.primitives[inst]),
             float(getattr(fit, "residuals", {}).get(inst, 0.0) or 0.0), getattr(fit, "axis_labels", {}).get(inst),
             {})
@@ -214,6 +249,8 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
                    for f in faces.values())
         if rms <= cfg.fallback_rms * scale and flat >= cfg.fallback_flatness and not same:
             add(int(inst), plane, rms, None, {"fallback": True})
+    if stats is not None:
+        stats["rejected_primitives"] = rejected
     return faces, sheets
 
 
@@ -268,10 +305,24 @@ def _edge_protos(ctx: ExtractContext, gi: int, gedge: Any) -> list[ProtoEdge]:
         agree = float(np.mean(raw[sl] == code))
         uvr = uv[sl]
         common = {"uv": uvr, "key0": key0, "key1": key1, "graph_edge": gi}
+        retyped = False
         if code == _C_INT:
             fa, fb = ctx.faces[a], ctx.faces[b]
             x0 = np.where(np.isfinite(st.p_int[sl]), st.p_int[sl], 0.5 * (st.p_a[sl] + st.p_b[sl]))
             pts = project_to_intersection(fa.prim, fb.prim, x0, cfg.curve_iters, ctx.K, cfg.int_band_px + 1.0)
+            met, on_curve = surfaces_meet(fa.prim, fb.prim, x0, max(cfg.meet_tol * ctx.scale, cfg.meet_min_m),
+                                          cfg.snap_iters)
+            if met.any() and np.mean(met) >= cfg.meet_share:
+                # on the curve where the surfaces meet nearby (elsewhere the lift stays: the image position rules)
+                pts = np.where(met[:, None], on_curve, pts)
+            elif cfg.meet_share > 0:
+                # the fitted surfaces do not meet along this run: it is where the nearer face ends in front
+                # of the farther one (typed with less confidence)
+                retyped = True
+                za, zb = np.nanmedian(st.p_a[sl, 2]), np.nanmedian(st.p_b[sl, 2])
+                code = _C_A_SIL if not zb < za else _C_B_SIL
+                ctx.stats["retyped_intersections"] = ctx.stats.get("retyped_intersections", 0) + 1
+        if code == _C_INT:
             curve = intersection_curve(fa.prim, fb.prim, pts, cfg.perpendicular_deg, cfg.parallel_deg)
             errs = [e for e in (_depth_err(za_fit[sl], za_obs[sl]), _depth_err(zb_fit[sl], zb_obs[sl]))
                     if np.isfinite(e)]
@@ -301,13 +352,14 @@ def _edge_protos(ctx: ExtractContext, gi: int, gedge: Any) -> list[ProtoEdge]:
         else:
             pts, vis_share = p_near, 0.0
         etype = EdgeType.VISIBILITY if vis else EdgeType.SILHOUETTE
+        factor = cfg.retype_conf if retyped else 1.0
         protos.append(ProtoEdge(etype, (near,), pts, stats={
             "agreement": agree, "jump": jump, "vis_share": vis_share, "depth_err": err_near,
-            "residual": ctx.faces[near].residual}, **common))
+            "residual": ctx.faces[near].residual, "factor": factor}, **common))
         if far:
             protos.append(ProtoEdge(EdgeType.OCCLUDED, (far,), p_far, stats={
                 "agreement": agree, "jump": jump, "depth_err": err_far,
-                "residual": ctx.faces[far].residual}, **common))
+                "residual": ctx.faces[far].residual, "factor": factor}, **common))
     return protos
 
 
@@ -373,20 +425,28 @@ def _key_pixel(key: tuple, graph: Any, protos: list[ProtoEdge], ends: list[tuple
     return protos[pi].uv[0] if e == 0 else protos[pi].uv[-1]
 
 
-def _depth_layers(pos: np.ndarray, types: list[EdgeType], merge: float) -> list[np.ndarray]:
-    """Split the edge ends meeting at one image point into depth layers: an occluded edge ending there means an
-    occlusion vertex with a near copy (silhouette / visibility ends) and a far copy (occluded ends), if they are
-    more than ``merge`` metres apart; intersection ends join the nearer copy. Otherwise one vertex."""
-    near = np.array([t in (EdgeType.SILHOUETTE, EdgeType.VISIBILITY) for t in types])
-    far = np.array([t is EdgeType.OCCLUDED for t in types])
-    if not far.any() or not near.any():
-        return [np.arange(len(pos))]
-    cn, cf = pos[near].mean(0), pos[far].mean(0)
-    if np.linalg.norm(cn - cf) <= merge:
-        return [np.arange(len(pos))]
-    to_near = np.linalg.norm(pos - cn, axis=1) <= np.linalg.norm(pos - cf, axis=1)
-    lab = np.where(near, 0, np.where(far, 1, np.where(to_near, 0, 1)))
-    return [np.flatnonzero(lab == 0), np.flatnonzero(lab == 1)]
+def _face_groups(faces: list[tuple[int, ...]]) -> list[np.ndarray]:
+    """Split the edge ends meeting at one image point into vertices: ends whose edges share a face (directly or
+    through other ends) are one vertex, so every face's boundary passes through one vertex there and its loops
+    close. At an occlusion T-junction the near face's ends (its silhouette or visibility edges) and the far
+    face's ends (its occluded edge and its other edges) share no face: two vertices, a near and a far copy."""
+    lab = list(range(len(faces)))
+
+    def find(i: int) -> int:
+        while lab[i] != i:
+            lab[i] = lab[lab[i]]
+            i = lab[i]
+        return i
+
+    first: dict[int, int] = {}
+    for i, fs in enumerate(faces):
+        for f in fs:
+            if f in first:
+                lab[find(i)] = find(first[f])
+            else:
+                first[f] = i
+    roots = np.array([find(i) for i in range(len(faces))])
+    return [np.flatnonzero(roots == r) for r in dict.fromkeys(roots.tolist())]
 
 
 def _make_vertices(ctx: ExtractContext, protos: list[ProtoEdge], graph: Any) -> list[ProtoVertex]:
@@ -396,12 +456,11 @@ def _make_vertices(ctx: ExtractContext, protos: list[ProtoEdge], graph: Any) -> 
     for pi, p in enumerate(protos):
         by_key.setdefault(p.key0, []).append((pi, 0))
         by_key.setdefault(p.key1, []).append((pi, 1))
-    merge = ctx.gap_thr
     vertices: list[ProtoVertex] = []
     n_opt = n_kept = 0
     for key, ends in by_key.items():
         pos = np.array([protos[pi].pts[0 if e == 0 else -1] for pi, e in ends])
-        clusters = _depth_layers(pos, [protos[pi].type for pi, _ in ends], merge)
+        clusters = _face_groups([protos[pi].faces for pi, _ in ends])
         pixel = _key_pixel(key, graph, protos, ends)
         for cl in clusters:
             cl_ends = [ends[i] for i in cl]
@@ -457,14 +516,18 @@ def extract_vbrep(scan: Any, seg: Any, fit: Any, config: VBRepConfig | None = No
     depth = np.asarray(scan.depth, float)
     window = depth_window(depth)
     scale = float(fit.scale)
-    faces, sheets = _face_geoms(fit, seg, depth, K, window, scale, cfg)
+    stats: dict[str, Any] = {}
+    faces, sheets = _face_geoms(fit, seg, depth, K, window, scale, cfg, stats)
     ctx = ExtractContext(faces, sheets, K, window, scale, max(cfg.int_gap * scale, cfg.int_gap_min_m), depth,
-                         np.asarray(seg.instances), cfg)
+                         np.asarray(seg.instances), cfg, stats)
     protos: list[ProtoEdge] = []
     for gi, ge in enumerate(fit.graph.edges):
         protos += _edge_protos(ctx, gi, ge)
     vertices = _make_vertices(ctx, protos, fit.graph)
     protos, vertices = postprocess(protos, vertices, K, cfg, same_m=0.25 * ctx.gap_thr)
+    ctx.stats.update(snap_to_surfaces(protos, vertices, {i: f.prim for i, f in faces.items()}, cfg.d_int * scale,
+                                      cfg.snap_iters, cfg.snap_tol))
+    protos = drop_degenerate(protos, K, cfg.min_edge_px)
     return assemble(ctx, protos, vertices, fit, seg, scan)
 
 
@@ -472,7 +535,11 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
              scan: Any) -> VBRep:
     """Build the VBRep dataclasses: faces with meshes and loops, edges with confidences, vertices."""
     cfg, scale = ctx.cfg, ctx.scale
-    inst_ids = sorted(ctx.faces)
+    # a face none of whose edges survived post-processing (a sliver of a few pixels) has no boundary to be
+    # trimmed by: it is left out (counted in meta["extract"]["faces_without_edges"])
+    bounded = {f for p in protos for f in p.faces}
+    inst_ids = sorted(i for i in ctx.faces if i in bounded)
+    ctx.stats["faces_without_edges"] = sorted(int(i) for i in ctx.faces if i not in bounded)
     fid = {inst: k for k, inst in enumerate(inst_ids)}
     edges = []
     for k, p in enumerate(protos):
@@ -482,6 +549,7 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
                                length_px=length_px, angle=s.get("angle", np.nan), gap=s.get("gap", np.nan),
                                jump=s.get("jump", np.inf), vis_share=s.get("vis_share", 0.0),
                                agreement=s.get("agreement", 1.0), gap_thr=ctx.gap_thr, scale=scale, cfg=cfg)
+        conf *= s.get("factor", 1.0)
         edges.append(VEdge(k, p.type, round(conf, 4), tuple(fid[f] for f in p.faces), p.pts, p.v0, p.v1,
                            p.curve if p.type is EdgeType.INTERSECTION else None))
     vverts = [VVertex(k, v.kind, v.position, v.pixel) for k, v in enumerate(vertices)]
@@ -499,7 +567,8 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
         "segmentation": getattr(seg, "method", None),
         "faces": {str(fid[i]): {"sheet": ctx.sheets[i].sheet, "concave": ctx.sheets[i].concave,
                                 "residual_m": ctx.faces[i].residual,
-                                "fallback_plane": bool(ctx.faces[i].extra.get("fallback"))} for i in inst_ids},
+                                "fallback_plane": bool(ctx.faces[i].extra.get("fallback")),
+                                "refit": ctx.faces[i].extra.get("refit")} for i in inst_ids},
         "extract": dict(ctx.stats, gap_threshold_m=ctx.gap_thr),
     }
     frame = np.asarray(getattr(fit, "frame", np.eye(3)), float)

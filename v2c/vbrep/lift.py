@@ -52,6 +52,18 @@ def project_to_intersection(pa: Primitive, pb: Primitive, x0: np.ndarray, iters:
     return x
 
 
+def surfaces_meet(pa: Primitive, pb: Primitive, x0: np.ndarray, tol: float, iters: int = 20,
+                  eps: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
+    """Whether the two surfaces meet near each start point (N, 3) (camera frame, metres): the Gauss-Newton
+    projection onto both (`project_to_intersection`, unrestricted) ends within ``eps`` metres of both surfaces
+    and within ``tol`` metres of its start. Returns (N,) bool and the projected points (N, 3)."""
+    x0 = np.asarray(x0, float).reshape(-1, 3)
+    x = project_to_intersection(pa, pb, x0, iters)
+    res = np.maximum(np.abs(pa.signed_distance(x)), np.abs(pb.signed_distance(x))) if len(x) else np.zeros(0)
+    ok = np.all(np.isfinite(x), axis=1) & (res <= eps) & (np.linalg.norm(x - x0, axis=1) <= tol)
+    return ok, x
+
+
 def visibility_residual(prim: Primitive) -> Callable[[np.ndarray], np.ndarray]:
     """g(x) = n(x) . x / |x|: zero where the surface normal is orthogonal to the view ray (camera at origin)."""
 

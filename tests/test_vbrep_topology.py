@@ -1,0 +1,69 @@
+"""Topological soundness of the VB-Rep (v2c.vbrep.topology): closed loops through shared vertices, polylines
+ending at their vertices and lying on their faces' surfaces, valid primitives, and what that buys the STEP
+exporter: faces trimmed by their own loops instead of their mesh outline."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exporters import step
+from v2c.primitives import Cone, Plane, Torus
+from v2c.vbrep.extract import _face_groups, extract_vbrep
+from v2c.vbrep.scenes import box_scene, cylinder_scene, scene_inputs
+from v2c.vbrep.topology import check_topology, solve_on_surfaces, valid_primitive
+
+SAMPLES = Path(__file__).resolve().parents[1] / "samples"
+
+
+def test_face_groups_split_t_junctions_and_join_corners():
+    # T-junction: near face 1 (silhouettes against the background and against face 2), far face 2 (its
+    # occluded edge and its silhouette): two vertices, one per depth layer
+    groups = _face_groups([(1,), (1,), (2,), (2,)])
+    assert [g.tolist() for g in groups] == [[0, 1], [2, 3]]
+    # a corner: three intersection edges of faces 1, 2, 3 and a silhouette of face 3: one vertex
+    assert len(_face_groups([(1, 2), (2, 3), (1, 3), (3,)])) == 1
+
+
+def test_valid_primitive():
+    assert valid_primitive(Torus([0, 0, 1], [0, 0, 1], 0.05, 0.01))
+    assert not valid_primitive(Torus([0, 0, 1], [0, 0, 1], -0.0088, 0.086))  # seen on a generated scan
+    assert not valid_primitive(Cone([0, 0, 1], [0, 0, 1], 0.0))
+    assert valid_primitive(Plane([0, 0, 1], [0, 0, -1]))
+
+
+def test_solve_on_surfaces_finds_the_corner():
+    planes = [Plane([0.1, 0, 0], [1, 0, 0]), Plane([0, 0.2, 0], [0, 1, 0]), Plane([0, 0, 0.3], [0, 0, 1])]
+    x, res = solve_on_surfaces(planes, np.array([0.0, 0.0, 0.0]))
+    assert np.allclose(x, [0.1, 0.2, 0.3]) and res < 1e-12
+
+
+@pytest.mark.parametrize("scene", [box_scene, cylinder_scene])
+def test_scene_vbrep_is_consistent(scene):
+    inp = scene_inputs(scene(), noise_m=0.0004, seed=0)
+    v = extract_vbrep(inp.scan, inp.seg, inp.fit)
+    t = check_topology(v)
+    assert t["open_loops"] == 0 and t["faces_without_loops"] == 0 and not t["invalid_primitives"]
+    assert t["end_gap_m"] == 0.0
+    assert t["off_surface_m"] < 1e-6
+
+
+# Measured 2026-11-21 (oracle segmentation, the geometry stage of that day), faces bounded by their mesh outline
+# by exporters.step.write / faces: before v2c.vbrep.topology bracket 5/12, knob 5/5, turned 6/10 (103/195 over
+# these three plus 20 generated `sensor` scans, seed 7, and 8 faces skipped); now bracket 0/12, turned 0/8 (two
+# slivers of 23 and 26 px whose edges were all shorter than min_edge_px are left out), knob 4/5 (22/188, 5
+# skipped). The knob's are curved faces whose fitted surfaces do not meet their neighbours (GeomAPI_IntSS finds
+# no curve there), a limit of the fits.
+@pytest.mark.parametrize("name, max_fallback", [("bracket_planes_cylinders", 0), ("turned_unaligned", 0),
+                                                ("knob_cone_torus_sphere", 4)])
+def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):
+    from v2c.pipeline import reconstruct
+
+    v = reconstruct(SAMPLES / name, "oracle")
+    t = check_topology(v)
+    assert t["open_loops"] == 0 and t["end_gap_m"] == 0.0 and not t["invalid_primitives"]
+    rep = step.write(v, tmp_path / "x.step", frame="camera")
+    assert rep.shape_valid and not rep.invalid_faces
+    assert len(rep.fallback_faces) <= max_fallback, rep.warnings

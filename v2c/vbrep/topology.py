@@ -1,0 +1,166 @@
+"""Topological and geometric consistency of the extracted VB-Rep (camera frame, metres).
+
+A B-rep consumer (the STEP exporter) trims each face by its own loops; that needs:
+
+- every loop a closed chain of edges whose end vertices coincide (shared vertex ids; `build_loops` chains them,
+  `open_loops` counts the chains that do not close);
+- every edge polyline starting and ending exactly at its vertices' positions and lying on each of its faces'
+  surfaces: an intersection edge on both (on their intersection curve), any other edge on its one face
+  (`snap_to_surfaces`);
+- valid primitive parameters (`valid_primitive`: positive radii, a cone half angle in (0, pi/2), a torus whose
+  tube circle lies on its side of the axis).
+
+`check_topology` measures all of it on a finished `VBRep` (tests, benchmarks).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from v2c.primitives import from_dict
+from v2c.primitives.base import Primitive
+from v2c.vbrep.lift import project_to_intersection
+from v2c.vbrep.model import EdgeType, VBRep
+from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, image_length
+
+
+def valid_primitive(prim: Primitive) -> bool:
+    """Whether a primitive's parameters describe a proper surface: finite numbers, positive radii, a cone half
+    angle strictly between 0 and pi/2, and a torus with a positive major radius (a negative one describes a tube
+    centred on the far side of the axis: a self-intersecting lemon, or nothing at all)."""
+    d = prim.to_dict()
+    vals = []
+    for v in d["params"].values():
+        vals += list(np.ravel(np.asarray(v, float)))
+    if not np.all(np.isfinite(vals)):
+        return False
+    p = d["params"]
+    if prim.type in ("cylinder", "sphere"):
+        return p["radius"] > 0
+    if prim.type == "cone":
+        return 0 < p["half_angle"] < np.pi / 2
+    if prim.type == "torus":
+        return p["radius"] > 0 and p["minor_radius"] > 0
+    return True
+
+
+def solve_on_surfaces(prims: list[Primitive], x0: np.ndarray, iters: int = 20) -> tuple[np.ndarray, float]:
+    """The point nearest ``x0`` (3,) on all the given surfaces (least squares where they have no common point):
+    Gauss-Newton with minimal-norm steps on their signed distances. Returns the point and the largest |signed
+    distance| left (metres)."""
+    x = np.asarray(x0, float).copy()
+    if not prims:
+        return x, 0.0
+    for _ in range(iters):
+        f = np.array([float(p.signed_distance(x[None])[0]) for p in prims])
+        J = np.stack([p.normal(x[None])[0] for p in prims])
+        step = np.linalg.lstsq(J, f, rcond=1e-9)[0]
+        if not np.all(np.isfinite(step)):
+            break
+        x = x - step
+        if np.linalg.norm(step) < 1e-12:
+            break
+    res = max(abs(float(p.signed_distance(x[None])[0])) for p in prims)
+    return x, res
+
+
+def _on_surface(prim: Primitive, pts: np.ndarray, iters: int = 3) -> np.ndarray:
+    """Points moved onto a surface (closest point, repeated for surfaces where one step is approximate)."""
+    x = np.asarray(pts, float)
+    for _ in range(iters):
+        x = prim.closest_point(x)
+    return x
+
+
+def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: dict[int, Primitive],
+                     max_move: float, iters: int = 20, eps: float = 1e-7) -> dict[str, Any]:
+    """Make the edges lie on their surfaces and end at their vertices (in place).
+
+    Vertices: moved onto all the surfaces of the faces of their edges (least squares, `solve_on_surfaces`) if that
+    moves them at most ``max_move`` metres. Intersection edges: interior samples onto the intersection curve
+    (minimal-norm Gauss-Newton on both signed distances); samples that do not get within ``eps`` of both
+    surfaces within ``max_move`` stay where they are (counted). Other edges: interior samples onto their face's surface. Every
+    polyline then starts and ends exactly at its vertices. prims: instance id -> primitive. Returns counts."""
+    stats = {"vertices_on_surfaces": 0, "vertices": len(verts), "samples_off_curve": 0}
+    faces_at: dict[int, set[int]] = {}
+    int_at: dict[int, list[tuple[int, ...]]] = {}
+    for p in protos:
+        for v in (p.v0, p.v1):
+            faces_at.setdefault(v, set()).update(p.faces)
+            if p.type is EdgeType.INTERSECTION:
+                int_at.setdefault(v, []).append(tuple(sorted(p.faces)))
+    for vid, v in enumerate(verts):
+        # on all its faces if they meet there; else on the faces of its intersection edges, else on one
+        # intersection edge's two faces (that edge's curve), else on its first face
+        ints = int_at.get(vid, [])
+        cands = [sorted(faces_at.get(vid, ())), sorted({f for fs in ints for f in fs})] + [list(fs) for fs in ints]
+        cands += [[f] for f in sorted(faces_at.get(vid, ()))]
+        best = None
+        for fs in cands:
+            if not fs:
+                continue
+            x, res = solve_on_surfaces([prims[f] for f in fs if f in prims], v.position, iters)
+            if np.all(np.isfinite(x)) and np.linalg.norm(x - v.position) <= max_move:
+                if res <= eps:
+                    best = x
+                    break
+                if best is None:
+                    best = x
+        if best is not None:
+            v.position = best
+            stats["vertices_on_surfaces"] += 1
+    for p in protos:
+        inner = p.pts[1:-1]
+        if len(inner):
+            if p.type is EdgeType.INTERSECTION and len(p.faces) == 2:
+                pa, pb = prims[p.faces[0]], prims[p.faces[1]]
+                x = project_to_intersection(pa, pb, inner, iters)
+                res = np.maximum(np.abs(pa.signed_distance(x)), np.abs(pb.signed_distance(x)))
+                ok = np.all(np.isfinite(x), 1) & (res <= eps) & (np.linalg.norm(x - inner, axis=1) <= max_move)
+                stats["samples_off_curve"] += int(np.sum(~ok))
+                inner = np.where(ok[:, None], x, inner)
+            else:
+                x = _on_surface(prims[p.faces[0]], inner)
+                inner = np.where(np.all(np.isfinite(x), 1)[:, None], x, inner)
+        p.pts = np.concatenate([verts[p.v0].position[None], inner, verts[p.v1].position[None]])
+    return stats
+
+
+def drop_degenerate(protos: list[ProtoEdge], K: np.ndarray, min_px: float) -> list[ProtoEdge]:
+    """Edges that start and end at one vertex with fewer than 3 samples (a closed curve needs a point between its
+    ends) or shorter than ``min_px`` pixels in the image are removed: such a loop encloses nothing (vertex merges
+    in post-processing can close a short edge after its own check). Loops through that vertex stay closed
+    without it."""
+    return [p for p in protos if p.v0 != p.v1 or (len(p.pts) >= 3 and image_length(p.pts, K) >= min_px)]
+
+
+def open_loops(vbrep: VBRep) -> list[tuple[int, int]]:
+    """(face id, loop index) of every loop that is not a closed chain through shared vertex ids."""
+    out = []
+    for f in vbrep.faces:
+        for k, lp in enumerate(f.loops):
+            ends = [(vbrep.edges[e].v1, vbrep.edges[e].v0) if r else (vbrep.edges[e].v0, vbrep.edges[e].v1)
+                    for e, r in lp]
+            if not all(ends[i][1] == ends[(i + 1) % len(ends)][0] for i in range(len(ends))):
+                out.append((f.id, k))
+    return out
+
+
+def check_topology(vbrep: VBRep) -> dict[str, Any]:
+    """Consistency measures of a VB-Rep: ``open_loops`` (count), ``faces_without_loops``, ``end_gap_m`` (largest
+    distance of a polyline end from its vertex), ``off_surface_m`` (largest distance of a polyline sample from one
+    of its edge's faces' surfaces), ``invalid_primitives`` (face ids)."""
+    prims = {f.id: from_dict(f.primitive) for f in vbrep.faces}
+    gap = off = 0.0
+    for e in vbrep.edges:
+        p = np.asarray(e.polyline, float)
+        gap = max(gap, float(np.linalg.norm(p[0] - vbrep.vertices[e.v0].position)),
+                  float(np.linalg.norm(p[-1] - vbrep.vertices[e.v1].position)))
+        for f in e.faces:
+            off = max(off, float(np.abs(prims[f].signed_distance(p)).max()))
+    return {"open_loops": len(open_loops(vbrep)),
+            "faces_without_loops": sum(1 for f in vbrep.faces if not f.loops),
+            "end_gap_m": gap, "off_surface_m": off,
+            "invalid_primitives": [k for k, pr in prims.items() if not valid_primitive(pr)]}
