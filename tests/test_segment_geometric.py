@@ -15,10 +15,11 @@ from v2c.segment.data import estimate_ground, estimate_normals, gravity_frame
 from v2c.segment.geometric import GeometricConfig, _Fit, classify_instance, part_frame
 from v2c.synth.dataset import SynthConfig, generate_dataset
 
-# Measured on these 6 scans (seed 4343, 320x240 `sensor`): see RECALL_MEASURED; threshold = measured - margin.
-RECALL_MEASURED = 0.0
-RECALL_MIN = 0.0
-TYPE_ACC_MIN = 0.0
+# Measured on these 6 scans (seed 4343, 320x240 `sensor`), 2026-11-21: face recall 0.514 (gt faces >= 50 px),
+# type accuracy 0.556, precision 0.420. The segmenter is seeded; the margins cover platform differences in the
+# RANSAC arithmetic and in the generator's rendering.
+RECALL_MIN = 0.40
+TYPE_ACC_MIN = 0.40
 
 
 @pytest.fixture(scope="module")

@@ -14,12 +14,13 @@ from v2c.segment.learned import DEFAULT_WEIGHTS, LearnedConfig, predict, segment
 from v2c.segment.net import UNet, load_weights
 from v2c.synth.dataset import SynthConfig, generate_dataset
 
-# Measured on these 16 scans (seed 4242, 256x256 `sensor`) with the shipped weights: see MIOU_MEASURED.
-# The thresholds are the measurement minus a margin for platform differences (bf16 vs fp32 kernels).
-MIOU_MEASURED = 0.0
-MIOU_MIN = 0.0
-RECALL_MEASURED = 0.0
-RECALL_MIN = 0.0
+# Measured on these 16 scans (seed 4242, 256x256 `sensor`) with the shipped weights (2026-11-21, bf16 CPU):
+# mean IoU 0.373 (18 classes, per-pixel labels of the instances, pooled), face recall 0.457 (IoU 0.5, gt faces
+# >= 50 px), precision 0.619, type accuracy 0.944, axis accuracy 0.928. The thresholds are the measurement minus a
+# margin for platform differences (fp32 vs bf16 kernels, other CPUs).
+MIOU_MIN = 0.30
+RECALL_MIN = 0.35
+TYPE_ACC_MIN = 0.85
 
 
 @pytest.fixture(scope="module")
@@ -52,6 +53,7 @@ def test_shipped_weights_reach_stated_miou(fresh_scans: list[Path]) -> None:
     s = summarise(rows)
     assert s["miou"] >= MIOU_MIN, s
     assert s["recall"] >= RECALL_MIN, s
+    assert s["type_acc"] >= TYPE_ACC_MIN, s
 
 
 def test_fp32_matches_bf16(fresh_scans: list[Path]) -> None:

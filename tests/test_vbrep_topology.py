@@ -51,11 +51,11 @@ def test_scene_vbrep_is_consistent(scene):
 
 
 # Measured 2026-11-21 (oracle segmentation, the geometry stage of that day), faces bounded by their mesh outline
-# by exporters.step.write / faces: before v2c.vbrep.topology bracket 5/12, knob 5/5, turned 6/10 (103/195 over
-# these three plus 20 generated `sensor` scans, seed 7, and 8 faces skipped); now bracket 0/12, turned 0/8 (two
-# slivers of 23 and 26 px whose edges were all shorter than min_edge_px are left out), knob 4/5 (22/188, 5
-# skipped). The knob's are curved faces whose fitted surfaces do not meet their neighbours (GeomAPI_IntSS finds
-# no curve there), a limit of the fits.
+# by exporters.step.write / faces: before v2c.vbrep.topology bracket 5/12, knob 4/5, turned 6/10 (103/197 over
+# these three plus 20 generated `sensor` scans, `v2c synth --n 20 --seed 7`, and 6 faces skipped); now bracket
+# 0/12, turned 0/8 (two slivers of 23 and 26 px whose edges were all shorter than min_edge_px are left out), knob
+# 2/5 (27/188, 5 skipped). The knob's are curved faces whose fitted surfaces do not meet their neighbours
+# (GeomAPI_IntSS finds no curve there), a limit of the fits; with the fits of earlier that day it had 4/5.
 @pytest.mark.parametrize("name, max_fallback", [("bracket_planes_cylinders", 0), ("turned_unaligned", 0),
                                                 ("knob_cone_torus_sphere", 4)])
 def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):

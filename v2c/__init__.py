@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["reconstruct", "load_scan"]
+__all__ = ["load_scan", "reconstruct"]
 
 
 def __getattr__(name: str) -> Any:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from v2c.segment.train import TrainConfig
+from v2c.segment.train_config import TrainConfig
 
 
 @click.command("train")

@@ -1,5 +1,5 @@
 """RANSAC per instance mask (Schnabel et al. 2007 style): hypotheses from minimal sets of points with normals,
-scored by inliers (distance and normal angle), the best one refined by robust least squares.
+scored by inliers (distance and normal angle; tori by MSAC, below), the best one refined by robust least squares.
 
 Minimal sets (camera frame, metres; normals from the depth gradient):
 - plane: 1 point + normal.
@@ -21,7 +21,7 @@ points, the cross-section from the points' (rho, h) cloud) join the minimal-set 
 
 Torus bounds (`torus_limits`): a small fillet's tube is a few pixels wide and its cross-section is an arc barely
 above the noise, so an unconstrained fit can trade a tilted axis or a giant tube for the same distances (a
-1.9 mm fillet came back as r = 11.6 mm, another as a 280 mm torus). The data do fix the patch's cross-section
+1.9 mm fillet came back as r = 11.6 mm, a 2.9 mm one as r = 1116 mm on R = 910 mm). The data do fix the patch's cross-section
 *span* (its extent in the torus' own (rho, h) half-plane) and its radial range: the minor radius is held within
 `torus_minor_span` times the span and the tube centre circle within the points' radial range widened by the
 largest allowed r. Hypotheses outside are dropped, the refinement is bounded, and `torus_ok` lets the joint
@@ -29,7 +29,8 @@ solves reject a torus that ran away. Within those bounds a thin tube's cross-sec
 90-degree arc of a 2 mm tube with 0.3 mm noise is matched as well by a 3.7 mm tube centred further in), so the
 local refinement adds a weak prior residual pulling r towards `torus_minor_prior` times the span (a fillet's
 quarter arc: r = 0.80 span on every torus of the benchmark sets), weighted `torus_prior_weight` per point, which
-decides only where the points cannot.
+decides only where the points cannot; and only for thin tubes (span below `torus_prior_max_span` d_inlier): a
+larger cross-section fixes r by itself, and the prior would only bias it.
 """
 
 from __future__ import annotations
@@ -244,13 +245,18 @@ def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: FitConfig) -> f
     d = np.minimum(np.abs(prim.signed_distance(x)), eps) / scale
     near = x[np.abs(prim.signed_distance(x)) < eps]
     r_lo = torus_limits(prim, near if len(near) >= 3 else x, config)[0]
-    r0 = config.torus_minor_prior * r_lo / config.torus_minor_span[0]
-    return float(np.sum(d * d) + len(x) * (config.torus_prior_weight * (prim.minor_radius - r0) / scale) ** 2)
+    span = r_lo / config.torus_minor_span[0]
+    cost = float(np.sum(d * d))
+    if span < config.torus_prior_max_span * eps:  # a thin tube only (module docstring)
+        cost += len(x) * (config.torus_prior_weight * (prim.minor_radius - config.torus_minor_prior * span) / scale) ** 2
+    return cost
 
 
 def clamp_torus(prim: Torus, x: np.ndarray, config: FitConfig) -> Torus:
     """``prim`` with its radii clamped into `torus_limits` on ``x`` (slightly inside the bounds)."""
     r_lo, r_hi, big_lo, big_hi = torus_limits(prim, x, config)
+    if not np.isfinite(r_hi + big_hi):  # too few points to bound anything
+        return prim
     r = float(np.clip(prim.minor_radius, r_lo * 1.001, r_hi * 0.999))
     big = float(np.clip(prim.radius, big_lo + 1e-3 * (big_hi - big_lo), big_hi - 1e-3 * (big_hi - big_lo)))
     return Torus(prim.origin, prim.axis, big, r)
@@ -300,9 +306,9 @@ def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: FitCo
         r_lo, r_hi, big_lo, big_hi = torus_limits(prim, x, config)
         lb[3], ub[3] = big_lo - prim.radius, big_hi - prim.radius
         lb[4], ub[4] = r_lo - prim.minor_radius, r_hi - prim.minor_radius
-        if config.torus_prior_weight > 0:
-            r0 = config.torus_minor_prior * r_lo / config.torus_minor_span[0]  # prior ratio * span
-            prior = np.array([[4, r0 - prim.minor_radius]])
+        span = r_lo / config.torus_minor_span[0]
+        if config.torus_prior_weight > 0 and span < config.torus_prior_max_span * config.d_inlier * scale:
+            prior = np.array([[4, config.torus_minor_prior * span - prim.minor_radius]])
     terms = [Term(prim, x, mode)]
     layout = Layout(terms, np.eye(3))
     w_prior = config.torus_prior_weight * np.sqrt(len(x)) / scale

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ import torch.nn.functional as F
 from v2c.labels import IGNORE, NUM_CLASSES
 from v2c.segment.data import CachedScans, build_cache, dequantise, find_scans
 from v2c.segment.net import NetConfig, UNet, bf16_supported, load_weights, save_weights
+from v2c.segment.train_config import TrainConfig
 
 #: The shipped training set: (width, height, noise profile, scans, `v2c synth` seed), generated into
 #: DATA/<width>x<height>_<noise>_s<seed>/. Validation uses seed 9000 and later, never these.
@@ -56,28 +57,6 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
             done += generate_dataset(sub, n - have, seed, SynthConfig(width=w, height=h, noise=noise), jobs=jobs,
                                      progress=False, start=have)
     return done
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    steps: int = 6000  # optimiser steps (the schedule length)
-    stop_step: int | None = None  # stop after this many steps (a reproducible prefix of the schedule)
-    minutes: float | None = None  # wall-clock cap (minutes); the best checkpoint so far is kept
-    batch: int = 8  # crops per step
-    crop_px: int = 192  # square crop side (pixels)
-    lr: float = 2e-3  # peak AdamW learning rate
-    weight_decay: float = 1e-4
-    warmup_steps: int = 200
-    final_lr_frac: float = 0.03  # cosine decays to lr * final_lr_frac
-    boundary_weight: float = 1.0  # weight of the boundary BCE against the label CE
-    boundary_pos_weight: float = 3.0  # BCE pos_weight of boundary pixels
-    class_weight_power: float = 0.3  # class weights = frequency^-power, normalised to mean 1 over present classes
-    flip: bool = True  # random horizontal mirrors (label-safe, see data.CachedScans.crop)
-    val_scans: int = 24  # held-out cached scans for the checkpoint metric (evenly spread over the sorted list)
-    eval_every: int = 500  # steps between validation + checkpoint
-    seed: int = 0
-    threads: int = 2  # torch CPU threads
-    bf16: bool | None = None  # None = when the CPU supports it
 
 
 def _lr_at(step: int, cfg: TrainConfig) -> float:
@@ -154,13 +133,14 @@ def evaluate(model: UNet, data: CachedScans, ids: list[int], bf16: bool) -> dict
             "iou": {int(k): round(float(iou[k]), 4) for k in np.nonzero(present)[0]}}
 
 
-def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig = TrainConfig(), cache_dir: str | Path | None = None,
+def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig | None = None, cache_dir: str | Path | None = None,
           net_cfg: NetConfig | None = None, init: str | Path | None = None, log=print) -> dict:
     """Train on the scans under ``data_dir``; write the best checkpoint (by validation mIoU) to ``out``.
 
     init: optional weights file to start from (a second stage: a fresh schedule over trained weights; its network
     config is used). Returns the training record (also written next to ``out`` as ``<out>.json``).
     """
+    cfg = cfg if cfg is not None else TrainConfig()
     net_cfg = net_cfg or NetConfig()
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)

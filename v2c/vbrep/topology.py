@@ -24,6 +24,7 @@ from v2c.primitives.base import Primitive
 from v2c.vbrep.lift import project_to_intersection
 from v2c.vbrep.model import EdgeType, VBRep
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, image_length
+from v2c.vbrep.raycast import project
 
 
 def valid_primitive(prim: Primitive) -> bool:
@@ -75,14 +76,18 @@ def _on_surface(prim: Primitive, pts: np.ndarray, iters: int = 3) -> np.ndarray:
 
 
 def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: dict[int, Primitive],
-                     max_move: float, iters: int = 20, eps: float = 1e-7) -> dict[str, Any]:
+                     max_move: float, iters: int = 20, eps: float = 1e-7, K: np.ndarray | None = None,
+                     end_px: float = 0.0) -> dict[str, Any]:
     """Make the edges lie on their surfaces and end at their vertices (in place).
 
     Vertices: moved onto all the surfaces of the faces of their edges (least squares, `solve_on_surfaces`) if that
     moves them at most ``max_move`` metres. Intersection edges: interior samples onto the intersection curve
     (minimal-norm Gauss-Newton on both signed distances); samples that do not get within ``eps`` of both
-    surfaces within ``max_move`` stay where they are (counted). Other edges: interior samples onto their face's surface. Every
-    polyline then starts and ends exactly at its vertices. prims: instance id -> primitive. Returns counts."""
+    surfaces within ``max_move`` stay where they are (counted). Other edges: interior samples onto their face's
+    surface. With K: interior samples within ``end_px`` pixels of an end vertex's image point are dropped (a
+    vertex solved a few pixels off the lifted end would otherwise leave the polyline doubling back across its
+    neighbour there). Every polyline then starts and ends exactly at its vertices. prims: instance id ->
+    primitive. Returns counts."""
     stats = {"vertices_on_surfaces": 0, "vertices": len(verts), "samples_off_curve": 0}
     faces_at: dict[int, set[int]] = {}
     int_at: dict[int, list[tuple[int, ...]]] = {}
@@ -124,7 +129,27 @@ def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: d
             else:
                 x = _on_surface(prims[p.faces[0]], inner)
                 inner = np.where(np.all(np.isfinite(x), 1)[:, None], x, inner)
-        p.pts = np.concatenate([verts[p.v0].position[None], inner, verts[p.v1].position[None]])
+        a, b = verts[p.v0].position, verts[p.v1].position
+        if K is not None and end_px > 0 and len(inner):
+            uv = project(inner, K)
+            ua, ub = project(np.stack([a, b]), K)
+            keep = np.ones(len(uv), bool)
+            for u_end, order in ((ua, np.arange(len(uv))), (ub, np.arange(len(uv))[::-1])):
+                near = np.linalg.norm(uv - u_end, axis=1) <= end_px
+                far = order[~near[order]]
+                if len(far) == 0:
+                    keep &= ~near
+                    continue
+                # the first sample beyond end_px sets the edge's direction out of the vertex; closer samples
+                # that lie behind the vertex (against that direction) double back: dropped
+                d = uv[far[0]] - u_end
+                keep &= ~(near & ((uv - u_end) @ d <= 0))
+            if p.v0 == p.v1 and not keep.any():
+                keep[len(keep) // 2] = True  # a closed edge keeps a point between its ends
+            inner = inner[keep]
+        p.pts = np.concatenate([a[None], inner, b[None]])
+        if len(p.uv):
+            p.uv = project(p.pts, K) if K is not None else p.uv
     return stats
 
 
