@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
 from OCP.BRepLib import BRepLib
 from OCP.Geom import Geom_Curve
@@ -70,7 +71,16 @@ class EdgeBuilder:
     """Steps 1-4 for one VB-Rep: `run` fills ``surfaces`` (VFace id -> AnalyticSurface), ``curves``
     (intersection VEdge id -> untrimmed exact curve), ``vpos`` (VVertex id -> position, mm), ``geoms`` (VEdge
     id -> EdgeGeom) and ``edges`` (VEdge id -> TopoDS_Edge oriented from v0 to v1); problems go to
-    ``warnings``."""
+    ``warnings``.
+
+    Guards: an edge whose polyline and end vertices span no more than ``fit_tol`` (a zero-length edge, or a
+    closed edge shrunk to a point) gets no geometry and no TopoDS_Edge (``degenerate``); the two vertices of a
+    degenerate open edge become one (``vertex_alias``: VVertex id -> the id standing for it), so the loops through
+    it still close without it. An intersection edge without an exact intersection curve is fitted on the face
+    whose surface its polyline lies nearer (``fit_face``); how far the fitted edge then lies off the other face's
+    surface is measured (``off_surface``: VEdge id -> (face id, mm)) and reported as a warning: covered by the
+    edge's tolerance up to ``branch_tol``, a gap between the faces beyond it.
+    """
 
     def __init__(self, vbrep: VBRep, fmap: FrameMap, config: BrepConfig) -> None:
         self.vb = vbrep
@@ -85,11 +95,16 @@ class EdgeBuilder:
         self.vpos: dict[int, np.ndarray] = {}
         self.geoms: dict[int, EdgeGeom] = {}
         self.edges: dict[int, TopoDS_Edge] = {}
+        self.degenerate: set[int] = set()
+        self.vertex_alias: dict[int, int] = {}
+        self.fit_face: dict[int, int] = {}
+        self.off_surface: dict[int, tuple[int, float]] = {}
         self.bb = BRep_Builder()
 
     def run(self) -> EdgeBuilder:
         """All four steps, in order."""
         self.build_surfaces()
+        self.find_degenerate_edges()
         self.build_intersection_curves()
         self.place_vertices()
         self.build_edge_geometry()
@@ -103,9 +118,40 @@ class EdgeBuilder:
             except (ValueError, KeyError, TypeError) as exc:
                 self.warnings.append(f"face {f.id}: no surface ({exc}); face skipped")
 
+    def vid(self, v: int) -> int:
+        """The VVertex id standing for ``v`` (itself unless merged through a degenerate edge)."""
+        return self.vertex_alias.get(v, v)
+
+    def find_degenerate_edges(self) -> None:
+        """Edges spanning no more than ``fit_tol`` mm (polyline and end vertices): dropped; the ends of an open
+        one merged into one vertex."""
+        vpos = {v.id: self.fmap.points(v.position) for v in self.vb.vertices}
+        parent: dict[int, int] = {}
+
+        def find(v: int) -> int:
+            while parent.get(v, v) != v:
+                v = parent[v]
+            return v
+
+        for e in self.vb.edges:
+            pts = [self.fmap.points(np.asarray(e.polyline, float).reshape(-1, 3))]
+            pts += [vpos[v][None] for v in (e.v0, e.v1) if v in vpos]
+            pts = np.concatenate(pts)
+            span = float(np.linalg.norm(pts - pts[0], axis=1).max()) if len(pts) else 0.0
+            if span > self.fit_tol:
+                continue
+            self.degenerate.add(e.id)
+            kind = "closed" if e.v0 == e.v1 else "zero-length"
+            self.warnings.append(f"edge {e.id}: degenerate {kind} edge (spans {span:.3g} mm); dropped"
+                                 + ("" if e.v0 == e.v1 else f", vertices {e.v0} and {e.v1} merged"))
+            a, b = find(e.v0), find(e.v1)
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+        self.vertex_alias = {v: find(v) for v in parent if find(v) != v}
+
     def build_intersection_curves(self) -> None:
         for e in self.vb.edges:
-            if EdgeType(e.type) is not EdgeType.INTERSECTION or len(e.faces) != 2:
+            if EdgeType(e.type) is not EdgeType.INTERSECTION or len(e.faces) != 2 or e.id in self.degenerate:
                 continue
             fa, fb = e.faces
             if fa not in self.surfaces or fb not in self.surfaces:
@@ -124,9 +170,14 @@ class EdgeBuilder:
                 if exact is not None:
                     curve, dist = exact, 0.0
             if curve is None or dist > self.branch_tol:
+                pts = self.fmap.points(np.asarray(e.polyline, float).reshape(-1, 3))
+                off = {f: float(np.mean(distance_to_surface(self.surfaces[f], pts))) for f in (fa, fb)}
+                near = min((fa, fb), key=lambda f: off[f])
+                self.fit_face[e.id] = near
                 self.warnings.append(
                     f"edge {e.id}: no intersection branch within {self.branch_tol:.2f} mm of the polyline "
-                    f"({len(cands)} branches, nearest {dist:.2f} mm); fitted on face {fa} instead"
+                    f"({len(cands)} branches, nearest {dist:.2f} mm); fitted on face {near} instead (polyline "
+                    f"{off[fa]:.2f} mm off face {fa}, {off[fb]:.2f} mm off face {fb})"
                 )
                 continue
             self.curves[e.id] = curve
@@ -149,11 +200,15 @@ class EdgeBuilder:
         inc_curves: dict[int, list[Geom_Curve]] = defaultdict(list)
         inc_surfs: dict[int, set[int]] = defaultdict(set)
         for e in self.vb.edges:
-            for v in {e.v0, e.v1}:
+            if e.id in self.degenerate:
+                continue
+            for v in {self.vid(e.v0), self.vid(e.v1)}:
                 if e.id in self.curves:
                     inc_curves[v].append(self.curves[e.id])
                 inc_surfs[v].update(f for f in e.faces if f in self.surfaces)
         for v in self.vb.vertices:
+            if v.id in self.vertex_alias:
+                continue
             x = self.fmap.points(v.position)
             for _ in range(self.cfg.vertex_iterations):
                 if inc_curves[v.id]:
@@ -174,6 +229,8 @@ class EdgeBuilder:
                 if done or len(proj) == 1:
                     break
             self.vpos[v.id] = x
+        for v, rep in self.vertex_alias.items():
+            self.vpos[v] = self.vpos[rep]
 
     def _curve_geom(self, e: VEdge, curve: Geom_Curve) -> EdgeGeom | None:
         poly = subsample(self.fmap.points(e.polyline), self.cfg.branch_samples)
@@ -188,7 +245,7 @@ class EdgeBuilder:
         if not (np.isfinite(ta) and np.isfinite(tb)):
             return None
         ta = _near(ta, t[0], period)
-        if e.v0 == e.v1:
+        if self.vid(e.v0) == self.vid(e.v1):
             if period is None:
                 return None
             tb = ta + np.sign(t[-1] - t[0] or 1.0) * period
@@ -244,17 +301,22 @@ class EdgeBuilder:
 
     def build_edge_geometry(self) -> None:
         for e in self.vb.edges:
+            if e.id in self.degenerate:
+                continue
             g = None
             if e.id in self.curves:
                 g = self._curve_geom(e, self.curves[e.id])
                 if g is None:
                     self.warnings.append(f"edge {e.id}: its intersection curve could not be trimmed; fitted")
             if g is None:
-                for f in e.faces:
+                faces = sorted(e.faces, key=lambda f: f != self.fit_face.get(e.id, f))
+                for f in faces:
                     if f in self.surfaces:
                         g = self._pcurve_geom(e, f)
                         if g is not None:
                             break
+            if g is not None and e.id in self.fit_face and g.face is not None:
+                self.fit_face[e.id] = g.face  # the nearer face's fit failed: the other one carries it
             if g is None:
                 g = self._free_geom(e)
             if g is None:
@@ -268,10 +330,13 @@ class EdgeBuilder:
             g = self.geoms.get(e.id)
             if g is None:
                 continue
-            gap[e.v0] = max(gap[e.v0], float(np.linalg.norm(g.end0 - self.vpos[e.v0])))
-            gap[e.v1] = max(gap[e.v1], float(np.linalg.norm(g.end1 - self.vpos[e.v1])))
+            a, b = self.vid(e.v0), self.vid(e.v1)
+            gap[a] = max(gap[a], float(np.linalg.norm(g.end0 - self.vpos[a])))
+            gap[b] = max(gap[b], float(np.linalg.norm(g.end1 - self.vpos[b])))
         verts: dict[int, TopoDS_Vertex] = {}
         for vid, x in self.vpos.items():
+            if vid in self.vertex_alias:
+                continue
             tol = max(self.cfg.min_tolerance, 1.05 * gap[vid] + self.cfg.min_tolerance)
             vx = TopoDS_Vertex()
             self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), tol)
@@ -283,7 +348,7 @@ class EdgeBuilder:
             g = self.geoms.get(e.id)
             if g is None:
                 continue
-            va, vb = verts[e.v0], verts[e.v1]
+            va, vb = verts[self.vid(e.v0)], verts[self.vid(e.v1)]
             forward = g.t1 > g.t0
             lo, hi = (g.t0, g.t1) if forward else (g.t1, g.t0)
             v_lo, v_hi = (va, vb) if forward else (vb, va)
@@ -305,6 +370,34 @@ class EdgeBuilder:
             elif g.pcurve is not None:  # exact iso curve: attach its pcurve (same parametrisation)
                 self.bb.UpdateEdge(edge, g.pcurve, self.surfaces[g.face].geom, TopLoc_Location(),
                                    BRep_Tool.Tolerance_s(edge))
+            if e.id in self.fit_face:
+                self._cover_other_face(e, edge, va, vb)
             # Stored oriented from v0 to v1, so a loop entry (id, reversed) is this edge, reversed or not.
             edges[e.id] = edge if forward else TopoDS.Edge_s(edge.Reversed())
         return edges
+
+    def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex,
+                          n: int = 33) -> None:
+        """An intersection edge fitted on one face (no intersection curve): measure how far it lies off the
+        other face's surface (mm, ``off_surface``), warn, and raise the edge's (and its vertices') tolerance to
+        cover that gap when it is within ``branch_tol``; a larger gap is reported as a gap between the faces."""
+        other = next((f for f in e.faces if f != self.fit_face[e.id]), None)
+        if other is None or other not in self.surfaces:
+            return
+        c = BRepAdaptor_Curve(edge)
+        ts = np.linspace(c.FirstParameter(), c.LastParameter(), n)
+        pts = np.array([c.Value(float(t)).Coord() for t in ts])
+        off = float(distance_to_surface(self.surfaces[other], pts).max())
+        self.off_surface[e.id] = (other, off)
+        if off <= self.cfg.min_tolerance:
+            return
+        if off <= self.branch_tol:
+            tol = 1.05 * off + self.cfg.min_tolerance
+            self.bb.UpdateEdge(edge, max(tol, BRep_Tool.Tolerance_s(edge)))
+            for vx in (va, vb):
+                self.bb.UpdateVertex(vx, max(tol, BRep_Tool.Tolerance_s(vx)))
+            self.warnings.append(f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
+                                 f"{other}'s surface; its tolerance covers the gap")
+        else:
+            self.warnings.append(f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
+                                 f"{other}'s surface (more than {self.branch_tol:.2f} mm): a gap between the faces")

@@ -56,6 +56,8 @@ class FaceBuilder:
         self.geoms = eb.geoms
         self.vpos = eb.vpos
         self.edges = eb.edges
+        self.vid = eb.vid
+        self.degenerate = eb.degenerate
         self.warnings = eb.warnings
         self.bb = eb.bb
         self.ctx = ShapeBuild_ReShape()
@@ -157,7 +159,8 @@ class FaceBuilder:
         ends = []
         for eid, rev in loop:
             e = self.vb.edges[eid]
-            ends.append((e.v1, e.v0) if rev else (e.v0, e.v1))
+            v0, v1 = self.vid(e.v0), self.vid(e.v1)
+            ends.append((v1, v0) if rev else (v0, v1))
         return all(ends[i][1] == ends[(i + 1) % len(ends)][0] for i in range(len(ends)))
 
     def _orient_to_camera(self, face: TopoDS_Face, f: VFace) -> TopoDS_Face:
@@ -233,28 +236,28 @@ class FaceBuilder:
         form closed loops that way; None when some chain does not close."""
         todo = [eid for lp in loops for eid, _ in lp if eid in self.geoms]
         at: dict[int, list[int]] = defaultdict(list)
+        ends = {eid: (self.vid(self.vb.edges[eid].v0), self.vid(self.vb.edges[eid].v1)) for eid in todo}
         for eid in todo:
-            e = self.vb.edges[eid]
-            at[e.v0].append(eid)
-            if e.v1 != e.v0:
-                at[e.v1].append(eid)
+            v0, v1 = ends[eid]
+            at[v0].append(eid)
+            if v1 != v0:
+                at[v1].append(eid)
         used: set[int] = set()
         out = []
         for first in todo:
             if first in used:
                 continue
-            e = self.vb.edges[first]
             loop, used_here = [(first, False)], {first}
-            start, cur = e.v0, e.v1
+            start, cur = ends[first]
             while cur != start:
                 nxt = next((x for x in at[cur] if x not in used and x not in used_here), None)
                 if nxt is None:
                     return None
-                ne = self.vb.edges[nxt]
-                rev = ne.v1 == cur and ne.v0 != cur
+                n0, n1 = ends[nxt]
+                rev = n1 == cur and n0 != cur
                 loop.append((nxt, rev))
                 used_here.add(nxt)
-                cur = ne.v0 if rev else ne.v1
+                cur = n0 if rev else n1
             used |= used_here
             out.append(loop)
         return out
@@ -265,20 +268,23 @@ class FaceBuilder:
         edges chained again through shared vertices (when the given loops do not close); only the loops that
         close; only the largest closed loop. Anything but the first is reported as a warning. None if all
         fail."""
-        if not f.loops:
+        # degenerate edges (dropped by the EdgeBuilder, their vertices merged) leave their loops
+        given = [[(eid, rev) for eid, rev in lp if eid not in self.degenerate] for lp in f.loops]
+        given = [lp for lp in given if lp]
+        if not given:
             return None
         s = self.surfaces[f.id]
 
         def by_area(loops: list[Loop]) -> list[Loop]:
             return sorted(loops, key=lambda lp: -abs(self._loop_area_uv(s, lp)))
 
-        attempts: list[tuple[str, list[Loop]]] = [("", f.loops)]
-        if not all(self._loop_closed(lp) for lp in f.loops):
-            chained = self._rechain(f.loops)
+        attempts: list[tuple[str, list[Loop]]] = [("", given)]
+        if not all(self._loop_closed(lp) for lp in given):
+            chained = self._rechain(given)
             if chained:
                 attempts.append(("its edges chained again through shared vertices", by_area(chained)))
-        closed = by_area([lp for lp in f.loops if self._loop_closed(lp)])
-        if closed and len(closed) < len(f.loops):
+        closed = by_area([lp for lp in given if self._loop_closed(lp)])
+        if closed and len(closed) < len(given):
             attempts.append(("only its closed loops", closed))
         if len(closed) > 1:
             attempts.append(("only its largest loop", closed[:1]))

@@ -7,41 +7,19 @@ from collections import defaultdict
 
 import numpy as np
 
+from v2c.polyline import rdp_indices as _rdp_indices
+
+
+def rdp_indices(points: np.ndarray, tol: float) -> np.ndarray:
+    """Ramer-Douglas-Peucker indices with distances to the chord segment (`v2c.polyline.rdp_indices`)."""
+    return _rdp_indices(points, tol, clamp=True)
+
 
 def subsample(points: np.ndarray, n: int) -> np.ndarray:
     """At most ``n`` points of a polyline, evenly by index, first and last kept."""
     if len(points) <= n:
         return points
     return points[np.unique(np.round(np.linspace(0, len(points) - 1, n)).astype(int))]
-
-
-def rdp_indices(points: np.ndarray, tol: float) -> np.ndarray:
-    """Indices of an open polyline's points (N, D) kept by Ramer-Douglas-Peucker within ``tol`` (same units);
-    the first and last are always kept."""
-    n = len(points)
-    if n <= 2:
-        return np.arange(n)
-    keep = np.zeros(n, bool)
-    keep[[0, n - 1]] = True
-    stack = [(0, n - 1)]
-    while stack:
-        i, j = stack.pop()
-        if j <= i + 1:
-            continue
-        seg = points[i + 1 : j]
-        a, d = points[i], points[j] - points[i]
-        ln2 = float(d @ d)
-        if ln2 > 1e-24:
-            t = np.clip((seg - a) @ d / ln2, 0.0, 1.0)
-            dist = np.linalg.norm(seg - (a + t[:, None] * d), axis=1)
-        else:
-            dist = np.linalg.norm(seg - a, axis=1)
-        k = int(np.argmax(dist))
-        if dist[k] > tol:
-            m = i + 1 + k
-            keep[m] = True
-            stack += [(i, m), (m, j)]
-    return np.flatnonzero(keep)
 
 
 def simplify_closed(points: np.ndarray, tol: float, max_points: int = 64) -> np.ndarray:

@@ -85,3 +85,25 @@ def test_region_restricts_instances() -> None:
     left[:, 40:] = 0
     assert np.array_equal(seg.instances > 0, left > 0)
     assert seg.num_instances == 2
+
+
+def test_soft_boundary_cuts_on_the_ridge() -> None:
+    """A 7-px strip between two faces (all one label) under soft predicted boundary bands that are wider on the
+    outer faces' side than on the strip's: the nearest-core fill cuts half-way between the cores (inside the outer
+    faces), flooding in order of boundary probability cuts on the ridges (the true boundaries)."""
+    faces = np.zeros((40, 60), np.uint16)
+    faces[2:38, 2:58] = 1
+    faces[18:25, 2:58] = 2  # the strip, rows 18-24
+    faces[25:38, 2:58] = 3
+    labels = np.where(faces > 0, 1, 0).astype(np.uint8)
+    rows = np.arange(40, dtype=np.float32)[:, None] + 0.5
+    d = np.minimum(np.abs(rows - 18.0), np.abs(rows - 25.0))  # distance to the nearer boundary (pixels)
+    sigma = np.where((rows > 18.0) & (rows < 25.0), 1.5, 4.0)  # band narrower inside the strip
+    prob = np.exp(-0.5 * ((d - 0.5) / sigma) ** 2)  # 1.0 on both ridge pixels of each boundary
+    prob = np.broadcast_to(prob, faces.shape).astype(np.float32)
+    seg = extract_instances(labels, prob)
+    m = _match(seg.instances, faces)
+    for f, i in m.items():
+        assert np.array_equal(seg.instances == i, faces == f)
+    nearest = extract_instances(labels, prob, cfg=InstanceConfig(flood_levels=()))
+    assert not np.array_equal(nearest.instances == nearest.instances[21, 30], faces == 2)

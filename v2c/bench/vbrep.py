@@ -13,7 +13,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from v2c.vbrep.gt_types import GTEdgeSamples, GTTypeConfig, gt_edge_samples
-from v2c.vbrep.mesh import sample_surface
 from v2c.vbrep.model import EdgeType, VBRep
 from v2c.vbrep.raycast import project
 
@@ -42,56 +41,22 @@ def gt_points(scan: Any, n: int | None = 20000, seed: int = 0) -> np.ndarray:
     return rays / rays[:, 2:3] * z[:, None]
 
 
-def _all_mesh(vbrep: VBRep) -> tuple[np.ndarray, np.ndarray]:
-    verts, tris, off = [], [], 0
-    for f in vbrep.faces:
-        if len(f.mesh_triangles):
-            verts.append(np.asarray(f.mesh_vertices, float))
-            tris.append(np.asarray(f.mesh_triangles, np.int64) + off)
-            off += len(f.mesh_vertices)
-    if not verts:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    return np.concatenate(verts), np.concatenate(tris)
-
-
-def camera_visible(points: np.ndarray, vbrep: VBRep, rng: np.random.Generator, tol: float,
-                   n_zbuf: int = 200000) -> np.ndarray:
-    """(N,) bool: points not hidden behind the reconstruction itself, seen from the camera. The z-buffer is
-    splatted from ``n_zbuf`` area-uniform samples of all face meshes; ``tol`` metres of slack."""
-    V, T = _all_mesh(vbrep)
-    w, h = vbrep.image_size
-    zbuf = np.full(h * w, np.inf)
-    pts = np.concatenate([sample_surface(V, T, n_zbuf, rng), points])
-    uv = np.rint(project(pts, vbrep.K)).astype(np.int64)
-    ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h) & (pts[:, 2] > 0)
-    np.minimum.at(zbuf, uv[ok, 1] * w + uv[ok, 0], pts[ok, 2])
-    uv = np.rint(project(points, vbrep.K)).astype(np.int64)
-    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-    vis = np.ones(len(points), bool)
-    zb = zbuf[np.clip(uv[:, 1], 0, h - 1) * w + np.clip(uv[:, 0], 0, w - 1)]
-    vis[inside] = points[inside, 2] <= zb[inside] + tol
-    return vis
-
-
 def chamfer(vbrep: VBRep, scan: Any, n: int = 20000, seed: int = 0, visible_only: bool = True) -> float:
     """BENCHMARK.md Chamfer distance, divided by the ground-truth part size: 0.5 * (mean over R of the distance
     to G + mean over G of the distance to R), G = ``n`` clean-depth points of the part, R = ``n`` points drawn
     area-uniformly on the reconstructed face meshes, keeping those the camera sees (``visible_only``; else all of
-    R, BENCHMARK.md's chamfer_all). Returns inf for an empty reconstruction."""
-    rng = np.random.default_rng(seed)
+    R, BENCHMARK.md's chamfer_all). Returns inf for an empty reconstruction.
+
+    The exact implementation of v2c.bench.metrics (visibility by an exact ray cast against the meshes,
+    `visible_points`): ``chamfer(v, scan)`` equals ``scan_metrics(v, scan)["chamfer"]`` for the same n and seed."""
+    from v2c.bench import metrics as M  # metrics imports this module
+
+    cfg = M.MetricConfig(n_points=n, seed=seed)
     size = part_size(scan)
     G = gt_points(scan, n, seed)
-    V, T = _all_mesh(vbrep)
-    if len(T) == 0 or len(G) == 0:
-        return float("inf")
-    R = sample_surface(V, T, n if not visible_only else 2 * n, rng)
-    if visible_only:
-        R = R[camera_visible(R, vbrep, rng, tol=0.005 * size)][:n]
-        if len(R) == 0:
-            return float("inf")
-    d_rg = cKDTree(G).query(R)[0]
-    d_gr = cKDTree(R).query(G)[0]
-    return float(0.5 * (d_rg.mean() + d_gr.mean()) / size)
+    R = M.reconstruction_points(vbrep, n, np.random.default_rng(seed), visible_only=visible_only,
+                                eps=cfg.visibility_eps_rel * size, max_rounds=cfg.max_draw_rounds)
+    return M.chamfer_distance(R, G, size)
 
 
 def face_to_gt(vbrep: VBRep, scan: Any) -> dict[int, int]:

@@ -20,6 +20,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, depth_first_order
 
+from v2c.polyline import rdp_indices
+
 
 @dataclass
 class GraphEdge:
@@ -56,22 +58,7 @@ def douglas_peucker(points: np.ndarray, tol: float) -> np.ndarray:
             return pts[:1].copy()
         a, b = douglas_peucker(pts[: k + 1], tol), douglas_peucker(pts[k:], tol)
         return np.concatenate([a, b[1:]])
-    keep = np.zeros(len(pts), bool)
-    keep[0] = keep[-1] = True
-    stack = [(0, len(pts) - 1)]
-    while stack:  # loop over segments; each step is vectorised over the points between them
-        i, j = stack.pop()
-        if j <= i + 1:
-            continue
-        seg = pts[j] - pts[i]
-        rel = pts[i + 1 : j] - pts[i]
-        n = float(np.hypot(*seg))
-        d = np.abs(seg[0] * rel[:, 1] - seg[1] * rel[:, 0]) / n if n > 0 else np.linalg.norm(rel, axis=1)
-        k = int(np.argmax(d))
-        if d[k] > tol:
-            keep[i + 1 + k] = True
-            stack += [(i, i + 1 + k), (i + 1 + k, j)]
-    return pts[keep]
+    return pts[rdp_indices(pts, tol)]
 
 
 def _cracks(lab: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

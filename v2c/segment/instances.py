@@ -1,13 +1,21 @@
 """Per-pixel labels + face boundaries -> surface instances (the panoptic step of the learned segmenter).
 
-1. Core pixels: part pixels (label != 0) not on a predicted face boundary.
-2. Connected components (4-connected) of core pixels sharing one label, after eroding the core by
-   ``core_erode_px`` (breaks thin bridges through gaps in the predicted boundary).
-3. Components under ``min_area_px`` are dissolved; every remaining part pixel (boundary band, dissolved bits) goes
-   to the nearest kept component within ``max_fill_px``; what is still left forms instances of its own (per label,
+0. Boundary evidence: the predicted boundary probability, raised (pixel-wise maximum) by optional extra evidence
+   from the scan (``feature_evidence``: depth jumps and normal creases, from the network's input features).
+1. Core pixels: part pixels (label != 0) with evidence <= ``boundary_threshold``; seed pixels: part pixels with
+   evidence < ``seed_threshold`` (a stricter cut, so that the half-open gaps of a leaky predicted boundary do
+   not connect two faces).
+2. Markers: connected components (4-connected) of seed pixels sharing one label (a change of arg-max label always
+   separates markers). With ``seed_split_px`` > 0 the seeds are eroded by that much first (conditional erosion:
+   components that would vanish are kept whole), which cuts the necks left by gaps in the predicted boundary.
+3. Markers under ``min_area_px`` are dissolved; the other part pixels are flooded from the markers in order of
+   evidence (``flood_levels`` thresholds; within a level each pixel joins the nearest marker of its connected
+   piece), so a region grows across low evidence first and two markers meet on the boundary ridge; what is left
+   joins the nearest instance within ``max_fill_px``; what is still left forms instances of its own (per label,
    4-connected, at least ``min_area_px``).
-4. Neighbouring instances whose contact is mostly open (core pixels on both sides, i.e. no predicted boundary
-   between them) were split by label noise only: they are merged.
+4. Neighbouring instances whose contact is mostly open (core pixels on both sides, i.e. no boundary evidence
+   between them) were split by label noise or by a neck cut only: they are merged. Two faces separated by a
+   partial boundary have a contact that is mostly closed, so they stay apart.
 5. Each instance's label is the arg-max of its mean class probability (background excluded), its score that mean
    probability; without probabilities, the majority label and its share.
 Pixel units throughout.
@@ -29,10 +37,16 @@ from v2c.segment.types import Segmentation
 class InstanceConfig:
     boundary_threshold: float = 0.5  # boundary probability above which a pixel is on a face boundary
     core_erode_px: int = 0  # core pixels are eroded by this much before the components are taken (pixels)
-    min_area_px: int = 24  # components smaller than this are dissolved into their neighbours (pixels)
+    min_area_px: int = 10  # markers smaller than this are dissolved into their neighbours (pixels)
     max_fill_px: float = 6.0  # farthest a leftover part pixel is attached to an instance (pixels)
     merge_open_frac: float = 0.5  # merge two instances when this share of their contact is open (no boundary)
     merge_min_contact_px: int = 3  # ... and their contact is at least this long (pixel pairs)
+    seed_threshold: float = 0.5  # seed (marker) pixels have boundary evidence below this (probability)
+    seed_split_px: int = 0  # conditional erosion of the seeds before the markers are taken (pixels)
+    flood_levels: tuple[float, ...] = (0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98, 1.01)  # evidence thresholds of the
+    # flooding from the markers, increasing (empty = the nearest marker only, as before)
+    depth_edge_gain: float = 0.0  # extra evidence = depth-edge feature (relative jump x 25) times this
+    normal_gain: float = 0.0  # extra evidence = (1 - cos of the normal change over 2 px) times this
 
 
 def _components_per_label(labels: np.ndarray, core: np.ndarray) -> np.ndarray:
@@ -119,6 +133,58 @@ def _merge_open(inst: np.ndarray, core: np.ndarray, cfg: InstanceConfig) -> np.n
     return roots[inst].astype(np.int32)
 
 
+def feature_evidence(feat: np.ndarray, cfg: InstanceConfig) -> np.ndarray | None:
+    """(H, W) float32 boundary evidence in [0, 1] from the network input features (``data.compute_features``):
+    depth-edge channel x ``depth_edge_gain`` and normal crease x ``normal_gain`` (pixel-wise maximum); None when
+    both gains are 0."""
+    if cfg.depth_edge_gain <= 0 and cfg.normal_gain <= 0:
+        return None
+    ev = np.zeros(feat.shape[1:], np.float32)
+    if cfg.depth_edge_gain > 0:
+        ev = np.maximum(ev, np.asarray(feat[7], np.float32) * cfg.depth_edge_gain)
+    if cfg.normal_gain > 0:
+        n = np.asarray(feat[3:6], np.float32)
+        crease = np.zeros_like(ev)
+        # 1 - cos of the angle between the normals one pixel either side, along rows and columns
+        crease[:, 1:-1] = 1.0 - (n[:, :, :-2] * n[:, :, 2:]).sum(axis=0)
+        crease[1:-1, :] = np.maximum(crease[1:-1, :], 1.0 - (n[:, :-2, :] * n[:, 2:, :]).sum(axis=0))
+        crease[np.asarray(feat[8]) > 0.5] = 0.0  # no depth: no normal
+        ev = np.maximum(ev, crease * cfg.normal_gain)
+    return np.clip(ev, 0.0, 1.0)
+
+
+def _markers(labels: np.ndarray, seeds: np.ndarray, split_px: int) -> np.ndarray:
+    """Per-label 4-connected components of ``seeds``; with ``split_px`` > 0, of the seeds eroded by that much,
+    plus every component that the erosion removes entirely (so small faces keep their marker)."""
+    whole = _components_per_label(labels, seeds)
+    if split_px <= 0:
+        return whole
+    er = cv2.erode(seeds.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=split_px) > 0
+    inst = _components_per_label(labels, er)
+    covered = np.zeros(int(whole.max()) + 1, bool)
+    covered[whole[er]] = True
+    lost = (whole > 0) & ~covered[whole]
+    if lost.any():
+        inst = np.where(lost, whole + inst.max(), inst)
+    return inst.astype(np.int32)
+
+
+def _flood(inst: np.ndarray, part: np.ndarray, ev: np.ndarray, levels: tuple[float, ...]) -> np.ndarray:
+    """Grow the instances over part pixels in order of evidence: for each level, every unassigned part pixel with
+    evidence below it joins the nearest instance pixel of its connected piece of (assigned | allowed) pixels."""
+    out = inst.copy()
+    for t in levels:
+        allowed = part & ((out > 0) | (ev < t))
+        hole = allowed & (out == 0)
+        if not hole.any() or not (out > 0).any():
+            continue
+        _, cc = cv2.connectedComponents(allowed.astype(np.uint8), connectivity=4)
+        _, (iv, iu) = ndimage.distance_transform_edt(out == 0, return_indices=True)
+        take = hole & (cc == cc[iv, iu])
+        out[take] = out[iv[take], iu[take]]
+    return out
+
+
 def label_instances(inst: np.ndarray, labels: np.ndarray, probs: np.ndarray | None
                     ) -> tuple[np.ndarray, np.ndarray]:
     """(labels (N+1,) uint8, scores (N+1,) float32) of instances 1..N (index 0 = background: label 0, score 0).
@@ -151,33 +217,46 @@ def label_instances(inst: np.ndarray, labels: np.ndarray, probs: np.ndarray | No
     return lab.astype(np.uint8), score.astype(np.float32)
 
 
+def _instances(labels: np.ndarray, part: np.ndarray, ev: np.ndarray, cfg: InstanceConfig) -> np.ndarray:
+    """Steps 1-4 of the module docstring: (H, W) int32 instance ids (not yet renumbered)."""
+    core = part & (ev <= cfg.boundary_threshold)
+    seeds = core & (ev < cfg.seed_threshold) if cfg.seed_threshold < cfg.boundary_threshold else core
+    if cfg.core_erode_px > 0:  # break thin bridges through gaps of the predicted boundary
+        seeds = cv2.erode(seeds.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=cfg.core_erode_px) > 0
+    inst = _markers(labels, seeds, cfg.seed_split_px)
+    inst = _drop_small(inst, cfg.min_area_px)
+    if cfg.flood_levels:
+        inst = _flood(inst, part, ev, cfg.flood_levels)
+    inst = _fill(inst, part, cfg.max_fill_px)
+    # part pixels still unassigned (e.g. a face wholly inside a thick predicted boundary) form their own instances
+    left = _drop_small(_components_per_label(labels, part & (inst == 0)), cfg.min_area_px)
+    inst = np.where(left > 0, left + inst.max(), inst).astype(np.int32)
+    return _merge_open(inst, core, cfg)
+
+
 def extract_instances(labels: np.ndarray, boundary: np.ndarray, region: np.ndarray | None = None,
                       probs: np.ndarray | None = None, cfg: InstanceConfig = InstanceConfig(),
-                      method: str = "learned") -> Segmentation:
+                      method: str = "learned", evidence: np.ndarray | None = None) -> Segmentation:
     """Instances from a per-pixel label map and a face-boundary map.
 
     labels: (H, W) int 18-class labels (0 = background; 255 treated as background). boundary: (H, W) bool, or
     float probabilities (thresholded at ``boundary_threshold``). region: optional (H, W) bool, pixels allowed to
     be part (mask/ROI). probs: optional (18, H, W) class probabilities for the instance labels and scores.
+    evidence: optional (H, W) extra boundary evidence in [0, 1] (``feature_evidence``), combined by maximum.
     """
     labels = np.asarray(labels)
     bnd = np.asarray(boundary)
-    if bnd.dtype != bool:
-        bnd = bnd > cfg.boundary_threshold
+    ev = bnd.astype(np.float32)  # a bool map is evidence 0 / 1
+    if evidence is not None:
+        ev = np.maximum(ev, evidence)
     part = (labels != BACKGROUND) & (labels != IGNORE)
     if region is not None:
         part &= region
-    core = part & ~bnd
-    seeds = core
-    if cfg.core_erode_px > 0:  # break thin bridges through gaps of the predicted boundary
-        seeds = cv2.erode(core.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=cfg.core_erode_px) > 0
-    inst = _components_per_label(labels, seeds)
-    inst = _drop_small(inst, cfg.min_area_px)
-    inst = _fill(inst, part, cfg.max_fill_px)
-    # part pixels still unassigned (e.g. a face wholly inside a thick predicted boundary) form their own instances
-    left = _drop_small(_components_per_label(labels, part & (inst == 0)), cfg.min_area_px)
-    inst = np.where(left > 0, left + inst.max(), inst).astype(np.int32)
-    inst = _merge_open(inst, core, cfg)
+    inst = np.zeros(labels.shape, np.int32)
+    rows, cols = np.nonzero(part.any(axis=1))[0], np.nonzero(part.any(axis=0))[0]
+    if len(rows):  # work on the part's bounding box (same result, less image to flood)
+        box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+        inst[box] = _instances(labels[box], part[box], ev[box], cfg)
     inst = _relabel_raster(inst)
     lab, score = label_instances(inst, labels, probs)
     return Segmentation(instances=inst, labels=lab, scores=score, method=method)

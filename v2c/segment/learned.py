@@ -15,7 +15,7 @@ import torch
 
 from v2c.scan import Scan
 from v2c.segment.data import FeatureConfig, scan_features
-from v2c.segment.instances import InstanceConfig, extract_instances
+from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
 from v2c.segment.net import UNet, bf16_supported, load_weights
 from v2c.segment.types import Segmentation
 
@@ -42,9 +42,16 @@ def _model(path: str) -> UNet:
     return model.to(memory_format=torch.channels_last)
 
 
-@torch.no_grad()
 def predict(scan: Scan, cfg: LearnedConfig = LearnedConfig()) -> tuple[np.ndarray, np.ndarray]:
     """(class probabilities (18, H, W) float32, boundary probability (H, W) float32) of a scan."""
+    probs, bnd, _ = predict_with_features(scan, cfg)
+    return probs, bnd
+
+
+@torch.no_grad()
+def predict_with_features(scan: Scan, cfg: LearnedConfig = LearnedConfig()
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``predict`` plus the network's input features (9, H, W) float32 (``data.compute_features``)."""
     path = Path(cfg.weights or DEFAULT_WEIGHTS)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: segmentation weights not found (train them with `v2c train`)")
@@ -55,7 +62,7 @@ def predict(scan: Scan, cfg: LearnedConfig = LearnedConfig()) -> tuple[np.ndarra
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
         lab, bnd = model(x)
     probs = torch.softmax(lab[0].float(), dim=0).numpy()
-    return probs, torch.sigmoid(bnd[0, 0].float()).numpy()
+    return probs, torch.sigmoid(bnd[0, 0].float()).numpy(), feat
 
 
 def segment_learned(scan: Scan, weights: str | Path | None = None, config: LearnedConfig | None = None
@@ -67,12 +74,15 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
     cfg = config or LearnedConfig()
     if weights is not None:
         cfg = LearnedConfig(weights=Path(weights), bf16=cfg.bf16, features=cfg.features, instances=cfg.instances)
-    probs, bnd = predict(scan, cfg)
-    return instances_from_prediction(scan, probs, bnd, cfg.instances)
+    probs, bnd, feat = predict_with_features(scan, cfg)
+    return instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat)
 
 
-def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig) -> Segmentation:
-    """Instances of a scan from the network's class probabilities (18, H, W) and boundary probability (H, W)."""
+def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig,
+                              feat: np.ndarray | None = None) -> Segmentation:
+    """Instances of a scan from the network's class probabilities (18, H, W) and boundary probability (H, W).
+
+    feat: the network input features (9, H, W), for the optional depth / normal boundary evidence of ``cfg``."""
     labels = probs.argmax(axis=0).astype(np.uint8)
     region = None
     if scan.mask is not None or scan.roi is not None:
@@ -82,4 +92,5 @@ def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cf
             # with a part mask, a masked pixel is part even where the network says background
             fg = probs[1:].argmax(axis=0).astype(np.uint8) + 1
             labels = np.where(region, fg, 0).astype(np.uint8)
-    return extract_instances(labels, bnd, region=region, probs=probs, cfg=cfg, method="learned")
+    evidence = feature_evidence(feat, cfg) if feat is not None else None
+    return extract_instances(labels, bnd, region=region, probs=probs, cfg=cfg, method="learned", evidence=evidence)

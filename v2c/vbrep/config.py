@@ -82,6 +82,9 @@ class VBRepConfig:
     # --- meshes
     mesh_stride_px: int = 2  # pixels: spacing of the back-projected pixel grid of each face mesh
     mesh_max_edge: float = 0.2  # scale units: triangles with a longer side (jumps between crossings) are dropped
+    mesh_surface_tol: float = 0.05  # scale units: a mesh ray's closest approach to a sheet it misses is moved onto
+    #                                 the surface when within this of it, else dropped (as are vertices outside the
+    #                                 depth window, e.g. at the camera centre); d_int's value
 
     # --- confidence (docs/vbrep.md)
     conf_residual: float = 0.02  # scale units: fit residual at which the residual factor is exp(-1)

@@ -563,7 +563,7 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
         fg = ctx.faces[inst]
         region = ctx.instances == inst
         mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px,
-                           cfg.mesh_max_edge * scale)
+                           cfg.mesh_max_edge * scale, cfg.mesh_surface_tol * scale)
         ch = ctx.sheets[inst]
         vfaces.append(VFace(fid[inst], inst, fg.prim.to_dict(), fg.axis_label, loops.get(fid[inst], []), mv, mt,
                             round(face_confidence(fg.residual, ch.errors, ch.sheet, scale, cfg), 4)))

@@ -7,6 +7,13 @@ surface sheet by ray-surface intersection (exact on the surface, covering exactl
 face), and the grid is triangulated: two triangles per grid square whose four corners are present, one where three
 are. Triangles with a side longer than ``max_edge`` metres (a jump between crossings where the sheet is absent) are
 dropped. Triangles are wound to face the camera.
+
+A grid point whose ray yields no usable point is left out with its triangles: a depth outside ``window`` (at or
+behind the camera centre, e.g. a plane seen edge-on through the camera centre gives z = 0 for every ray) or not
+finite, or a point farther than ``surface_tol`` metres from the surface (the closest-approach fallback of a ray
+that misses the curved sheet by more than that). Closest-approach points within ``surface_tol`` (rays just beside
+a contour, or where the fitted surface does not quite cover the face's pixels) are moved onto the surface (its
+closest point). So every vertex lies on its surface (within 1e-7 m) and in front of the camera.
 """
 
 from __future__ import annotations
@@ -15,14 +22,17 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from v2c.primitives.base import Primitive
-from v2c.vbrep.raycast import intersect, pixel_rays, sheet_depth
+from v2c.vbrep.raycast import as_primitive, intersect, pixel_rays, sheet_depth
 
 
 def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray, K: np.ndarray,
-              window: tuple[float, float], stride: int = 2, max_edge: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+              window: tuple[float, float], stride: int = 2, max_edge: float = np.inf,
+              surface_tol: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
     """Mesh of one face. region: (H, W) bool pixels of the face; depth: (H, W) observed depth (metres, 0 = none)
-    used to pick the crossing where the sheet is absent. Returns vertices (n, 3) camera-frame metres and triangles
-    (m, 3) int64."""
+    used to pick the crossing where the sheet is absent; window: (near, far) depths (metres) a vertex may have;
+    surface_tol: metres a ray's closest approach may lie off the surface to be moved onto it (farther: dropped).
+    Returns vertices (n, 3) camera-frame metres and triangles (m, 3) int64; every vertex has
+    window[0] <= z <= window[1] and lies on the surface."""
     vs, us = np.nonzero(region)
     if len(us) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
@@ -63,6 +73,20 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
     rays = pixel_rays(uv, K)
     z = sheet_depth(intersect(prim, rays, window), sheet, np.where(prior > 0, prior, np.nan))
     verts = rays * z[:, None]
+    good = np.isfinite(z) & (z >= max(window[0], 1e-9)) & (z <= window[1])
+    if good.any():  # closest-approach points of rays missing the sheet: onto the surface, or dropped
+        p = as_primitive(prim)
+        gi = np.flatnonzero(good)
+        off = np.abs(p.signed_distance(verts[gi]))
+        good[gi[off > surface_tol]] = False
+        snap = gi[(off <= surface_tol) & (off > 1e-9)]
+        if len(snap):
+            for _ in range(3):  # closest_point is exact for the quadrics, a good step for the torus
+                verts[snap] = p.closest_point(verts[snap])
+            good[snap] &= (np.abs(p.signed_distance(verts[snap])) <= 1e-7) & (verts[snap, 2] >= window[0]) \
+                & (verts[snap, 2] <= window[1])
+    if not good.all():
+        idx[keep] = np.where(good, idx[keep], -1)
     a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
     c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
     tris = []
@@ -73,7 +97,7 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
         tris.append(np.stack([t0, t1, t2], 1)[three])
     tri = np.concatenate(tris).astype(np.int64)
     if len(tri) == 0:
-        return verts, tri
+        return np.zeros((0, 3)), tri
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
     longest = np.max(np.stack([np.linalg.norm(p1 - p0, axis=1), np.linalg.norm(p2 - p1, axis=1),
                                np.linalg.norm(p0 - p2, axis=1)]), 0)

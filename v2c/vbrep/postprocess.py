@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from v2c.polyline import rdp_indices
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.model import EdgeType, VertexKind
 from v2c.vbrep.raycast import project
@@ -59,29 +60,6 @@ def image_length(pts: np.ndarray, K: np.ndarray) -> float:
     if len(pts) < 2:
         return 0.0
     return float(np.sum(np.linalg.norm(np.diff(project(pts, K), axis=0), axis=1)))
-
-
-def rdp_indices(pts: np.ndarray, tol: float) -> np.ndarray:
-    """Indices kept by Ramer-Douglas-Peucker on (K, 2) points (both ends kept)."""
-    n = len(pts)
-    if n <= 2:
-        return np.arange(n)
-    keep = np.zeros(n, bool)
-    keep[0] = keep[-1] = True
-    stack = [(0, n - 1)]
-    while stack:
-        i, j = stack.pop()
-        if j <= i + 1:
-            continue
-        seg = pts[j] - pts[i]
-        rel = pts[i + 1:j] - pts[i]
-        ln = float(np.hypot(*seg))
-        d = np.abs(seg[0] * rel[:, 1] - seg[1] * rel[:, 0]) / ln if ln > 0 else np.linalg.norm(rel, axis=1)
-        k = int(np.argmax(d))
-        if d[k] > tol:
-            keep[i + 1 + k] = True
-            stack += [(i, i + 1 + k), (i + 1 + k, j)]
-    return np.flatnonzero(keep)
 
 
 def _labelling(protos: list[ProtoEdge]) -> list[ProtoEdge]:

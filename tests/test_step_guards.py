@@ -1,0 +1,82 @@
+"""exporters guards: degenerate edges, intersection edges without an intersection curve."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from OCP.BRepAdaptor import BRepAdaptor_Curve
+from OCP.BRepCheck import BRepCheck_Analyzer
+
+from exporters import step
+from exporters.brep import BrepConfig, build_brep, check_faces
+from exporters.brep_edges import EdgeBuilder
+from exporters.frames import FrameMap
+from exporters.occ_surfaces import distance_to_surface
+from v2c.vbrep.examples import box_corner
+from v2c.vbrep.model import EdgeType, VEdge, VertexKind, VVertex
+
+CAMERA = FrameMap(np.eye(3), np.zeros(3))  # camera frame, millimetres
+
+
+def _closed_point_edge():
+    """Box corner with a closed edge shrunk to a point inside face 0, as an inner loop of that face."""
+    vb = box_corner()
+    p = np.mean([vb.vertices[i].position for i in (0, 1, 2, 4)], axis=0)
+    vb.vertices.append(VVertex(7, VertexKind.OTHER, p, np.array([300.0, 200.0])))
+    vb.edges.append(VEdge(9, EdgeType.SILHOUETTE, 0.9, (0,), np.repeat(p[None], 3, 0), 7, 7, None))
+    vb.faces[0].loops.append([(9, False)])
+    return vb
+
+
+def _zero_length_edge():
+    """Box corner with vertex 4 split in two at the same point, joined by a zero-length edge in face 0's loop."""
+    vb = box_corner()
+    p = vb.vertices[4].position.copy()
+    vb.vertices.append(VVertex(7, VertexKind.OTHER, p, vb.vertices[4].pixel.copy()))
+    vb.edges.append(VEdge(9, EdgeType.SILHOUETTE, 0.9, (0,), np.stack([p, p]), 4, 7, None))
+    vb.edges[4].v0 = 7
+    vb.faces[0].loops = [[(0, False), (3, False), (9, False), (4, False), (1, True)]]
+    return vb
+
+
+def test_degenerate_edges_are_dropped_and_the_shape_stays_valid(tmp_path: Path) -> None:
+    # Before: the closed point edge failed its pcurve fit ("degenerate polyline"), became a free B-spline
+    # edge of zero length and the assembled shape failed BRepCheck; the zero-length edge failed
+    # BRepBuilderAPI_MakeEdge and face 0 fell back to its mesh outline.
+    for make in (_closed_point_edge, _zero_length_edge):
+        vb = make()
+        built = build_brep(vb, CAMERA)
+        assert 9 not in built.edges and 9 not in built.free_edges
+        assert built.fallback_faces == [] and built.skipped_faces == []
+        assert all(check_faces(built).values()) and BRepCheck_Analyzer(built.shape).IsValid()
+        assert built.face_edges[0] == {0, 1, 3, 4}
+        assert any("edge 9: degenerate" in w for w in built.warnings)
+        assert not any("pcurve fit failed" in w or "BRepCheck" in w for w in built.warnings)
+        report = step.write(vb, tmp_path / f"{make.__name__}.step", frame="camera")
+        assert report.fallback_faces == [] and report.free_edges == []
+        back = step.read_typed(tmp_path / f"{make.__name__}.step")
+        assert len(back.faces) == 3 and back.edge(9) == []
+
+
+def test_intersection_edge_without_curve_fitted_on_the_nearer_face() -> None:
+    # Face 0's plane moved 6 mm along its normal: edges 0 (faces 0, 1) and 1 (faces 0, 2) have no intersection
+    # branch near their polylines, which lie on faces 1 and 2. Before, each was fitted on its first face (0),
+    # leaving it 6 mm off the second face's surface without a word.
+    vb = box_corner()
+    prm = vb.faces[0].primitive["params"]
+    prm["origin"] = (np.asarray(prm["origin"]) + 0.006 * np.asarray(prm["normal"])).tolist()
+    eb = EdgeBuilder(vb, CAMERA, BrepConfig()).run()
+    assert eb.fit_face == {0: 1, 1: 2}
+    for eid, near in eb.fit_face.items():
+        c = BRepAdaptor_Curve(eb.edges[eid])
+        pts = np.array([c.Value(t).Coord() for t in np.linspace(c.FirstParameter(), c.LastParameter(), 17)])
+        assert distance_to_surface(eb.surfaces[near], pts).max() < 1e-6
+        other, off = eb.off_surface[eid]
+        assert other == 0 and 5.5 < off < 6.5
+        assert any(w.startswith(f"edge {eid}: fitted on face {near}, ") and "off face 0" in w for w in eb.warnings)
+
+
+def test_exact_intersections_need_no_guard() -> None:
+    eb = EdgeBuilder(box_corner(), CAMERA, BrepConfig()).run()
+    assert eb.fit_face == {} and eb.off_surface == {} and eb.degenerate == set() and eb.warnings == []

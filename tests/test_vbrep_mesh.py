@@ -1,0 +1,72 @@
+"""Face meshes (v2c.vbrep.mesh.face_mesh): every vertex on its surface and in front of the camera."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from v2c.primitives import from_dict
+from v2c.vbrep.extract import extract_vbrep
+from v2c.vbrep.mesh import face_mesh
+from v2c.vbrep.raycast import project
+from v2c.vbrep.scenes import box_scene, scene_inputs
+
+K = np.array([[600.0, 0, 160], [0, 600.0, 120], [0, 0, 1]])
+H, W = 240, 320
+WINDOW = (0.3, 1.5)  # metres: depth range of the scene
+
+
+def _region(u0: int, v0: int, u1: int, v1: int) -> np.ndarray:
+    r = np.zeros((H, W), bool)
+    r[v0:v1, u0:u1] = True
+    return r
+
+
+def test_plane_through_the_camera_centre_gives_no_vertex_at_the_camera():
+    # A plane seen edge-on through the camera centre (a fallback plane of a grazing face, scan_00021 of the
+    # sensor benchmark set): every ray meets it at z = 0. Before the fix the whole face mesh sat at the camera
+    # centre and, rendered, covered the image.
+    n = np.array([0.99992700, 0.0, 0.01208298])
+    plane = from_dict({"type": "plane", "params": {"origin": (0.78 * np.array([-n[2], 0, n[0]])).tolist(),
+                                                   "normal": n.tolist()}})
+    region = _region(150, 60, 170, 180)
+    verts, tris = face_mesh(plane, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02)
+    assert len(verts) == 0 or verts[:, 2].min() >= WINDOW[0]
+    assert len(tris) == 0 or tris.max() < len(verts)
+
+
+def test_rays_missing_a_cylinder_leave_no_vertex_off_the_surface():
+    # An upright cylinder (radius 5 cm at 0.8 m) and a region twice as wide as its image: the rays beside it
+    # miss it; their closest-approach fallback is off the surface (up to 5 cm here) and must not become mesh
+    # vertices: dropped beyond the tolerance, moved onto the surface within it.
+    cyl = from_dict({"type": "cylinder", "params": {"origin": [0.0, 0.0, 0.8], "axis": [0.0, 1.0, 0.0],
+                                                    "radius": 0.05}})
+    region = _region(80, 40, 240, 200)
+    tol = 0.005
+    verts, tris = face_mesh(cyl, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02, tol)
+    assert len(tris) > 100
+    assert np.abs(cyl.signed_distance(verts)).max() <= 1e-7
+    assert verts[:, 2].min() >= WINDOW[0]
+    # the mesh still spans the cylinder's image (its contour at u = 160 +- 600 * 0.05 / sqrt(0.8^2 - 0.05^2))
+    half = 600 * 0.05 / np.sqrt(0.8**2 - 0.05**2)
+    uv = project(verts, K)
+    assert uv[:, 0].min() < 160 - half + 2.5 and uv[:, 0].max() > 160 + half - 2.5
+    assert uv[:, 0].min() > 160 - half - 1.5 and uv[:, 0].max() < 160 + half + 1.5
+
+
+def test_plane_mesh_is_unchanged_by_the_guards():
+    plane = from_dict({"type": "plane", "params": {"origin": [0.0, 0.0, 0.8], "normal": [0.0, 0.3, -1.0]}})
+    region = _region(100, 80, 200, 160)
+    args = (plane, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02)
+    v0, t0 = face_mesh(*args)
+    v1, t1 = face_mesh(*args, 1e-4)
+    np.testing.assert_array_equal(t0, t1)
+    np.testing.assert_allclose(v0, v1)
+
+
+def test_extracted_meshes_lie_in_front_of_the_camera_on_their_surfaces():
+    inp = scene_inputs(box_scene())
+    v = extract_vbrep(inp.scan, inp.seg, inp.fit)
+    for f in v.faces:
+        mv = np.asarray(f.mesh_vertices, float)
+        assert len(mv) and mv[:, 2].min() > 0.1
+        assert np.abs(from_dict(f.primitive).signed_distance(mv)).max() <= 1e-7
