@@ -14,13 +14,14 @@ from v2c.segment.learned import DEFAULT_WEIGHTS, LearnedConfig, predict, segment
 from v2c.segment.net import UNet, load_weights
 from v2c.synth.dataset import SynthConfig, generate_dataset
 
-# Measured on these 16 scans (seed 4242, 256x256 `sensor`) with the shipped weights (2026-11-21, bf16 CPU):
-# mean IoU 0.373 (18 classes, per-pixel labels of the instances, pooled), face recall 0.457 (IoU 0.5, gt faces
-# >= 50 px), precision 0.619, type accuracy 0.944, axis accuracy 0.928. The thresholds are the measurement minus a
-# margin for platform differences (fp32 vs bf16 kernels, other CPUs).
-MIOU_MIN = 0.30
+# Measured on these 16 scans (seed 4242, 256x256 `sensor`) with the shipped weights (stage 3) and the flooding
+# instance step (2026-11-21, bf16 CPU): mean IoU 0.428 (18 classes, per-pixel labels of the instances, pooled), face
+# recall 0.453 (IoU 0.5, gt faces >= 50 px), precision 0.545, type accuracy 0.967, axis accuracy 0.944. (Stage-2
+# weights with the old nearest-core instance step: 0.373 / 0.457 / 0.619 / 0.944 / 0.928.) The thresholds are the
+# measurement minus a margin for platform differences (fp32 vs bf16 kernels, other CPUs).
+MIOU_MIN = 0.35
 RECALL_MIN = 0.35
-TYPE_ACC_MIN = 0.85
+TYPE_ACC_MIN = 0.87
 
 
 @pytest.fixture(scope="module")

@@ -1,24 +1,26 @@
 """Per-pixel labels + face boundaries -> surface instances (the panoptic step of the learned segmenter).
 
 0. Boundary evidence: the predicted boundary probability, raised (pixel-wise maximum) by optional extra evidence
-   from the scan (``feature_evidence``: depth jumps and normal creases, from the network's input features).
-1. Core pixels: part pixels (label != 0) with evidence <= ``boundary_threshold``; seed pixels: part pixels with
-   evidence < ``seed_threshold`` (a stricter cut, so that the half-open gaps of a leaky predicted boundary do
-   not connect two faces).
+   from the scan (``feature_evidence``: depth jumps and normal creases from the network's input features; off by
+   default, they did not help on the tuning set).
+1. Core pixels: part pixels (label != 0) with evidence <= ``boundary_threshold``; seed pixels: core pixels with
+   evidence < ``seed_threshold`` (default: the same cut).
 2. Markers: connected components (4-connected) of seed pixels sharing one label (a change of arg-max label always
    separates markers). With ``seed_split_px`` > 0 the seeds are eroded by that much first (conditional erosion:
-   components that would vanish are kept whole), which cuts the necks left by gaps in the predicted boundary.
+   components that would vanish are kept whole), which cuts necks through gaps of the predicted boundary (off by
+   default: it fragments faces more than it separates them).
 3. Markers under ``min_area_px`` are dissolved; the other part pixels are flooded from the markers in order of
    evidence (``flood_levels`` thresholds; within a level each pixel joins the nearest marker of its connected
-   piece), so a region grows across low evidence first and two markers meet on the boundary ridge; what is left
-   joins the nearest instance within ``max_fill_px``; what is still left forms instances of its own (per label,
+   piece), so a region grows across low evidence first and two markers meet on the ridge of the predicted boundary
+   band, not half-way between their cores (which handed thin faces to their neighbours); what is left joins the
+   nearest instance within ``max_fill_px``; what is still left forms instances of its own (per label,
    4-connected, at least ``min_area_px``).
 4. Neighbouring instances whose contact is mostly open (core pixels on both sides, i.e. no boundary evidence
-   between them) were split by label noise or by a neck cut only: they are merged. Two faces separated by a
-   partial boundary have a contact that is mostly closed, so they stay apart.
+   between them) were split by label noise only: they are merged. Two faces separated by a partial boundary have
+   a contact that is mostly closed, so they stay apart.
 5. Each instance's label is the arg-max of its mean class probability (background excluded), its score that mean
    probability; without probabilities, the majority label and its share.
-Pixel units throughout.
+Pixel units throughout. Everything runs on the part's bounding box.
 """
 
 from __future__ import annotations
