@@ -19,7 +19,7 @@ test: setup
 	$(PY) -m pytest -n $(JOBS) -q tests
 
 # The main job on a bundled sample: SCAN/reconstruction.step (+ .vbrep.json and the .png figure next to it).
-DEMO_SCAN ?= samples/bracket_planes_cylinders
+DEMO_SCAN ?= samples/turned_unaligned
 demo: setup
 	$(V2C) to-step $(DEMO_SCAN)/
 	@echo "open $(DEMO_SCAN)/reconstruction.step in FreeCAD; the figure is $(DEMO_SCAN)/reconstruction.png"
