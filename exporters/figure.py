@@ -28,6 +28,9 @@ INT_VIS_COLOR = (230, 0, 230)
 BACKGROUND = (255, 255, 255)
 
 
+#: Depth (metres, along the viewing axis) under which a point counts as at or behind the viewer in a drawing.
+MIN_VIEW_DEPTH_M = 1e-6
+
 def palette(n: int, seed: int = 3) -> np.ndarray:
     """(n, 3) uint8 distinct pastel colours (fixed for a seed)."""
     rng = np.random.default_rng(seed)
@@ -74,7 +77,9 @@ def render_vbrep(vbrep: VBRep, size: tuple[int, int] = (480, 480), R: np.ndarray
     def proj(x: np.ndarray) -> np.ndarray:
         y = np.asarray(x, float).reshape(-1, 3) @ R.T + t
         p = y @ K.T
-        return p[:, :2] / np.maximum(p[:, 2:3], 1e-9)
+        z = p[:, 2:3]
+        # Points at or behind the viewer's plane have no image position: nan, left out of fitting and drawing.
+        return np.where(z > MIN_VIEW_DEPTH_M, p[:, :2] / np.where(z > MIN_VIEW_DEPTH_M, z, 1.0), np.nan)
 
     all_pts = [f.mesh_vertices for f in vbrep.faces if len(f.mesh_vertices)]
     all_pts += [e.polyline for e in vbrep.edges]
@@ -82,7 +87,8 @@ def render_vbrep(vbrep: VBRep, size: tuple[int, int] = (480, 480), R: np.ndarray
     if not all_pts:
         return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
     if crop is None:
-        s, off = _fit_transform(proj(np.concatenate(all_pts)), (w, h))
+        px = proj(np.concatenate(all_pts))
+        s, off = _fit_transform(px[np.isfinite(px).all(axis=1)], (w, h))
     else:
         s, off = crop[0] * ss, crop[1] * ss
 
@@ -108,22 +114,30 @@ def render_vbrep(vbrep: VBRep, size: tuple[int, int] = (480, 480), R: np.ndarray
     if tri_pts:
         P = np.concatenate(tri_pts)
         C = np.concatenate(tri_col).clip(0, 255).astype(np.uint8)
-        order = np.argsort(-np.concatenate(tri_z))
-        Pi = np.rint(P * 4).astype(np.int32)  # 2 fractional bits
+        # A point at or behind the viewer's plane projects to inf/nan: such triangles are not drawn.
+        ok = np.isfinite(P).all(axis=(1, 2))
+        order = [k for k in np.argsort(-np.concatenate(tri_z)) if ok[k]]
+        Pi = np.rint(np.where(np.isfinite(P), P, 0.0) * 4).astype(np.int32)  # 2 fractional bits
         for k in order:
             cv2.fillConvexPoly(img, Pi[k], C[k].tolist(), lineType=cv2.LINE_8, shift=2)
     thick = max(1, 2 * ss)
     for etype in (EdgeType.OCCLUDED, EdgeType.SILHOUETTE, EdgeType.VISIBILITY, EdgeType.INTERSECTION):
         for e in vbrep.edges:
             if EdgeType(e.type) is etype and len(e.polyline) >= 2:
-                q = np.rint(to_px(e.polyline) * 4).astype(np.int32)
+                q = to_px(e.polyline)
+                q = np.rint(q[np.isfinite(q).all(axis=1)] * 4).astype(np.int32)
+                if len(q) < 2:
+                    continue
                 cv2.polylines(img, [q], False, EDGE_COLORS[etype], thick, cv2.LINE_AA, shift=2)
     r = 4 * ss
     for v in vbrep.vertices:
         kind = VertexKind(v.kind)
         if kind not in (VertexKind.CORNER, VertexKind.INTERSECTION_VISIBILITY):
             continue
-        c = tuple(int(x) for x in np.rint(to_px(v.position[None])[0]))
+        c = to_px(v.position[None])[0]
+        if not np.isfinite(c).all():
+            continue
+        c = tuple(int(x) for x in np.rint(c))
         col = CORNER_COLOR if kind is VertexKind.CORNER else INT_VIS_COLOR
         cv2.circle(img, c, r, (40, 40, 40), -1, cv2.LINE_AA)
         cv2.circle(img, c, r - ss, col, -1, cv2.LINE_AA)
