@@ -3,10 +3,9 @@ mesh boundaries, connected groups."""
 
 from __future__ import annotations
 
-from collections import defaultdict
-
 import numpy as np
 
+from v2c.groups import groups_sharing_keys
 from v2c.polyline import rdp_indices as _rdp_indices
 
 
@@ -114,25 +113,9 @@ def mesh_boundary_loop(triangles: np.ndarray) -> np.ndarray | None:
 
 def connected_groups(face_edges: dict[int, set[int]]) -> list[list[int]]:
     """Groups of faces connected through shared edge ids (union-find), each sorted, in first-face order."""
-    parent = {f: f for f in face_edges}
-
-    def root(f: int) -> int:
-        while parent[f] != f:
-            parent[f] = parent[parent[f]]
-            f = parent[f]
-        return f
-
-    owner: dict[int, int] = {}
-    for f, es in face_edges.items():
-        for e in es:
-            if e in owner:
-                parent[root(f)] = root(owner[e])
-            else:
-                owner[e] = f
-    groups: dict[int, list[int]] = defaultdict(list)
-    for f in face_edges:
-        groups[root(f)].append(f)
-    return sorted((sorted(g) for g in groups.values()), key=lambda g: g[0])
+    faces = list(face_edges)
+    groups = groups_sharing_keys([face_edges[f] for f in faces])
+    return sorted((sorted(faces[k] for k in g) for g in groups), key=lambda g: g[0])
 
 
 def signed_area(uv: np.ndarray) -> float:

@@ -136,21 +136,26 @@ def _hyp_tori(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, extent
     for sgn in (1.0, -1.0):  # tube centre behind (convex) or in front of (concave) the surface
         for r in radii:
             q = p - sgn * r * nn
-            a, b = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
-            ab = np.cross(a, b)
-            den = 2 * np.sum(ab * ab, axis=1)
-            ok = den > 1e-18
-            num = np.cross(np.sum(a * a, 1)[:, None] * b - np.sum(b * b, 1)[:, None] * a, ab)
-            c = q[:, 0] + num / np.where(ok, den, 1.0)[:, None]
+            c, axis, ok = _circumcircles(q)
             big_r = np.linalg.norm(q[:, 0] - c, axis=1)
             ok &= (big_r < rmax) & (big_r > config.torus_min_ratio * r)
-            axis = unit(ab)
             # the normals must lie in the planes through the axis (a torus' normal lines cross its axis)
             rad = unit(q - c[:, None, :])
             off = np.abs(np.sum(nn * np.cross(axis[:, None, :], rad), axis=2)).max(axis=1)
             ok &= off < max_off
             out += [Torus(c[k], axis[k], big_r[k], r) for k in np.flatnonzero(ok)]
     return out
+
+
+def _circumcircles(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Circles through point triples (K, 3, 3): centres (K, 3), unit plane normals (K, 3), and a mask of the
+    non-degenerate (not collinear) triples; centres of degenerate triples are not meaningful."""
+    a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    ab = np.cross(a, b)
+    den = 2 * np.sum(ab * ab, axis=1)
+    ok = den > 1e-18
+    num = np.cross(np.sum(a * a, 1)[:, None] * b - np.sum(b * b, 1)[:, None] * a, ab)
+    return p[:, 0] + num / np.where(ok, den, 1.0)[:, None], unit(ab), ok
 
 
 def _circle_2d(p: np.ndarray) -> tuple[np.ndarray, float]:
@@ -184,14 +189,7 @@ def _hyp_torus_rings(x: np.ndarray, idx: np.ndarray, m: int, config: FitConfig) 
     through three sample points gives the axis line (its centre and normal), the first ``m`` points' (rho, h)
     cloud the tube's cross-section; plus one from the whole patch (best-fit plane normal as the axis, circle
     fitted in that plane)."""
-    p = x[idx]  # (K, 3, 3)
-    u, v = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    w = np.cross(u, v)
-    den = 2 * np.sum(w * w, axis=1)
-    ok = den > 1e-18
-    num = np.cross(np.sum(u * u, 1)[:, None] * v - np.sum(v * v, 1)[:, None] * u, w)
-    c = p[:, 0] + num / np.where(ok, den, 1.0)[:, None]
-    axes = unit(w)
+    c, axes, ok = _circumcircles(x[idx])
     y = x[:m]
     lines = [(c[k], axes[k]) for k in np.flatnonzero(ok)]
     if len(x) >= 6:

@@ -25,6 +25,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from v2c.groups import groups_sharing_keys
 from v2c.primitives import Plane, Sphere
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import KIND_INT, FaceGeom, classify_samples
@@ -434,23 +435,7 @@ def _face_groups(faces: list[tuple[int, ...]]) -> list[np.ndarray]:
     through other ends) are one vertex, so every face's boundary passes through one vertex there and its loops
     close. At an occlusion T-junction the near face's ends (its silhouette or visibility edges) and the far
     face's ends (its occluded edge and its other edges) share no face: two vertices, a near and a far copy."""
-    lab = list(range(len(faces)))
-
-    def find(i: int) -> int:
-        while lab[i] != i:
-            lab[i] = lab[lab[i]]
-            i = lab[i]
-        return i
-
-    first: dict[int, int] = {}
-    for i, fs in enumerate(faces):
-        for f in fs:
-            if f in first:
-                lab[find(i)] = find(first[f])
-            else:
-                first[f] = i
-    roots = np.array([find(i) for i in range(len(faces))])
-    return [np.flatnonzero(roots == r) for r in dict.fromkeys(roots.tolist())]
+    return groups_sharing_keys(faces)
 
 
 def _make_vertices(ctx: ExtractContext, protos: list[ProtoEdge], graph: Any) -> list[ProtoVertex]:
