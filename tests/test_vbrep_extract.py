@@ -149,3 +149,24 @@ def test_edges_and_vertices_are_consistent(box, cylinder, hole_and_boss):
             V, T = f.mesh_vertices, f.mesh_triangles
             n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
             assert np.all(np.einsum("ij,ij->i", n, V[T[:, 0]]) <= 0)
+
+
+def test_axis_cylinder_fallback_recovers_a_small_arc() -> None:
+    # a 40-degree arc of a 12 mm hole wall, 0.2 mm noise: the fallback for a labelled but unfitted cylinder keeps
+    # the type and gets the radius and axis line from the frame axis alone
+    from v2c.vbrep.extract import fit_axis_cylinder_points
+
+    rng = np.random.default_rng(0)
+    axis = np.array([0.0, -0.6, 0.8])
+    t1 = np.array([1.0, 0.0, 0.0])
+    t2 = np.cross(axis, t1)
+    ang = rng.uniform(0, np.deg2rad(40), 200)
+    h = rng.uniform(0, 0.01, 200)
+    centre = np.array([0.02, 0.01, 0.5])
+    X = centre + 0.012 * (np.cos(ang)[:, None] * t1 + np.sin(ang)[:, None] * t2) + h[:, None] * axis
+    X += rng.normal(0, 2e-4, X.shape)
+    cyl, rms = fit_axis_cylinder_points(X, axis)
+    assert abs(cyl.radius - 0.012) < 1e-3 and rms < 3e-4
+    off = (cyl.origin - centre) - ((cyl.origin - centre) @ axis) * axis  # axis-line offset
+    assert np.linalg.norm(off) < 1e-3
+    assert fit_axis_cylinder_points(X[:4], axis) is None

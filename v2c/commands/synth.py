@@ -51,13 +51,16 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
               help="PNG compression level (9 = smallest files, slower).")
 @click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write a PNG with color | depth | labels of the first (up to 4) scans.")
+@click.option("--print-share", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
+              help="Share of scans whose part carries a printed (packaging-like) texture.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
             families: tuple[str, ...] | None, jobs: int, start: int, png_compression: int, preview: Path | None,
-            quiet: bool) -> None:
+            print_share: float, quiet: bool) -> None:
     """Render N synthetic scans of random CAD parts into OUT/scan_XXXXX (color, depth, camera, mask, gt/)."""
     from v2c.synth.dataset import SynthConfig, generate_dataset
     from v2c.synth.parts import list_cad_files
+    from v2c.synth.scene import SceneConfig
 
     cad_files: tuple[str, ...] = ()
     if cad is not None:
@@ -70,7 +73,7 @@ def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad
     if "cad" in families and not cad_files:
         raise click.ClickException("family 'cad' needs --cad DIR")
     cfg = SynthConfig(width=size[0], height=size[1], noise=noise, families=families, cad_files=cad_files,
-                      png_compression=png_compression)
+                      png_compression=png_compression, scene=SceneConfig(print_share=print_share))
     folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start)
     if preview is not None:
         from v2c.synth.preview import write_preview

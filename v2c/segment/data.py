@@ -33,6 +33,7 @@ import numpy as np
 from v2c.scan import Scan, backproject, load_scan
 
 NUM_INPUTS = 9
+MIRROR_SIGN_CHANNEL = 4  # the "left" normal component: the only channel a horizontal mirror negates
 RGB_MEAN, RGB_STD = 0.5, 0.25
 
 
@@ -330,7 +331,8 @@ class CachedScans:
         bs[:ch, :cw] = b[v0:v0 + ch, u0:u0 + cw]
         if flip:
             xs = xs[:, :, ::-1].copy()
-            xs[4] = (256 - xs[4].astype(np.int16)).clip(0, 255).astype(np.uint8)  # q(-n) = 256 - q(n)
+            c = MIRROR_SIGN_CHANNEL  # q(-n) = 256 - q(n)
+            xs[c] = (256 - xs[c].astype(np.int16)).clip(0, 255).astype(np.uint8)
             ys = ys[:, ::-1].copy()
             bs = bs[:, ::-1].copy()
         return xs, ys, bs

@@ -1,12 +1,14 @@
 """The learned segmenter: U-Net label + boundary maps -> instances (``segment_learned``).
 
-Weights default to ``v2c/segment/weights/unet.pt`` (see its MODEL_CARD.md). Inference runs on the whole image at
-native resolution (the network is fully convolutional); bf16 autocast where the CPU supports it.
+Weights default to ``v2c/segment/weights/unet.pt`` (see its MODEL_CARD.md). Inference runs at native resolution
+(the network is fully convolutional) on the part's box (mask.png / ROI bounding box plus a context margin; the whole
+image when neither is given), averaged with its horizontal mirror (a label-safe flip, ``data.CachedScans.crop``);
+bf16 autocast where the CPU supports it. Outside the box the class is background and the boundary 0.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -14,9 +16,10 @@ import numpy as np
 import torch
 
 from v2c.scan import Scan
-from v2c.segment.data import FeatureConfig, scan_features
+from v2c.segment.data import MIRROR_SIGN_CHANNEL, FeatureConfig, scan_features
 from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
 from v2c.segment.net import UNet, bf16_supported, load_weights
+from v2c.segment.refine import RefineConfig, split_plane_outliers
 from v2c.segment.types import Segmentation
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -29,6 +32,10 @@ class LearnedConfig:
     bf16: bool | None = None  # None = where the CPU supports it
     features: FeatureConfig = field(default_factory=FeatureConfig)
     instances: InstanceConfig = field(default_factory=InstanceConfig)
+    refine: RefineConfig = field(default_factory=RefineConfig)  # the plane-outlier split (refine.py)
+    context_px: int = 32  # margin of image context around the mask / ROI box fed to the network (pixels);
+    # < 0 runs the whole image
+    mirror_tta: bool = True  # average the prediction with that of the mirrored input (2x network time)
 
 
 def weights_available(path: Path | None = None) -> bool:
@@ -57,12 +64,41 @@ def predict_with_features(scan: Scan, cfg: LearnedConfig = LearnedConfig()
         raise FileNotFoundError(f"{path}: segmentation weights not found (train them with `v2c train`)")
     model = _model(str(path))
     feat = scan_features(scan, cfg.features)
-    x = torch.from_numpy(feat[None]).contiguous(memory_format=torch.channels_last)
+    h, w = feat.shape[1:]
+    y0, y1, x0, x1 = _box(scan, cfg.context_px, (h, w))
+    x = torch.from_numpy(np.ascontiguousarray(feat[None, :, y0:y1, x0:x1]))
     bf16 = bf16_supported() if cfg.bf16 is None else cfg.bf16
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-        lab, bnd = model(x)
-    probs = torch.softmax(lab[0].float(), dim=0).numpy()
-    return probs, torch.sigmoid(bnd[0, 0].float()).numpy(), feat
+        lab, bnd = model(x.contiguous(memory_format=torch.channels_last))
+        prob = torch.softmax(lab[0].float(), dim=0)
+        edge = torch.sigmoid(bnd[0, 0].float())
+        if cfg.mirror_tta:
+            xm = torch.flip(x, dims=[3])
+            xm[:, MIRROR_SIGN_CHANNEL] = -xm[:, MIRROR_SIGN_CHANNEL]
+            lab_m, bnd_m = model(xm.contiguous(memory_format=torch.channels_last))
+            prob = 0.5 * (prob + torch.flip(torch.softmax(lab_m[0].float(), dim=0), dims=[2]))
+            edge = 0.5 * (edge + torch.flip(torch.sigmoid(bnd_m[0, 0].float()), dims=[1]))
+    probs = np.zeros((prob.shape[0], h, w), np.float32)
+    probs[0] = 1.0
+    probs[:, y0:y1, x0:x1] = prob.numpy()
+    boundary = np.zeros((h, w), np.float32)
+    boundary[y0:y1, x0:x1] = edge.numpy()
+    return probs, boundary, feat
+
+
+def _box(scan: Scan, context_px: int, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """(y0, y1, x0, x1) of the network's input window: the mask / ROI bounding box grown by context_px."""
+    h, w = shape
+    if context_px < 0 or (scan.mask is None and scan.roi is None):
+        return 0, h, 0, w
+    region = scan.roi_mask()
+    if scan.mask is not None:
+        region = region & scan.mask
+    ys, xs = np.nonzero(region)
+    if len(ys) == 0:
+        return 0, h, 0, w
+    return (max(int(ys.min()) - context_px, 0), min(int(ys.max()) + context_px + 1, h),
+            max(int(xs.min()) - context_px, 0), min(int(xs.max()) + context_px + 1, w))
 
 
 def segment_learned(scan: Scan, weights: str | Path | None = None, config: LearnedConfig | None = None
@@ -73,9 +109,10 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
     """
     cfg = config or LearnedConfig()
     if weights is not None:
-        cfg = LearnedConfig(weights=Path(weights), bf16=cfg.bf16, features=cfg.features, instances=cfg.instances)
+        cfg = replace(cfg, weights=Path(weights))
     probs, bnd, feat = predict_with_features(scan, cfg)
-    return instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat)
+    seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat)
+    return split_plane_outliers(seg, scan.depth, scan.K, probs, cfg.refine)
 
 
 def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig,

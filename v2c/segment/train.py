@@ -35,6 +35,13 @@ TRAINING_RECIPE: tuple[tuple[int, int, str, int, int], ...] = (
     (640, 480, "sensor", 150, 105),
     (640, 480, "paper", 60, 106),
 )
+#: Stage 4's extra scans (fine-tuning set, MODEL_CARD.md): (width, height, noise, scans, seed, print share), in
+#: DATA/<width>x<height>_<noise>[_print]_s<seed>/; the stage trains on these plus the 640x480 and the 320x240 /
+#: 256x256 sensor sets of TRAINING_RECIPE.
+FINETUNE_RECIPE: tuple[tuple[int, int, str, int, int, float], ...] = (
+    (640, 480, "sensor", 1000, 107, 0.0),
+    (640, 480, "sensor", 500, 108, 0.5),
+)
 
 
 def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
@@ -44,18 +51,20 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
     Equivalent to one `v2c synth` run per recipe row.
     """
     from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
+    from v2c.synth.scene import SceneConfig
 
     done: list[Path] = []
-    for w, h, noise, n, seed in recipe:
-        sub = Path(out_dir) / f"{w}x{h}_{noise}_s{seed}"
+    for w, h, noise, n, seed, *extra in recipe:
+        share = float(extra[0]) if extra else 0.0
+        sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}_s{seed}"
         n = max(1, round(n * scale))
         have = 0  # resume: scans are pure functions of (seed, index) and meta.json is written last
         while have < n and (sub / scan_name(have) / "gt" / "meta.json").is_file():
             have += 1
         done += [sub / scan_name(i) for i in range(have)]
         if have < n:
-            done += generate_dataset(sub, n - have, seed, SynthConfig(width=w, height=h, noise=noise), jobs=jobs,
-                                     progress=False, start=have)
+            cfg = SynthConfig(width=w, height=h, noise=noise, scene=SceneConfig(print_share=share))
+            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have)
     return done
 
 

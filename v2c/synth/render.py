@@ -14,10 +14,10 @@ import cv2
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
-from pyfastnoiselite.pyfastnoiselite import FastNoiseLite, FractalType, NoiseType
+from pyfastnoiselite.pyfastnoiselite import CellularReturnType, FastNoiseLite, FractalType, NoiseType
 
 from v2c.synth.intersect import intersect_primitive, rows_dot
-from v2c.synth.scene import GroundLook, Scene
+from v2c.synth.scene import GroundLook, PrintLook, Scene
 
 ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
 GROUND_SHININESS = 8.0  # Blinn-Phong exponent of the ground
@@ -136,7 +136,11 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
     albedo_g = ground_albedo(scene, cfg).reshape(-1, 3)[ground]
     color[ground] = _shade(scene, ebr, dirs32[ground], t_ground[ground], ground_n, albedo_g, scene.ground.specular,
                            GROUND_SHININESS, sphere, deflection_m, cfg)
-    color[hit] = _shade(scene, ebr, d.astype(np.float32), t, nrm, scene.material.albedo, scene.material.specular,
+    albedo_p = scene.material.albedo
+    if scene.print_look is not None:  # printed part: albedo from the world position of each hit
+        world_p = (d * t[:, None] - trans) @ rot
+        albedo_p = print_texture(scene.print_look, world_p).astype(np.float32)
+    color[hit] = _shade(scene, ebr, d.astype(np.float32), t, nrm, albedo_p, scene.material.specular,
                         scene.material.shininess, sphere, deflection_m, cfg)
     # Backdrop: a vertical gradient where rays miss everything; far ground fades into it.
     far_mask = prim < 0
@@ -244,6 +248,33 @@ def ground_texture(look: GroundLook, x: np.ndarray, y: np.ndarray) -> np.ndarray
         mix = 0.15 * (0.5 + 0.5 * _fbm(noise, u, v))
     mix = np.clip(mix, 0.0, 1.0)[:, None]
     return look.color_a * (1 - mix) + look.color_b * mix
+
+
+def print_texture(look: PrintLook, p: np.ndarray) -> np.ndarray:
+    """Albedo (n, 3) of a printed part at world points p (n, 3), metres: flat inks with sharp edges."""
+    q = p / look.scale_m
+    noise = FastNoiseLite(look.seed)
+    noise.frequency = 1.0
+    k = len(look.palette)
+    along = q @ look.direction
+    if look.kind == "blocks":
+        noise.noise_type = NoiseType.NoiseType_Cellular
+        noise.cellular_return_type = CellularReturnType.CellularReturnType_CellValue
+        v = 0.5 + 0.5 * np.asarray(noise.gen_from_coords(q.T.astype(np.float32)), float)
+    elif look.kind == "stripes":
+        v = (np.floor(along) % k + 0.5) / k
+    else:
+        noise.noise_type = NoiseType.NoiseType_OpenSimplex2
+        noise.fractal_type = FractalType.FractalType_FBm
+        noise.fractal_octaves = 3
+        v = 0.5 + 0.5 * np.asarray(noise.gen_from_coords((q * (0.05 if look.kind == "text" else 1.0)
+                                                          ).T.astype(np.float32)), float)
+        v = np.clip((v - 0.5) * 2.5 + 0.5, 0.0, 0.999)
+    idx = np.clip((v * k).astype(int), 0, k - 1)
+    if look.kind == "text":  # lines of fine marks on the regions of ink 1 and up
+        marks = (np.sin(2 * np.pi * along) > 0.3) & (np.sin(7.3 * np.pi * (q @ np.roll(look.direction, 1))) > 0)
+        idx = np.where(marks & (idx > 0), (idx + 1) % k, 0)
+    return look.palette[idx]
 
 
 def _fbm(noise: FastNoiseLite, u: np.ndarray, v: np.ndarray) -> np.ndarray:

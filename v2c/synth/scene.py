@@ -27,6 +27,8 @@ class SceneConfig:
     ambient: tuple[float, float] = (0.08, 0.25)  # ambient light intensity (linear)
     key_intensity: tuple[float, float] = (0.7, 1.3)
     fill_intensity: tuple[float, float] = (0.0, 0.5)
+    print_share: float = 0.0  # share of scans whose part carries a printed texture (packaging-like artwork that
+    # ignores face boundaries; drawn from its own generator, so 0 leaves every other draw unchanged)
 
 
 @dataclass
@@ -62,6 +64,17 @@ class GroundLook:
 
 
 @dataclass
+class PrintLook:
+    """Procedural print on the part (world metres): flat colour regions with sharp edges, like packaging art."""
+
+    kind: str  # "blocks" (cells of flat colour) | "stripes" | "blotches" (thresholded fBm) | "text" (fine marks)
+    palette: np.ndarray  # (k, 3) linear RGB
+    scale_m: float  # feature size of the pattern
+    direction: np.ndarray  # (3,) unit world direction of stripes and text lines
+    seed: int
+
+
+@dataclass
 class Scene:
     """Everything about one scan except the part's geometry."""
 
@@ -79,6 +92,7 @@ class Scene:
     ground: GroundLook
     backdrop: np.ndarray  # (2, 3) linear RGB, top and bottom of the wall gradient
     info: dict = field(default_factory=dict)
+    print_look: PrintLook | None = None  # printed part texture (None: the material's flat albedo)
 
 
 _MATERIALS = {
@@ -110,6 +124,18 @@ def _sample_ground(rng: np.random.Generator, part_size: float) -> GroundLook:
     scale = float(part_size * rng.uniform(0.4, 2.0)) if kind != "tiles" else float(rng.uniform(0.05, 0.3))
     return GroundLook(kind, base, other, scale, float(rng.uniform(0, np.pi)), int(rng.integers(0, 2**31 - 1)),
                       float(rng.uniform(0.0, 0.3)))
+
+
+def _sample_print(rng: np.random.Generator, part_size: float, base: np.ndarray) -> PrintLook:
+    kind = str(rng.choice(["blocks", "stripes", "blotches", "text"]))
+    k = int(rng.integers(2, 5))
+    palette = rng.uniform(0.0, 1.0, (k, 3)) ** rng.uniform(0.7, 2.2, (k, 1))
+    palette[0] = base  # the material colour stays one of the inks
+    scale = float(part_size * rng.uniform(0.08, 0.5)) if kind != "text" else float(part_size * rng.uniform(0.01,
+                                                                                                           0.03))
+    direction = rng.normal(size=3)
+    return PrintLook(kind, palette.astype(float), scale, direction / np.linalg.norm(direction),
+                     int(rng.integers(0, 2**31 - 1)))
 
 
 def _look_at(eye: np.ndarray, target: np.ndarray, roll: float) -> np.ndarray:
@@ -198,5 +224,12 @@ def sample_scene(rng: np.random.Generator, bbox_lo_mm: np.ndarray, bbox_hi_mm: n
     info = {"elevation_deg": float(np.rad2deg(elev)), "azimuth_deg": float(np.rad2deg(azim)),
             "distance_m": float(dist), "fill": float(fill), "turn_deg": float(np.rad2deg(turn)),
             "hfov_deg": float(np.rad2deg(hfov))}
+    material, ground = _sample_material(rng), _sample_ground(rng, float(size))
+    look = None
+    if cfg.print_share > 0:  # its own generator (seeded by the ground's draw): the main stream is untouched
+        prng = np.random.default_rng([ground.seed, 7])
+        if prng.random() < cfg.print_share:
+            look = _sample_print(prng, float(size), material.albedo)
+            material = Material(material.albedo, float(prng.uniform(0.0, 0.15)), material.shininess, "printed")
     return Scene(width, height, K, world_to_cam, float(scale), rest_to_world, float(size), axes_cam, ambient,
-                 lights, _sample_material(rng), _sample_ground(rng, float(size)), backdrop, info)
+                 lights, material, ground, backdrop, info, look)

@@ -26,7 +26,8 @@ import cv2
 import numpy as np
 
 from v2c.groups import groups_sharing_keys
-from v2c.primitives import Plane, Sphere
+from v2c.labels import type_axis_of
+from v2c.primitives import Cylinder, Plane, Sphere
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import KIND_INT, FaceGeom, classify_samples
 from v2c.vbrep.confidence import edge_confidence, face_confidence
@@ -177,6 +178,55 @@ def fit_sphere_points(X: np.ndarray, trim: float = 0.8) -> tuple[Sphere, float] 
     return Sphere(c, float(np.sqrt(r2))), float(np.sqrt(np.mean(d**2)))
 
 
+def fit_axis_cylinder_points(X: np.ndarray, axis: np.ndarray) -> tuple[Cylinder, float] | None:
+    """Least-squares cylinder with a given unit axis through (N, 3) points: an algebraic circle fit of the points
+    projected on the plane normal to the axis, refined by
+    Gauss-Newton on the geometric distance. Returns the cylinder and its RMS distance (metres); None with fewer
+    than 5 points or a degenerate fit."""
+    if len(X) < 5:
+        return None
+    a = axis / np.linalg.norm(axis)
+    t1 = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(a, t1)
+    q = np.stack([X @ t1, X @ t2], 1)
+    A = np.concatenate([2 * q, np.ones((len(q), 1))], 1)
+    sol = np.linalg.lstsq(A, np.sum(q**2, 1), rcond=None)[0]
+    r2 = float(sol[2] + sol[:2] @ sol[:2])
+    if not (np.all(np.isfinite(sol)) and r2 > 0):
+        return None
+    c, r = sol[:2], float(np.sqrt(r2))
+    for _ in range(10):  # geometric (Gauss-Newton) refinement: the algebraic fit shrinks short noisy arcs
+        v = q - c
+        dist = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+        J = np.concatenate([-v / dist[:, None], -np.ones((len(q), 1))], 1)
+        step = np.linalg.lstsq(J, -(dist - r), rcond=None)[0]
+        c, r = c + step[:2], r + float(step[2])
+        if not np.isfinite(r) or r <= 0:
+            return None
+    d = np.linalg.norm(q - c, axis=1) - r
+    origin = c[0] * t1 + c[1] * t2 + float(np.mean(X @ a)) * a
+    return Cylinder(origin, a, r), float(np.sqrt(np.mean(d**2)))
+
+
+def _labelled_fallback(inst: int, seg: Any, fit: Any, X: np.ndarray, scale: float, cfg: VBRepConfig
+                       ) -> tuple[Cylinder, float, str] | None:
+    """An unfitted instance labelled cylinder with an aligned axis class (X / Y / Z): the cylinder on that axis of
+    the shared frame that fits its evidence within fallback_rms and has a radius of at most the part size (a tiny
+    wall patch keeps its type instead of becoming a plane); else None."""
+    labels = np.asarray(getattr(seg, "labels", ()))
+    frame = getattr(fit, "frame", None)
+    if frame is None or inst >= len(labels) or not 1 <= int(labels[inst]) <= 16:
+        return None
+    ptype, ax = type_axis_of(int(labels[inst]))
+    if ptype.value != "cylinder" or ax is None or ax.value == "U":
+        return None
+    got = fit_axis_cylinder_points(X, np.asarray(frame, float)[{"X": 0, "Y": 1, "Z": 2}[ax.value]])
+    if got is None or got[1] > cfg.fallback_rms * scale or got[0].radius > scale:
+        return None
+    return got[0], got[1], ax.value
+
+
 def fallback_plane_points(inst: int, inst_map: np.ndarray, depth: np.ndarray, K: np.ndarray,
                           faces: dict[int, FaceGeom], window: tuple[float, float]) -> list[np.ndarray]:
     """3D evidence (camera frame, metres) for an instance the geometry stage could not fit (e.g. a face seen at a
@@ -240,7 +290,12 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
         sources = fallback_plane_points(int(inst), inst_map, depth, K, faces, window)
         if len(sources) < 2:  # one neighbour's edge alone does not fix a plane (it may lie in that neighbour)
             continue
-        got = fit_plane_points(np.concatenate(sources))
+        evidence = np.concatenate(sources)
+        cyl = _labelled_fallback(int(inst), seg, fit, evidence, scale, cfg)
+        if cyl is not None:
+            add(int(inst), cyl[0], cyl[1], cyl[2], {"fallback": True})
+            continue
+        got = fit_plane_points(evidence)
         if got is None:
             continue
         plane, rms, flat = got

@@ -1,0 +1,121 @@
+"""Geometric check of learned instances: split off what a plane instance's own plane cannot explain.
+
+The network's commonest miss is a thin face (a hole's wall, a boss's side, a narrow step) painted with the label of
+the plane around it, with no predicted boundary between them (docs/segmentation.md). Depth sees what colour and
+label maps miss: the thin face lies off the plane. For every instance labelled plane, a plane is fitted to its
+points (RANSAC, then least squares on the inliers); connected sets of valid pixels further from it than the
+tolerance become instances of their own, labelled by the network's most probable class there, or join a
+neighbouring instance of that label (the rest of the face they belong to).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from v2c.fit.points import backproject, estimate_part_size
+from v2c.labels import PrimitiveType, type_axis_of
+from v2c.segment.types import Segmentation
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Thresholds of the plane-outlier split (units in the comments)."""
+
+    enabled: bool = True
+    min_parent_px: int = 80  # plane instances with fewer valid pixels are left alone (pixels)
+    tol_part: float = 0.02  # off-plane distance that counts as another surface (part-size units)
+    tol_noise: float = 4.0  # ... and at least this many robust residual sigmas of the plane's inliers (ratio)
+    min_split_px: int = 60  # smallest split-off set after the opening (pixels)
+    open_px: int = 1  # opening radius applied to the outlier mask first (pixels; removes edge speckle)
+    min_split_share: float = 0.02  # ... and at least this share of the parent instance (fraction)
+    hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
+    sample_points: int = 800  # points scoring them (count)
+    seed: int = 0
+
+
+def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.Generator
+                  ) -> tuple[np.ndarray, float]:
+    """(unit normal, offset) of the plane n.x = d that most points of x (n, 3) lie within tol of."""
+    sub = x[rng.choice(len(x), min(len(x), cfg.sample_points), replace=False)]
+    tri = sub[rng.integers(0, len(sub), (cfg.hypotheses, 3))]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 1e-12
+    n = n[ok] / norm[ok, None]
+    d = np.einsum("ij,ij->i", n, tri[ok, 0])
+    score = (np.abs(sub @ n.T - d) < tol).sum(axis=0)
+    k = int(np.argmax(score))
+    inl = np.abs(x @ n[k] - d[k]) < tol
+    c = x[inl].mean(axis=0)
+    _, _, vt = np.linalg.svd(x[inl] - c, full_matrices=False)
+    nn = vt[2]
+    return nn, float(nn @ c)
+
+
+def _same_label_neighbour(inst: np.ndarray, sel: np.ndarray, parent: int, label: int, labels: list,
+                          kernel: np.ndarray) -> int | None:
+    """The instance other than ``parent`` with label ``label`` that shares the longest contact with the pixel set
+    ``sel`` (the rest of a face the network cut elsewhere), or None."""
+    ring = cv2.dilate(sel.astype(np.uint8), kernel).astype(bool) & ~sel
+    ids, counts = np.unique(inst[ring], return_counts=True)
+    best, best_n = None, 0
+    for j, k in zip(ids.tolist(), counts.tolist(), strict=True):
+        if j not in (0, parent) and j < len(labels) and int(labels[j]) == label and k > best_n:
+            best, best_n = j, k
+    return best
+
+
+def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
+                         cfg: RefineConfig = RefineConfig()) -> Segmentation:
+    """``seg`` with the off-plane parts of its plane instances split off (module docstring). depth: (H, W) metres
+    (0 = no reading); probs: the network's (18, H, W) class probabilities, which label the new instances."""
+    inst = np.asarray(seg.instances).astype(np.int32).copy()
+    valid = (np.asarray(depth) > 0) & (inst > 0)
+    if not cfg.enabled or not valid.any():
+        return seg
+    pts = backproject(np.asarray(depth, float), np.asarray(K, float))
+    size = estimate_part_size(pts[valid])
+    labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores))
+    rng = np.random.default_rng(cfg.seed)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * cfg.open_px + 1,) * 2)
+    n0 = len(labels)
+    changed = False
+    for i in range(1, n0):  # loop over instances
+        lab = int(labels[i])
+        if not 1 <= lab <= 17 or type_axis_of(lab)[0] is not PrimitiveType.PLANE:
+            continue
+        m = valid & (inst == i)
+        if m.sum() < cfg.min_parent_px:
+            continue
+        x = pts[m]
+        tol = cfg.tol_part * size
+        nrm, off = _plane_ransac(x, 0.5 * tol, cfg, rng)
+        r = x @ nrm - off
+        inl = np.abs(r) < 0.5 * tol
+        sigma = 1.4826 * float(np.median(np.abs(r[inl]))) if inl.any() else 0.0
+        far = np.zeros(m.shape, np.uint8)
+        far[m] = np.abs(r) > max(tol, cfg.tol_noise * sigma)
+        if cfg.open_px > 0:
+            far = cv2.morphologyEx(far, cv2.MORPH_OPEN, kernel)
+        n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(far, connectivity=8)
+        min_px = max(cfg.min_split_px, cfg.min_split_share * m.sum())
+        for c in range(1, n_cc):  # loop over outlier components
+            if stats[c, cv2.CC_STAT_AREA] < min_px:
+                continue
+            sel = cc == c
+            p = probs[:, sel].mean(axis=1)
+            p[0] = 0.0
+            new = int(np.argmax(p))
+            target = _same_label_neighbour(inst, sel, i, new, labels, kernel)
+            if target is None:
+                target = len(labels)
+                labels.append(new)
+                scores.append(float(p[new] / max(p.sum(), 1e-9)))
+            inst[sel] = target
+            changed = True
+    if not changed:
+        return seg
+    return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
