@@ -70,3 +70,22 @@ def test_a_noisy_plane_is_left_alone() -> None:
     seg = Segmentation(inst, np.array([0, PLANE_Z], np.uint8), np.array([0, 0.9], np.float32), "learned")
     out = split_plane_outliers(seg, depth, K, _probs(np.full((H, W), PLANE_Z)), RefineConfig())
     assert out is seg
+
+
+def test_fragments_of_one_plane_are_merged_and_a_step_is_not() -> None:
+    from v2c.segment.refine import merge_coplanar
+
+    rng = np.random.default_rng(3)
+    depth = _tilted_plane(rng, 2e-4)
+    depth[:, 120:] += 0.02  # columns 120+: a parallel plane 20 mm lower (a step), same label
+    inst = np.ones((H, W), np.int32)
+    inst[:, 60:120] = 2  # the network cut the first plane at column 60 (a print edge)
+    inst[:, 120:] = 3
+    labels = np.array([0, PLANE_Z, PLANE_Z, PLANE_Z], np.uint8)
+    seg = Segmentation(inst, labels, np.array([0, 0.9, 0.9, 0.9], np.float32), "learned")
+    out = merge_coplanar(seg, depth, K, RefineConfig())
+    assert np.array_equal(out.instances == 1, inst <= 2) and np.array_equal(out.instances == 2, inst == 3)
+    assert list(out.labels) == [0, PLANE_Z, PLANE_Z]  # ids renumbered: labels[k] stays instance k's
+    other = Segmentation(inst, np.array([0, PLANE_Z, label_of("plane", "X"), PLANE_Z], np.uint8), seg.scores,
+                         "learned")
+    assert merge_coplanar(other, depth, K, RefineConfig()) is other  # labels differ: never merged

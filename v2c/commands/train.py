@@ -10,8 +10,11 @@ from v2c.segment.train_config import TrainConfig
 
 
 @click.command("train")
-@click.option("--data", "data_dir", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path),
+@click.option("--data", "data_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Folder holding `v2c synth` scans (searched recursively for scans with gt/).")
+@click.option("--recipe", type=click.Choice(["base", "stage4", "stage5"]), default=None,
+              help="First generate this training set's missing scans under DATA (MODEL_CARD.md: base = stages "
+                   "1-3, stage4, stage5 = stages 5-6); resumable, 2 processes.")
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Weights file to write (the best checkpoint by validation mIoU).")
 @click.option("--seed", default=0, show_default=True, help="Seed of the weights and of the crop sequence.")
@@ -30,12 +33,19 @@ from v2c.segment.train_config import TrainConfig
               help="Start from these weights (a second training stage with a fresh schedule).")
 @click.option("--threads", default=TrainConfig.threads, show_default=True, help="torch CPU threads.")
 @click.option("--fp32", is_flag=True, help="Disable bf16 autocast even where the CPU supports it.")
-def command(data_dir: Path, out: Path, seed: int, steps: int, stop_step: int | None, minutes: float | None,
+def command(data_dir: Path, recipe: str | None, out: Path, seed: int, steps: int, stop_step: int | None, minutes: float | None,
             warmup_steps: int, batch: int, crop_px: int, lr: float, cache_dir: Path | None, init: Path | None,
             threads: int, fp32: bool) -> None:
     """Train the segmentation network on the scans under DATA and write OUT (+ OUT.json, the training record)."""
     from v2c.segment.train import train
 
+    if recipe is not None:
+        from v2c.segment.train import RECIPES, generate_training_data
+
+        click.echo(f"generating the {recipe} training set under {data_dir} (missing scans only)")
+        generate_training_data(data_dir, jobs=2, recipe=RECIPES[recipe])
+    if not data_dir.is_dir():
+        raise click.ClickException(f"{data_dir}: no such folder (generate scans with `v2c synth` or --recipe)")
     cfg = TrainConfig(steps=steps, stop_step=stop_step, minutes=minutes, warmup_steps=warmup_steps, batch=batch,
                       crop_px=crop_px, lr=lr, seed=seed, threads=threads, bf16=False if fp32 else None)
     try:

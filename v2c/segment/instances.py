@@ -39,7 +39,7 @@ from v2c.segment.types import Segmentation
 class InstanceConfig:
     boundary_threshold: float = 0.5  # boundary probability above which a pixel is on a face boundary
     core_erode_px: int = 0  # core pixels are eroded by this much before the components are taken (pixels)
-    min_area_px: int = 10  # markers smaller than this are dissolved into their neighbours (pixels)
+    min_area_px: int = 15  # markers smaller than this are dissolved into their neighbours (pixels)
     max_fill_px: float = 6.0  # farthest a leftover part pixel is attached to an instance (pixels)
     merge_open_frac: float = 0.5  # merge two instances when this share of their contact is open (no boundary)
     merge_min_contact_px: int = 3  # ... and their contact is at least this long (pixel pairs)

@@ -19,7 +19,7 @@ from v2c.scan import Scan
 from v2c.segment.data import MIRROR_SIGN_CHANNEL, FeatureConfig, scan_features
 from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
 from v2c.segment.net import UNet, bf16_supported, load_weights
-from v2c.segment.refine import RefineConfig, split_plane_outliers
+from v2c.segment.refine import RefineConfig, merge_coplanar, split_plane_outliers
 from v2c.segment.types import Segmentation
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -32,10 +32,12 @@ class LearnedConfig:
     bf16: bool | None = None  # None = where the CPU supports it
     features: FeatureConfig = field(default_factory=FeatureConfig)
     instances: InstanceConfig = field(default_factory=InstanceConfig)
-    refine: RefineConfig = field(default_factory=RefineConfig)  # the plane-outlier split (refine.py)
+    refine: RefineConfig = field(default_factory=RefineConfig)  # plane-outlier split, coplanar merge (refine.py)
     context_px: int = 32  # margin of image context around the mask / ROI box fed to the network (pixels);
     # < 0 runs the whole image
     mirror_tta: bool = True  # average the prediction with that of the mirrored input (2x network time)
+    ground_region: bool = True  # without mask.png: the part is what stands above the RANSAC ground inside the ROI
+    # (`geometric.part_region`, as the geometric segmenter does), not the network's background class
 
 
 def weights_available(path: Path | None = None) -> bool:
@@ -111,21 +113,29 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
     if weights is not None:
         cfg = replace(cfg, weights=Path(weights))
     probs, bnd, feat = predict_with_features(scan, cfg)
-    seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat)
-    return split_plane_outliers(seg, scan.depth, scan.K, probs, cfg.refine)
+    region = None
+    if cfg.ground_region and scan.mask is None and scan.roi is not None:
+        from v2c.segment.geometric import GeometricConfig, part_region
+
+        region = part_region(scan, GeometricConfig())[0]
+    seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat, part=region)
+    seg = split_plane_outliers(seg, scan.depth, scan.K, probs, cfg.refine)
+    return merge_coplanar(seg, scan.depth, scan.K, cfg.refine)
 
 
 def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig,
-                              feat: np.ndarray | None = None) -> Segmentation:
+                              feat: np.ndarray | None = None, part: np.ndarray | None = None) -> Segmentation:
     """Instances of a scan from the network's class probabilities (18, H, W) and boundary probability (H, W).
 
-    feat: the network input features (9, H, W), for the optional depth / normal boundary evidence of ``cfg``."""
+    feat: the network input features (9, H, W), for the optional depth / normal boundary evidence of ``cfg``;
+    part: (H, W) bool part pixels that stand in for mask.png when the scan has none."""
     labels = probs.argmax(axis=0).astype(np.uint8)
     region = None
-    if scan.mask is not None or scan.roi is not None:
+    mask = scan.mask if scan.mask is not None else part
+    if mask is not None or scan.roi is not None:
         region = scan.roi_mask()
-        if scan.mask is not None:
-            region &= scan.mask
+        if mask is not None:
+            region &= mask
             # with a part mask, a masked pixel is part even where the network says background
             fg = probs[1:].argmax(axis=0).astype(np.uint8) + 1
             labels = np.where(region, fg, 0).astype(np.uint8)

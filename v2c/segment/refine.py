@@ -1,4 +1,5 @@
-"""Geometric check of learned instances: split off what a plane instance's own plane cannot explain.
+"""Geometric check of learned instances: split off what a plane instance's own plane cannot explain, and merge
+plane fragments that lie on one plane.
 
 The network's commonest miss is a thin face (a hole's wall, a boss's side, a narrow step) painted with the label of
 the plane around it, with no predicted boundary between them (docs/segmentation.md). Depth sees what colour and
@@ -16,6 +17,7 @@ import cv2
 import numpy as np
 
 from v2c.fit.points import backproject, estimate_part_size
+from v2c.groups import groups_sharing_keys
 from v2c.labels import PrimitiveType, type_axis_of
 from v2c.segment.types import Segmentation
 
@@ -31,6 +33,11 @@ class RefineConfig:
     min_split_px: int = 60  # smallest split-off set after the opening (pixels)
     open_px: int = 1  # opening radius applied to the outlier mask first (pixels; removes edge speckle)
     min_split_share: float = 0.02  # ... and at least this share of the parent instance (fraction)
+    merge: bool = True  # merge adjacent plane instances of one label that lie on one plane (fragments of a face)
+    merge_angle_deg: float = 5.0  # ... normals within this angle (degrees)
+    merge_tol_part: float = 0.01  # ... and each one's points within this median distance of the other's plane
+    #                                (part-size units)
+    merge_min_px: int = 8  # instances with fewer valid pixels take part with a plane through their points (pixels)
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
     sample_points: int = 800  # points scoring them (count)
     seed: int = 0
@@ -96,8 +103,9 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
         r = x @ nrm - off
         inl = np.abs(r) < 0.5 * tol
         sigma = 1.4826 * float(np.median(np.abs(r[inl]))) if inl.any() else 0.0
+        off_plane = np.abs(r) > max(tol, cfg.tol_noise * sigma)
         far = np.zeros(m.shape, np.uint8)
-        far[m] = np.abs(r) > max(tol, cfg.tol_noise * sigma)
+        far[m] = off_plane
         if cfg.open_px > 0:
             far = cv2.morphologyEx(far, cv2.MORPH_OPEN, kernel)
         n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(far, connectivity=8)
@@ -119,3 +127,57 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
     if not changed:
         return seg
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
+
+
+def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig()
+                   ) -> Segmentation:
+    """``seg`` with adjacent plane instances of the same label merged where they lie on one plane (normals within
+    merge_angle_deg, each one's points within merge_tol_part part sizes of the other's plane, median): the network
+    cut a face where it saw a print edge, a shadow or noise. Only touching instances (4-neighbour pixel pairs)."""
+    inst = np.asarray(seg.instances).astype(np.int32)
+    valid = (np.asarray(depth) > 0) & (inst > 0)
+    if not (cfg.enabled and cfg.merge) or not valid.any():
+        return seg
+    pts = backproject(np.asarray(depth, float), np.asarray(K, float))
+    size = estimate_part_size(pts[valid])
+    tol = cfg.merge_tol_part * size
+    labels = np.asarray(seg.labels)
+    is_plane = np.array([1 <= int(lab) <= 17 and type_axis_of(int(lab))[0] is PrimitiveType.PLANE
+                         for lab in labels])
+    pairs = np.concatenate([np.stack([inst[:, :-1].ravel(), inst[:, 1:].ravel()], 1),
+                            np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)])
+    pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
+    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
+    pairs = pairs[is_plane[pairs[:, 0]] & is_plane[pairs[:, 1]] & (labels[pairs[:, 0]] == labels[pairs[:, 1]])]
+    if not len(pairs):
+        return seg
+    rng = np.random.default_rng(cfg.seed)
+    planes: dict[int, tuple[np.ndarray, float, np.ndarray]] = {}
+    for i in np.unique(pairs):  # loop over candidate instances
+        x = pts[valid & (inst == i)]
+        if len(x) >= max(cfg.merge_min_px, 3):
+            nrm, off = _plane_ransac(x, 0.5 * cfg.tol_part * size, cfg, rng)
+            planes[int(i)] = (nrm, off, x)
+    cos_min = np.cos(np.deg2rad(cfg.merge_angle_deg))
+    keys: dict[int, list[int]] = {}
+    for k, (a, b) in enumerate(pairs.tolist()):  # loop over touching pairs
+        if a not in planes or b not in planes:
+            continue
+        (na, da, xa), (nb, db, xb) = planes[a], planes[b]
+        if abs(float(na @ nb)) < cos_min:
+            continue
+        if np.median(np.abs(xb @ na - da)) < tol and np.median(np.abs(xa @ nb - db)) < tol:
+            keys.setdefault(a, []).append(k)
+            keys.setdefault(b, []).append(k)
+    if not keys:
+        return seg
+    items = sorted(keys)
+    lut = np.arange(len(labels), dtype=np.int32)
+    for group in groups_sharing_keys([keys[i] for i in items]):
+        ids = [items[g] for g in group]
+        lut[ids] = min(ids)
+    roots = np.unique(lut)  # ids 0..N renumbered without the merged ones (labels[k] is instance k's)
+    compact = np.zeros(len(labels), np.int32)
+    compact[roots] = np.arange(len(roots), dtype=np.int32)
+    return Segmentation(compact[lut[inst]], np.asarray(seg.labels)[roots], np.asarray(seg.scores)[roots],
+                        seg.method)

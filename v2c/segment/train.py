@@ -35,13 +35,16 @@ TRAINING_RECIPE: tuple[tuple[int, int, str, int, int], ...] = (
     (640, 480, "sensor", 150, 105),
     (640, 480, "paper", 60, 106),
 )
-#: Stage 4's extra scans (fine-tuning set, MODEL_CARD.md): (width, height, noise, scans, seed, print share), in
-#: DATA/<width>x<height>_<noise>[_print]_s<seed>/; the stage trains on these plus the 640x480 and the 320x240 /
-#: 256x256 sensor sets of TRAINING_RECIPE.
-FINETUNE_RECIPE: tuple[tuple[int, int, str, int, int, float], ...] = (
+#: The fine-tuning sets (stages 4-6, MODEL_CARD.md): (width, height, noise, scans, seed, print share), generated
+#: into DATA/<width>x<height>_<noise>[_print]_s<seed>/ like TRAINING_RECIPE. Stage 4 trains on STAGE4_RECIPE (the
+#: validation size, 640x480, weighted up; half of seed 108's parts printed); stages 5 and 6 on STAGE5_RECIPE.
+STAGE4_RECIPE: tuple[tuple, ...] = (
+    *(row for row in TRAINING_RECIPE if row[4] in (101, 103, 105, 106)),
     (640, 480, "sensor", 1000, 107, 0.0),
     (640, 480, "sensor", 500, 108, 0.5),
 )
+STAGE5_RECIPE: tuple[tuple, ...] = (*STAGE4_RECIPE, (640, 480, "sensor", 1000, 111, 0.3))
+RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RECIPE}
 
 
 def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
