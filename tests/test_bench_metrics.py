@@ -166,6 +166,22 @@ def test_box_angles_and_can_radius_on_hand_built_vbreps():
     assert len(b["pairs"]) == 3
     assert all(p["angle_deg"] == pytest.approx(90.0, abs=1e-6) for p in b["pairs"])
     assert b["max_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    # a second piece of the largest face (parallel, tilted 5 degrees, area between the others') is skipped, not
+    # paired: the three kept faces are still the corner's
+    from dataclasses import replace
+
+    box = box_corner()
+    big = max(box.faces, key=R._face_area)
+    n = np.asarray(big.primitive["params"]["normal"], float)
+    t = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    tilted = np.cos(np.deg2rad(5)) * n + np.sin(np.deg2rad(5)) * t / np.linalg.norm(t)
+    piece = replace(big, id=max(f.id for f in box.faces) + 1,
+                    primitive={"type": "plane", "params": {**big.primitive["params"], "normal": tilted.tolist()}},
+                    mesh_vertices=0.9 * np.asarray(big.mesh_vertices, float))
+    box.faces.append(piece)
+    b2 = R.box_angles(box)
+    assert len(b2["pairs"]) == 3 and piece.id not in {i for p in b2["pairs"] for i in p["faces"]}
+    assert b2["max_error_deg"] == pytest.approx(0.0, abs=1e-6)
     c = R.can_radius(cylinder_upright(radius=0.04))
     assert c["cylinder_faces"] == 1 and c["radius_mm"] == pytest.approx(40.0)
 

@@ -551,22 +551,28 @@ def _face_area(f: Any) -> float:
     return float(0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1).sum())
 
 
-def box_angles(vbrep: Any, n_planes: int = 3) -> dict[str, Any]:
-    """Angles (degrees, in [0, 90]) between the normals of the ``n_planes`` largest planar faces (mesh area), and
-    the largest deviation from 90 degrees over the pairs further than 45 degrees from parallel (faces of one box
-    corner; a near-parallel pair is a face and, say, the table)."""
+def box_angles(vbrep: Any, n_planes: int = 3, distinct_deg: float = 20.0) -> dict[str, Any]:
+    """Angles (degrees, in [0, 90]) between the normals of the ``n_planes`` largest planar faces (mesh area) of
+    distinct directions (a face within ``distinct_deg`` of a larger one kept is a piece of the same box face, or
+    parallel to it, and is skipped), and the largest deviation from 90 degrees over the pairs further than 45
+    degrees from parallel (faces of one box corner)."""
     planes = sorted((f for f in vbrep.faces if f.primitive.get("type") == "plane"), key=_face_area, reverse=True)
-    planes = planes[:n_planes]
+    normals = [np.asarray(f.primitive["params"]["normal"], float) for f in planes]
+    normals = [n / np.linalg.norm(n) for n in normals]
+    kept: list[int] = []
+    for i, n in enumerate(normals):  # loop over planes, largest first
+        if all(abs(float(n @ normals[k])) < np.cos(np.deg2rad(distinct_deg)) for k in kept):
+            kept.append(i)
+        if len(kept) == n_planes:
+            break
     pairs = []
-    for i in range(len(planes)):
-        for j in range(i + 1, len(planes)):
-            a = np.asarray(planes[i].primitive["params"]["normal"], float)
-            b = np.asarray(planes[j].primitive["params"]["normal"], float)
-            cos = abs(float(a @ b) / (np.linalg.norm(a) * np.linalg.norm(b)))
-            pairs.append({"faces": [planes[i].id, planes[j].id],
+    for a in range(len(kept)):
+        for b in range(a + 1, len(kept)):
+            cos = abs(float(normals[kept[a]] @ normals[kept[b]]))
+            pairs.append({"faces": [planes[kept[a]].id, planes[kept[b]].id],
                           "angle_deg": float(np.degrees(np.arccos(min(1.0, cos))))})
     corner = [p["angle_deg"] for p in pairs if p["angle_deg"] > 45.0]
-    return {"plane_faces": len([f for f in vbrep.faces if f.primitive.get("type") == "plane"]), "pairs": pairs,
+    return {"plane_faces": len(planes), "pairs": pairs,
             "max_error_deg": float(max(abs(90.0 - a) for a in corner)) if corner else float("nan")}
 
 
