@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from tests.conftest import SHARED_DATA
 from v2c.bench import metrics as M
 from v2c.bench import run as R
 from v2c.vbrep.model import VFace
@@ -186,13 +185,13 @@ def test_box_angles_and_can_radius_on_hand_built_vbreps():
     assert c["cylinder_faces"] == 1 and c["radius_mm"] == pytest.approx(40.0)
 
 
-def test_real_rois_fit_their_frames():
+def test_real_rois_fit_their_frames(shared_data):
     import cv2
 
     rois = R.load_rois()
     assert len(rois) >= 5
     for name, spec in rois.items():
-        img = cv2.imread(str(SHARED_DATA / "real" / name / "color.png"))
+        img = cv2.imread(str(shared_data / "real" / name / "color.png"))
         assert img is not None, name
         x0, y0, x1, y1 = spec["roi"]
         assert 0 <= x0 < x1 <= img.shape[1] and 0 <= y0 < y1 <= img.shape[0]
