@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from v2c.fit.config import FitConfig
-from v2c.fit.ransac import refine_primitive, torus_msac
+from v2c.fit.ransac import circle_2d, refine_primitive, torus_msac
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.directions import tangent_basis
 
@@ -36,19 +36,10 @@ def _axis_line(x: np.ndarray, n: np.ndarray, a: np.ndarray) -> tuple[np.ndarray,
     return c2[0] * t1 + c2[1] * t2, rho, x @ a
 
 
-def _circle_2d(p: np.ndarray) -> tuple[np.ndarray, float]:
-    """Algebraic (Kasa) circle fit of 2D points (N, 2): centre (2,), radius."""
-    a = np.column_stack([2 * p, np.ones(len(p))])
-    b = np.sum(p * p, axis=1)
-    sol = np.linalg.lstsq(a, b, rcond=None)[0]
-    c = sol[:2]
-    return c, float(np.sqrt(max(sol[2] + c @ c, 0.0)))
-
-
 def _circle_axis(x: np.ndarray, a: np.ndarray) -> np.ndarray:
     """Point on the axis line of direction ``a`` from a circle fit of the points projected along it."""
     t1, t2 = tangent_basis(a)
-    c2, _ = _circle_2d(np.stack([x @ t1, x @ t2], axis=1))
+    c2, _ = circle_2d(np.stack([x @ t1, x @ t2], axis=1))
     return c2[0] * t1 + c2[1] * t2
 
 
@@ -76,7 +67,7 @@ def start_with_axis(ptype: str, x: np.ndarray, n: np.ndarray, a: np.ndarray,
         h0 = float(np.median(h - rho / np.tan(half)))
         return Cone(c + (h0 - c @ a) * a, a, half)
     if ptype == "torus":
-        cc, r = _circle_2d(np.stack([rho, h], axis=1))
+        cc, r = circle_2d(np.stack([rho, h], axis=1))
         return Torus(c + (cc[1] - c @ a) * a, a, float(cc[0]), r)
     raise ValueError(ptype)
 

@@ -158,7 +158,7 @@ def _circumcircles(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return p[:, 0] + num / np.where(ok, den, 1.0)[:, None], unit(ab), ok
 
 
-def _circle_2d(p: np.ndarray) -> tuple[np.ndarray, float]:
+def circle_2d(p: np.ndarray) -> tuple[np.ndarray, float]:
     """Algebraic (Kasa) circle fit of 2D points (N, 2): centre (2,), radius."""
     a = np.column_stack([2 * p, np.ones(len(p))])
     sol = np.linalg.lstsq(a, np.sum(p * p, axis=1), rcond=None)[0]
@@ -171,7 +171,7 @@ def torus_from_axis_line(c: np.ndarray, a: np.ndarray, x: np.ndarray, config: Fi
     the cloud's median point); None where degenerate."""
     h, rho, _ = radial_frame(x - c, a)
     m = np.stack([rho, h], axis=1)
-    cc, r = _circle_2d(m)
+    cc, r = circle_2d(m)
     if not np.isfinite(r) or r <= 0:
         return None
     r_lo, r_hi, _, _ = torus_limits(Torus(c, a, 1.0, 1.0), x, config)
@@ -197,7 +197,7 @@ def _hyp_torus_rings(x: np.ndarray, idx: np.ndarray, m: int, config: FitConfig) 
         a = np.linalg.eigh((x - mu).T @ (x - mu))[1][:, 0]
         t1 = unit(np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0]))
         t2 = np.cross(a, t1)
-        c2, _ = _circle_2d(np.stack([(x - mu) @ t1, (x - mu) @ t2], axis=1))
+        c2, _ = circle_2d(np.stack([(x - mu) @ t1, (x - mu) @ t2], axis=1))
         lines.append((mu + c2[0] * t1 + c2[1] * t2, a))
     out: list[Primitive] = []
     for cl, al in lines:

@@ -25,9 +25,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from v2c.fit.ransac import circle_2d
 from v2c.groups import groups_sharing_keys
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Sphere
+from v2c.primitives.directions import tangent_basis
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import KIND_INT, FaceGeom, classify_samples
 from v2c.vbrep.confidence import edge_confidence, face_confidence
@@ -180,22 +182,17 @@ def fit_sphere_points(X: np.ndarray, trim: float = 0.8) -> tuple[Sphere, float] 
 
 def fit_axis_cylinder_points(X: np.ndarray, axis: np.ndarray) -> tuple[Cylinder, float] | None:
     """Least-squares cylinder with a given unit axis through (N, 3) points: an algebraic circle fit of the points
-    projected on the plane normal to the axis, refined by
-    Gauss-Newton on the geometric distance. Returns the cylinder and its RMS distance (metres); None with fewer
-    than 5 points or a degenerate fit."""
+    projected on the plane normal to the axis (`fit.ransac.circle_2d`), refined by Gauss-Newton on the geometric
+    distance. Returns the cylinder and its RMS distance (metres); None with fewer than 5 points or a degenerate
+    fit."""
     if len(X) < 5:
         return None
     a = axis / np.linalg.norm(axis)
-    t1 = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-    t1 /= np.linalg.norm(t1)
-    t2 = np.cross(a, t1)
+    t1, t2 = tangent_basis(a)
     q = np.stack([X @ t1, X @ t2], 1)
-    A = np.concatenate([2 * q, np.ones((len(q), 1))], 1)
-    sol = np.linalg.lstsq(A, np.sum(q**2, 1), rcond=None)[0]
-    r2 = float(sol[2] + sol[:2] @ sol[:2])
-    if not (np.all(np.isfinite(sol)) and r2 > 0):
+    c, r = circle_2d(q)
+    if not (np.all(np.isfinite(c)) and r > 0):
         return None
-    c, r = sol[:2], float(np.sqrt(r2))
     for _ in range(10):  # geometric (Gauss-Newton) refinement: the algebraic fit shrinks short noisy arcs
         v = q - c
         dist = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
