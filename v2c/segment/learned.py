@@ -19,7 +19,7 @@ from v2c.scan import Scan
 from v2c.segment.data import MIRROR_SIGN_CHANNEL, FeatureConfig, scan_features
 from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
 from v2c.segment.net import UNet, bf16_supported, load_weights
-from v2c.segment.refine import RefineConfig, merge_coplanar, split_plane_outliers
+from v2c.segment.refine import RefineConfig, refine_instances
 from v2c.segment.types import Segmentation
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -119,8 +119,7 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
 
         region = part_region(scan, GeometricConfig())[0]
     seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat, part=region)
-    seg = split_plane_outliers(seg, scan.depth, scan.K, probs, cfg.refine)
-    return merge_coplanar(seg, scan.depth, scan.K, cfg.refine)
+    return refine_instances(seg, scan.depth, scan.K, probs, cfg.refine)
 
 
 def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig,

@@ -18,7 +18,7 @@ import numpy as np
 
 from v2c.fit.points import backproject, estimate_part_size
 from v2c.groups import groups_sharing_keys
-from v2c.labels import PrimitiveType, type_axis_of
+from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL
 from v2c.segment.types import Segmentation
 
 
@@ -41,6 +41,31 @@ class RefineConfig:
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
     sample_points: int = 800  # points scoring them (count)
     seed: int = 0
+
+
+_PLANE = TYPE_NAMES.index("plane")
+
+
+def _is_plane(labels: np.ndarray) -> np.ndarray:
+    """(N,) bool: which 18-class labels are planes (any axis class)."""
+    return TYPE_OF_LABEL[np.asarray(labels, np.int64)] == _PLANE
+
+
+def scan_geometry(depth: np.ndarray, K: np.ndarray, inst: np.ndarray) -> tuple[np.ndarray, float]:
+    """(H, W, 3) camera-frame points and the part size (metres) from the valid pixels of the instances: what both
+    steps measure distances in. Neither step moves a pixel into or out of the part, so one computation serves both."""
+    pts = backproject(np.asarray(depth, float), np.asarray(K, float))
+    return pts, estimate_part_size(pts[(np.asarray(depth) > 0) & (np.asarray(inst) > 0)])
+
+
+def refine_instances(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
+                     cfg: RefineConfig = RefineConfig()) -> Segmentation:
+    """`split_plane_outliers`, then `merge_coplanar`, on one point map."""
+    if not cfg.enabled:
+        return seg
+    geometry = scan_geometry(depth, K, seg.instances)
+    seg = split_plane_outliers(seg, depth, K, probs, cfg, geometry)
+    return merge_coplanar(seg, depth, K, cfg, geometry)
 
 
 def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.Generator
@@ -76,23 +101,24 @@ def _same_label_neighbour(inst: np.ndarray, sel: np.ndarray, parent: int, label:
 
 
 def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
-                         cfg: RefineConfig = RefineConfig()) -> Segmentation:
+                         cfg: RefineConfig = RefineConfig(),
+                         geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
     """``seg`` with the off-plane parts of its plane instances split off (module docstring). depth: (H, W) metres
-    (0 = no reading); probs: the network's (18, H, W) class probabilities, which label the new instances."""
+    (0 = no reading); probs: the network's (18, H, W) class probabilities, which label the new instances;
+    geometry: `scan_geometry` of the scan when already computed."""
     inst = np.asarray(seg.instances).astype(np.int32).copy()
     valid = (np.asarray(depth) > 0) & (inst > 0)
     if not cfg.enabled or not valid.any():
         return seg
-    pts = backproject(np.asarray(depth, float), np.asarray(K, float))
-    size = estimate_part_size(pts[valid])
+    pts, size = geometry or scan_geometry(depth, K, inst)
     labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores))
+    is_plane = _is_plane(seg.labels)
     rng = np.random.default_rng(cfg.seed)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * cfg.open_px + 1,) * 2)
     n0 = len(labels)
     changed = False
     for i in range(1, n0):  # loop over instances
-        lab = int(labels[i])
-        if not 1 <= lab <= 17 or type_axis_of(lab)[0] is not PrimitiveType.PLANE:
+        if not is_plane[i]:
             continue
         m = valid & (inst == i)
         if m.sum() < cfg.min_parent_px:
@@ -129,8 +155,8 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
 
 
-def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig()
-                   ) -> Segmentation:
+def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
+                   geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
     """``seg`` with adjacent plane instances of the same label merged where they lie on one plane (normals within
     merge_angle_deg, each one's points within merge_tol_part part sizes of the other's plane, median): the network
     cut a face where it saw a print edge, a shadow or noise. Only touching instances (4-neighbour pixel pairs)."""
@@ -138,12 +164,10 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
     valid = (np.asarray(depth) > 0) & (inst > 0)
     if not (cfg.enabled and cfg.merge) or not valid.any():
         return seg
-    pts = backproject(np.asarray(depth, float), np.asarray(K, float))
-    size = estimate_part_size(pts[valid])
+    pts, size = geometry or scan_geometry(depth, K, inst)
     tol = cfg.merge_tol_part * size
     labels = np.asarray(seg.labels)
-    is_plane = np.array([1 <= int(lab) <= 17 and type_axis_of(int(lab))[0] is PrimitiveType.PLANE
-                         for lab in labels])
+    is_plane = _is_plane(labels)
     pairs = np.concatenate([np.stack([inst[:, :-1].ravel(), inst[:, 1:].ravel()], 1),
                             np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)])
     pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
