@@ -35,9 +35,9 @@ TRAINING_RECIPE: tuple[tuple[int, int, str, int, int], ...] = (
     (640, 480, "sensor", 150, 105),
     (640, 480, "paper", 60, 106),
 )
-#: The fine-tuning sets (stages 4-6, MODEL_CARD.md): (width, height, noise, scans, seed, print share), generated
+#: The fine-tuning sets (stages 4-7, MODEL_CARD.md): (width, height, noise, scans, seed, print share), generated
 #: into DATA/<width>x<height>_<noise>[_print]_s<seed>/ like TRAINING_RECIPE. Stage 4 trains on STAGE4_RECIPE (the
-#: validation size, 640x480, weighted up; half of seed 108's parts printed); stages 5 and 6 on STAGE5_RECIPE.
+#: validation size, 640x480, weighted up; half of seed 108's parts printed); stages 5 to 7 on STAGE5_RECIPE.
 STAGE4_RECIPE: tuple[tuple, ...] = (
     *(row for row in TRAINING_RECIPE if row[4] in (101, 103, 105, 106)),
     (640, 480, "sensor", 1000, 107, 0.0),
