@@ -107,3 +107,67 @@ def test_soft_boundary_cuts_on_the_ridge() -> None:
         assert np.array_equal(seg.instances == i, faces == f)
     nearest = extract_instances(labels, prob, cfg=InstanceConfig(flood_levels=()))
     assert not np.array_equal(nearest.instances == nearest.instances[21, 30], faces == 2)
+
+
+def _probs_of(labels: np.ndarray, p_own: float) -> np.ndarray:
+    """(18, H, W) class probabilities: ``p_own`` on each pixel's label, the rest spread evenly over the others."""
+    probs = np.full((18,) + labels.shape, (1.0 - p_own) / 17, np.float32)
+    probs[labels.astype(np.int64), np.arange(labels.shape[0])[:, None], np.arange(labels.shape[1])[None, :]] = p_own
+    return probs
+
+
+def _thin_wall() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A 4-px strip (label 7, cylinder Z) between two planes (labels 1 and 3), all three under one predicted
+    boundary band 8 px wide: the strip has no pixel of low boundary probability (a hole's wall under its rim)."""
+    faces = np.zeros((40, 60), np.uint16)
+    faces[2:18, 2:58] = 1
+    faces[18:22, 2:58] = 2
+    faces[22:38, 2:58] = 3
+    labels = np.vectorize({0: 0, 1: 1, 2: 7, 3: 3}.get)(faces).astype(np.uint8)
+    prob = np.zeros(faces.shape, np.float32)
+    prob[16:24] = 0.9
+    return faces, labels, prob
+
+
+def test_face_inside_the_boundary_band_gets_its_own_instance() -> None:
+    faces, labels, prob = _thin_wall()
+    probs = _probs_of(labels, 0.9)
+    seg = extract_instances(labels, prob, probs=probs)
+    m = _match(seg.instances, faces)
+    assert np.array_equal(seg.instances == m[2], faces == 2)
+    assert seg.labels[m[2]] == 7
+    # without band markers the strip is flooded by its neighbours
+    off = extract_instances(labels, prob, probs=probs, cfg=InstanceConfig(band_marker_px=0))
+    assert not np.isin(faces[off.instances == off.instances[20, 30]], [2]).all()
+    # an unsure strip (mean probability of its label under band_marker_prob) is label noise: no marker
+    unsure = probs.copy()
+    unsure[:, faces == 2] = _probs_of(labels, 0.5)[:, faces == 2]
+    noisy = extract_instances(labels, prob, probs=unsure)
+    assert noisy.num_instances == 2
+
+
+def test_band_next_to_its_own_face_is_not_a_marker() -> None:
+    """The band halves of two faces carry their faces' labels and touch their markers: no extra instance."""
+    faces, labels, prob = _thin_wall()
+    labels[faces == 2] = 1  # the strip is painted with its upper neighbour's label: the band is that face's edge
+    seg = extract_instances(labels, prob, probs=_probs_of(labels, 0.9))
+    assert seg.num_instances == 2
+    assert (seg.instances[faces == 1] == seg.instances[5, 30]).all()
+
+
+def test_open_contact_keeps_confident_faces_of_two_types_apart() -> None:
+    """A confident cylinder patch inside a plane with no predicted boundary stays an instance (a hole wall the
+    boundary head missed); an unsure one is label noise and merges, as does a patch of another plane class."""
+    faces, labels, _ = _faces_and_labels()
+    region = faces == 1
+    patch = np.zeros(faces.shape, bool)
+    patch[8:20, 8:20] = True
+    no_boundary = np.zeros(faces.shape, bool)
+    for lab, p_own, apart in ((7, 0.95, True), (7, 0.6, False), (4, 0.95, False)):
+        noisy = np.where(region, 1, 0).astype(np.uint8)
+        noisy[patch] = lab
+        seg = extract_instances(noisy, no_boundary, probs=_probs_of(noisy, p_own))
+        assert (seg.num_instances == 2) == apart, (lab, p_own)
+        if apart:
+            assert np.array_equal(seg.instances == seg.instances[10, 10], patch)
+            assert seg.labels[seg.instances[10, 10]] == 7

@@ -28,7 +28,7 @@ class RefineConfig:
 
     enabled: bool = True
     min_parent_px: int = 80  # plane instances with fewer valid pixels are left alone (pixels)
-    tol_part: float = 0.02  # off-plane distance that counts as another surface (part-size units)
+    tol_part: float = 0.015  # off-plane distance that counts as another surface (part-size units)
     tol_noise: float = 4.0  # ... and at least this many robust residual sigmas of the plane's inliers (ratio)
     min_split_px: int = 60  # smallest split-off set after the opening (pixels)
     open_px: int = 1  # opening radius applied to the outlier mask first (pixels; removes edge speckle)
