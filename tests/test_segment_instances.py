@@ -158,7 +158,7 @@ def test_band_next_to_its_own_face_is_not_a_marker() -> None:
 def test_open_contact_keeps_confident_faces_of_two_types_apart() -> None:
     """A confident cylinder patch inside a plane with no predicted boundary stays an instance (a hole wall the
     boundary head missed); an unsure one is label noise and merges, as does a patch of another plane class."""
-    faces, labels, _ = _faces_and_labels()
+    faces, _, _ = _faces_and_labels()
     region = faces == 1
     patch = np.zeros(faces.shape, bool)
     patch[8:20, 8:20] = True
