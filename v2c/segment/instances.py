@@ -18,7 +18,7 @@
 3b. A face the boundary band covers whole (a hole's wall under its rim, a narrow step or chamfer: no seed pixel) is
    kept as it is labelled: band pixels of one label that touch no marker of that label and are sure of it
    (``band_marker_px``, ``band_marker_prob``) form an instance that the flooding does not take (tuning set,
-   stage-7 weights: face recall 0.808 -> 0.882, precision 0.906 -> 0.908).
+   stage-7 weights, 100 scans: face recall 0.808 -> 0.882, precision 0.906 -> 0.908).
 4. Neighbouring instances whose contact is mostly open (core pixels on both sides, i.e. no boundary evidence
    between them) were split by label noise only: they are merged. Two faces separated by a partial boundary have
    a contact that is mostly closed, so they stay apart; so do two instances of different primitive types that are
@@ -44,7 +44,7 @@ from v2c.segment.types import Segmentation
 class InstanceConfig:
     boundary_threshold: float = 0.25  # boundary probability above which a pixel is on a face boundary
     core_erode_px: int = 0  # core pixels are eroded by this much before the components are taken (pixels)
-    min_area_px: int = 15  # markers smaller than this are dissolved into their neighbours (pixels)
+    min_area_px: int = 50  # markers smaller than this are dissolved into their neighbours (pixels)
     max_fill_px: float = 6.0  # farthest a leftover part pixel is attached to an instance (pixels)
     merge_open_frac: float = 0.5  # merge two instances when this share of their contact is open (no boundary)
     merge_min_contact_px: int = 3  # ... and their contact is at least this long (pixel pairs)
@@ -61,7 +61,7 @@ class InstanceConfig:
     band_marker_px: int = 25  # a face wholly inside the predicted boundary band (a thin wall or step) is an
     # instance of its own: connected band pixels of one label, at least this many, touching no marker of that label
     # (pixels; 0 = off)
-    band_marker_prob: float = 0.6  # ... and a mean probability of its label at least this (with class
+    band_marker_prob: float = 0.55  # ... and a mean probability of its label at least this (with class
     # probabilities; label noise along a boundary is less sure than a thin face)
 
 
