@@ -33,6 +33,8 @@ class RefineConfig:
     min_split_px: int = 60  # smallest split-off set after the opening (pixels)
     open_px: int = 1  # opening radius applied to the outlier mask first (pixels; removes edge speckle)
     min_split_share: float = 0.02  # ... and at least this share of the parent instance (fraction)
+    max_split_share: float = 0.5  # ... and at most this share (fraction; a larger set is more likely the face
+    # itself, with the plane fitted to what it wrongly took in)
     merge: bool = True  # merge adjacent plane instances of one label that lie on one plane (fragments of a face)
     merge_angle_deg: float = 5.0  # ... normals within this angle (degrees)
     merge_tol_part: float = 0.01  # ... and each one's points within this median distance of the other's plane
@@ -137,7 +139,7 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
         n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(far, connectivity=8)
         min_px = max(cfg.min_split_px, cfg.min_split_share * m.sum())
         for c in range(1, n_cc):  # loop over outlier components
-            if stats[c, cv2.CC_STAT_AREA] < min_px:
+            if not min_px <= stats[c, cv2.CC_STAT_AREA] <= cfg.max_split_share * m.sum():
                 continue
             sel = cc == c
             p = probs[:, sel].mean(axis=1)
