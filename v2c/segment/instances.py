@@ -18,7 +18,7 @@
 3b. A face the boundary band covers whole (a hole's wall under its rim, a narrow step or chamfer: no seed pixel) is
    kept as it is labelled: band pixels of one label that touch no marker of that label and are sure of it
    (``band_marker_px``, ``band_marker_prob``) form an instance that the flooding does not take (tuning set,
-   stage-7 weights, 100 scans: face recall 0.808 -> 0.882, precision 0.906 -> 0.908).
+   stage-7 weights, 100 scans: face recall 0.808 -> 0.882, precision 0.906 -> 0.908; docs/segmentation.md).
 4. Neighbouring instances whose contact is mostly open (core pixels on both sides, i.e. no boundary evidence
    between them) were split by label noise only: they are merged. Two faces separated by a partial boundary have
    a contact that is mostly closed, so they stay apart; so do two instances of different primitive types that are
@@ -58,7 +58,7 @@ class InstanceConfig:
     # thresholds of the flooding from the markers, increasing (empty = the nearest marker only)
     depth_edge_gain: float = 0.0  # extra evidence = depth-edge feature (relative jump x 25) times this
     normal_gain: float = 0.0  # extra evidence = (1 - cos of the normal change over 2 px) times this
-    band_marker_px: int = 25  # a face wholly inside the predicted boundary band (a thin wall or step) is an
+    band_marker_px: int = 35  # a face wholly inside the predicted boundary band (a thin wall or step) is an
     # instance of its own: connected band pixels of one label, at least this many, touching no marker of that label
     # (pixels; 0 = off)
     band_marker_prob: float = 0.55  # ... and a mean probability of its label at least this (with class

@@ -37,7 +37,7 @@ TRAINING_RECIPE: tuple[tuple[int, int, str, int, int], ...] = (
 )
 #: The fine-tuning sets (stages 4-7, MODEL_CARD.md): (width, height, noise, scans, seed, print share), generated
 #: into DATA/<width>x<height>_<noise>[_print]_s<seed>/ like TRAINING_RECIPE. Stage 4 trains on STAGE4_RECIPE (the
-#: validation size, 640x480, weighted up; half of seed 108's parts printed); stages 5 to 7 on STAGE5_RECIPE.
+#: validation size, 640x480, weighted up; half of seed 108's parts printed); stages 5 to 8 on STAGE5_RECIPE.
 STAGE4_RECIPE: tuple[tuple, ...] = (
     *(row for row in TRAINING_RECIPE if row[4] in (101, 103, 105, 106)),
     (640, 480, "sensor", 1000, 107, 0.0),
