@@ -170,3 +170,33 @@ def test_axis_cylinder_fallback_recovers_a_small_arc() -> None:
     off = (cyl.origin - centre) - ((cyl.origin - centre) @ axis) * axis  # axis-line offset
     assert np.linalg.norm(off) < 1e-3
     assert fit_axis_cylinder_points(X[:4], axis) is None
+
+
+def test_labelled_plane_fallback_uses_the_frame_axis() -> None:
+    # a face seen at a grazing angle has no depth of its own: its evidence is its two edges with fitted neighbours
+    # (two lines, which a free plane fit cannot tell from other planes through them); labelled plane Y, it becomes
+    # the plane normal to the frame's Y axis through them. Plane U gets no labelled fallback; scattered evidence none.
+    from types import SimpleNamespace
+
+    from v2c.labels import label_of
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.extract import _labelled_fallback, fit_axis_plane_points
+
+    rng = np.random.default_rng(1)
+    c, s = np.cos(0.3), np.sin(0.3)
+    frame = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]]) @ np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+    y = frame[1]
+    on_plane = 0.04 * y + np.array([0.0, 0.0, 0.5])
+    t = rng.uniform(-0.03, 0.03, (2, 60))
+    X = np.concatenate([on_plane + t[0][:, None] * frame[0], on_plane + 0.01 * frame[2] + t[1][:, None] * frame[0]])
+    X += rng.normal(0, 2e-4, X.shape)
+    cfg = VBRepConfig()
+    fit = SimpleNamespace(frame=frame)
+    seg = SimpleNamespace(labels=np.array([0, label_of("plane", "Y"), label_of("plane", "U")], np.uint8))
+    plane, rms, axl = _labelled_fallback(1, seg, fit, X, 0.1, cfg)
+    assert axl == "Y" and abs(abs(plane.axis_vector @ y) - 1.0) < 1e-12 and rms < 5e-4
+    assert abs(plane.signed_distance(on_plane[None])[0]) < 2e-4
+    assert _labelled_fallback(2, seg, fit, X, 0.1, cfg) is None
+    scattered = X + rng.normal(0, 0.01, X.shape)
+    assert _labelled_fallback(1, seg, fit, scattered, 0.1, cfg) is None
+    assert fit_axis_plane_points(X[:2], y) is None

@@ -206,20 +206,36 @@ def fit_axis_cylinder_points(X: np.ndarray, axis: np.ndarray) -> tuple[Cylinder,
     return Cylinder(origin, a, r), float(np.sqrt(np.mean(d**2)))
 
 
+def fit_axis_plane_points(X: np.ndarray, normal: np.ndarray) -> tuple[Plane, float] | None:
+    """Least-squares plane with a given unit normal through (N, 3) points: the mean offset along the normal.
+    Returns the plane and its RMS distance (metres); None with fewer than 3 points."""
+    if len(X) < 3:
+        return None
+    n = normal / np.linalg.norm(normal)
+    return Plane(X.mean(axis=0), n), float(np.std(X @ n))
+
+
 def _labelled_fallback(inst: int, seg: Any, fit: Any, X: np.ndarray, scale: float, cfg: VBRepConfig
-                       ) -> tuple[Cylinder, float, str] | None:
-    """An unfitted instance labelled cylinder with an aligned axis class (X / Y / Z): the cylinder on that axis of
-    the shared frame that fits its evidence within fallback_rms and has a radius of at most the part size (a tiny
-    wall patch keeps its type instead of becoming a plane); else None."""
+                       ) -> tuple[Cylinder | Plane, float, str] | None:
+    """An unfitted instance labelled cylinder or plane with an aligned axis class (X / Y / Z): the cylinder on
+    that axis of the shared frame (radius at most the part size: a tiny wall patch keeps its type instead of
+    becoming a plane), or the plane normal to it, that fits its evidence within fallback_rms; else None. A face
+    seen at a grazing angle has hardly any depth; its label's axis fixes the plane that its edges alone cannot."""
     labels = np.asarray(getattr(seg, "labels", ()))
     frame = getattr(fit, "frame", None)
     if frame is None or inst >= len(labels) or not 1 <= int(labels[inst]) <= 16:
         return None
     ptype, ax = type_axis_of(int(labels[inst]))
-    if ptype.value != "cylinder" or ax is None or ax.value == "U":
+    if ptype.value not in ("cylinder", "plane") or ax is None or ax.value == "U":
         return None
-    got = fit_axis_cylinder_points(X, np.asarray(frame, float)[{"X": 0, "Y": 1, "Z": 2}[ax.value]])
-    if got is None or got[1] > cfg.fallback_rms * scale or got[0].radius > scale:
+    axis = np.asarray(frame, float)[{"X": 0, "Y": 1, "Z": 2}[ax.value]]
+    if ptype.value == "plane":
+        got = fit_axis_plane_points(X, axis)
+    else:
+        got = fit_axis_cylinder_points(X, axis)
+        if got is not None and got[0].radius > scale:
+            return None
+    if got is None or got[1] > cfg.fallback_rms * scale:
         return None
     return got[0], got[1], ax.value
 
@@ -288,19 +304,22 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
         if len(sources) < 2:  # one neighbour's edge alone does not fix a plane (it may lie in that neighbour)
             continue
         evidence = np.concatenate(sources)
-        cyl = _labelled_fallback(int(inst), seg, fit, evidence, scale, cfg)
-        if cyl is not None:
-            add(int(inst), cyl[0], cyl[1], cyl[2], {"fallback": True})
+
+        def coincides(plane: Plane) -> bool:  # with a fitted plane (within fallback_min_angle_deg, fallback_rms)
+            return any(f.prim.type == "plane" and abs(float(f.prim.axis_vector @ plane.axis_vector))
+                       > np.cos(np.deg2rad(cfg.fallback_min_angle_deg))
+                       and abs(float(f.prim.axis_vector @ (plane.origin - f.prim.origin))) < cfg.fallback_rms * scale
+                       for f in faces.values())
+
+        lab = _labelled_fallback(int(inst), seg, fit, evidence, scale, cfg)
+        if lab is not None and not (lab[0].type == "plane" and coincides(lab[0])):
+            add(int(inst), lab[0], lab[1], lab[2], {"fallback": True})
             continue
         got = fit_plane_points(evidence)
         if got is None:
             continue
         plane, rms, flat = got
-        same = any(f.prim.type == "plane" and abs(float(f.prim.axis_vector @ plane.axis_vector))
-                   > np.cos(np.deg2rad(cfg.fallback_min_angle_deg))
-                   and abs(float(f.prim.axis_vector @ (plane.origin - f.prim.origin))) < cfg.fallback_rms * scale
-                   for f in faces.values())
-        if rms <= cfg.fallback_rms * scale and flat >= cfg.fallback_flatness and not same:
+        if rms <= cfg.fallback_rms * scale and flat >= cfg.fallback_flatness and not coincides(plane):
             add(int(inst), plane, rms, None, {"fallback": True})
     if stats is not None:
         stats["rejected_primitives"] = rejected
