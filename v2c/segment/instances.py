@@ -121,6 +121,15 @@ def _majority_label(inst: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return votes.reshape(n, NUM_CLASSES).argmax(axis=1)
 
 
+def _mean_prob_of(ids: np.ndarray, label_of_id: np.ndarray, probs: np.ndarray) -> np.ndarray:
+    """(len(label_of_id),) mean probability, over each id's pixels of an id map, of that id's label (0 where empty)."""
+    sel = ids > 0
+    flat = ids[sel].astype(np.int64)
+    own = probs.reshape(probs.shape[0], -1)[label_of_id[flat], np.flatnonzero(sel)]
+    n = len(label_of_id)
+    return np.bincount(flat, weights=own, minlength=n) / np.maximum(np.bincount(flat, minlength=n), 1)
+
+
 def _merge_open(inst: np.ndarray, core: np.ndarray, labels: np.ndarray, probs: np.ndarray | None,
                 cfg: InstanceConfig) -> np.ndarray:
     """Union instances whose shared border is mostly open (both sides core pixels); with ``merge_same_type``,
@@ -149,11 +158,7 @@ def _merge_open(inst: np.ndarray, core: np.ndarray, labels: np.ndarray, probs: n
         a, b = uk // (n + 1), uk % (n + 1)
         ok = kind[a] == kind[b]
         if probs is not None and cfg.merge_sure_prob > 0:
-            sel = inst > 0
-            ids = inst[sel].astype(np.int64)
-            own = probs.reshape(probs.shape[0], -1)[major[ids], np.flatnonzero(sel)]
-            sure = np.bincount(ids, weights=own, minlength=n + 1) >= cfg.merge_sure_prob * np.maximum(
-                np.bincount(ids, minlength=n + 1), 1)
+            sure = _mean_prob_of(inst, major, probs) >= cfg.merge_sure_prob
             ok |= ~(sure[a] & sure[b])
         merge &= ok
     if not merge.any():
@@ -210,13 +215,6 @@ def _markers(labels: np.ndarray, seeds: np.ndarray, split_px: int) -> np.ndarray
     return inst.astype(np.int32)
 
 
-def _label_per_id(ids: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """(max id + 1,) label of each id of a map whose regions each hold one label (``_components_per_label``)."""
-    out = np.zeros(int(ids.max()) + 1, np.int64)
-    out[ids.ravel()] = labels.ravel()
-    return out
-
-
 def _band_markers(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs: np.ndarray | None,
                   cfg: InstanceConfig) -> np.ndarray:
     """(H, W) int32 instances, numbered above ``inst``'s markers (0 elsewhere), of the faces the boundary band
@@ -229,7 +227,7 @@ def _band_markers(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs:
     if n == 0:
         return band
     area = np.bincount(band.ravel(), minlength=n + 1)
-    lab_band, lab_inst = _label_per_id(band, labels), _label_per_id(inst, labels)
+    lab_band, lab_inst = _majority_label(band, labels), _majority_label(inst, labels)  # one label per region
     same = np.zeros(n + 1, bool)  # band component touches a marker of its own label
     for a, b in ((band[:, :-1], inst[:, 1:]), (band[:, 1:], inst[:, :-1]),
                  (band[:-1, :], inst[1:, :]), (band[1:, :], inst[:-1, :])):
@@ -238,9 +236,7 @@ def _band_markers(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs:
         same[ids[lab_band[ids] == lab_inst[b[m]]]] = True
     keep = (area >= cfg.band_marker_px) & ~same
     if probs is not None and cfg.band_marker_prob > 0:
-        sel = band > 0
-        p_own = probs.reshape(probs.shape[0], -1)[lab_band[band[sel]], np.flatnonzero(sel)]
-        keep &= np.bincount(band[sel], weights=p_own, minlength=n + 1) >= cfg.band_marker_prob * area
+        keep &= _mean_prob_of(band, lab_band, probs) >= cfg.band_marker_prob
     keep[0] = False
     return np.where(keep[band], band + int(inst.max()), 0).astype(np.int32)
 

@@ -123,7 +123,8 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
         if not is_plane[i]:
             continue
         m = valid & (inst == i)
-        if m.sum() < cfg.min_parent_px:
+        parent_px = int(m.sum())
+        if parent_px < cfg.min_parent_px:
             continue
         x = pts[m]
         tol = cfg.tol_part * size
@@ -137,9 +138,9 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
         if cfg.open_px > 0:
             far = cv2.morphologyEx(far, cv2.MORPH_OPEN, kernel)
         n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(far, connectivity=8)
-        min_px = max(cfg.min_split_px, cfg.min_split_share * m.sum())
+        min_px = max(cfg.min_split_px, cfg.min_split_share * parent_px)
         for c in range(1, n_cc):  # loop over outlier components
-            if not min_px <= stats[c, cv2.CC_STAT_AREA] <= cfg.max_split_share * m.sum():
+            if not min_px <= stats[c, cv2.CC_STAT_AREA] <= cfg.max_split_share * parent_px:
                 continue
             sel = cc == c
             p = probs[:, sel].mean(axis=1)

@@ -296,6 +296,12 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
         add(int(inst), as_primitive(fit.primitives[inst]),
             float(getattr(fit, "residuals", {}).get(inst, 0.0) or 0.0), getattr(fit, "axis_labels", {}).get(inst),
             {})
+    def coincides(plane: Plane) -> bool:  # with a fitted plane (within fallback_min_angle_deg, fallback_rms)
+        return any(f.prim.type == "plane" and abs(float(f.prim.axis_vector @ plane.axis_vector))
+                   > np.cos(np.deg2rad(cfg.fallback_min_angle_deg))
+                   and abs(float(f.prim.axis_vector @ (plane.origin - f.prim.origin))) < cfg.fallback_rms * scale
+                   for f in faces.values())
+
     counts = np.bincount(inst_map.ravel())
     for inst in np.flatnonzero(counts >= cfg.fallback_min_px):
         if inst == 0 or int(inst) in faces:
@@ -304,13 +310,6 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
         if len(sources) < 2:  # one neighbour's edge alone does not fix a plane (it may lie in that neighbour)
             continue
         evidence = np.concatenate(sources)
-
-        def coincides(plane: Plane) -> bool:  # with a fitted plane (within fallback_min_angle_deg, fallback_rms)
-            return any(f.prim.type == "plane" and abs(float(f.prim.axis_vector @ plane.axis_vector))
-                       > np.cos(np.deg2rad(cfg.fallback_min_angle_deg))
-                       and abs(float(f.prim.axis_vector @ (plane.origin - f.prim.origin))) < cfg.fallback_rms * scale
-                       for f in faces.values())
-
         lab = _labelled_fallback(int(inst), seg, fit, evidence, scale, cfg)
         if lab is not None and not (lab[0].type == "plane" and coincides(lab[0])):
             add(int(inst), lab[0], lab[1], lab[2], {"fallback": True})

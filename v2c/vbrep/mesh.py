@@ -96,10 +96,8 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
         three = (t0 >= 0) & (t1 >= 0) & (t2 >= 0) & (miss < 0)
         tris.append(np.stack([t0, t1, t2], 1)[three])
     tri = np.concatenate(tris).astype(np.int64)
-    if len(tri) and out.any():  # a triangle of outline points only spans a gap (a small hole) of the region
-        on_outline = np.zeros(len(verts), bool)
-        on_outline[np.flatnonzero(out)] = True
-        tri = tri[~on_outline[tri].all(axis=1)]
+    if len(tri):  # a triangle of outline points only (``out``, per vertex) spans a gap (a small hole) of the region
+        tri = tri[~out[tri].all(axis=1)]
     if len(tri) == 0:
         return np.zeros((0, 3)), tri
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
