@@ -146,3 +146,37 @@ def test_type_search_short_cylinder_is_no_sphere() -> None:
     n = unit(radial + rng.normal(0, 0.03, radial.shape))
     kind, f = fit_instance(x, n, None, SCALE, FitConfig(), np.random.default_rng(2))
     assert kind == "cylinder" and f is not None
+
+
+def taper_samples(gt: Cone, n: int = 200, seed: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """A short patch of a slightly tapered shaft as a small instance shows it: 12 mm along the axis, 100 degrees
+    around it; 0.3 mm point noise, and depth-gradient normals smoothed across the shoulder beside it (turned 60
+    degrees towards the axis, noise 0.1), so that their angle to the axis says nothing about the taper."""
+    rng = np.random.default_rng(seed)
+    t1, t2 = tangent_basis(gt.axis)
+    h = rng.uniform(0.19, 0.202, n)  # heights from the apex (metres): radius about 17 mm at 5 degrees
+    phi = rng.uniform(np.deg2rad(-140), np.deg2rad(-40), n)
+    e = np.cos(phi)[:, None] * t1 + np.sin(phi)[:, None] * t2
+    x = gt.origin + h[:, None] * gt.axis + (h * np.tan(gt.half_angle))[:, None] * e
+    x = x + rng.normal(0, 0.0003, x.shape)
+    return x, unit(gt.normal(x) + np.sqrt(3.0) * gt.axis + rng.normal(0, 0.1, x.shape))
+
+
+def test_axis_refit_keeps_a_slight_taper() -> None:
+    """Held on its axis, a 5-degree cone patch with misleading normals keeps its taper. On a benchmark scan the
+    start from the normals alone once ran to a 68-degree funnel with its apex 2 m behind the camera; the refit
+    now also starts from the free fit, and a joint solve that drives a cone that wide (wider than max_radius at
+    its points) goes back (`cone_ok`)."""
+    from v2c.fit.ransac import cone_ok
+
+    axis = unit(np.array([0.05, 0.92, 0.4]))
+    gt = Cone(np.array([0.0, 0.0, 0.5]) - 0.196 * axis, axis, np.deg2rad(5.0))
+    x, n = taper_samples(gt)
+    free = Cone(gt.origin + 0.001 * tangent_basis(axis)[0], unit(axis + 0.01 * tangent_basis(axis)[1]),
+                gt.half_angle + np.deg2rad(0.5))  # a free fit a little off
+    q = fit_with_axis(free, x, n, axis, 0.2, FitConfig())
+    assert isinstance(q, Cone) and cone_ok(q, x, 0.2, FitConfig())
+    assert abs(np.rad2deg(q.half_angle) - 5.0) < 1.5  # degrees
+    assert np.median(np.abs(q.signed_distance(x))) < 0.0005  # metres (noise 0.3 mm)
+    funnel = Cone(gt.origin - 2.0 * axis, axis, np.deg2rad(68.0))  # the runaway solution's shape
+    assert not cone_ok(funnel, x, 0.2, FitConfig())

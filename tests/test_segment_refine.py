@@ -89,3 +89,80 @@ def test_fragments_of_one_plane_are_merged_and_a_step_is_not() -> None:
     other = Segmentation(inst, np.array([0, PLANE_Z, label_of("plane", "X"), PLANE_Z], np.uint8), seg.scores,
                          "learned")
     assert merge_coplanar(other, depth, K, RefineConfig()) is other  # labels differ: never merged
+
+
+def _chamfered_top(width_px: int = 8, slope_deg: float = 25.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(depth, part, chamfer) of a face-on top face (z = 0.5 m, rows 20-79, columns 10-149) whose last
+    ``width_px`` rows are a narrow chamfer turning ``slope_deg`` away: 20 mm wide, it stays within about 9 mm
+    of the top's plane, the same as the split's distance tolerance (0.015 part sizes)."""
+    v = np.arange(H, dtype=float)[:, None].repeat(W, 1)
+    v0 = 80 - width_px
+    t = np.tan(np.deg2rad(slope_deg))
+    y0 = (v0 - K[1, 2]) / K[1, 1] * 0.5
+    z = np.where(v < v0, 0.5, (0.5 - y0 * t) / (1.0 - (v - K[1, 2]) / K[1, 1] * t))
+    part = np.zeros((H, W), bool)
+    part[20:80, 10:150] = True
+    chamfer = part & (v >= v0)
+    return np.where(part, z, 0.0), part, chamfer
+
+
+def test_narrow_chamfer_is_split_by_its_normals() -> None:
+    """The network labels the chamfer unaligned plane but floods it into the top's instance. Distance alone leaves
+    it (or splits off its far rows only); the normals, 25 degrees off the top's, with the other label, split it
+    whole."""
+    from v2c.segment.data import estimate_normals
+
+    depth, part, chamfer = _chamfered_top()
+    plane_u = label_of("plane", "U")
+    inst = part.astype(np.int32)
+    seg = Segmentation(inst, np.array([0, PLANE_Z], np.uint8), np.array([0, 0.9], np.float32), "learned")
+    probs = _probs(np.where(chamfer, plane_u, PLANE_Z))
+    normals = np.moveaxis(estimate_normals(depth, K), 2, 0)
+    by_distance = split_plane_outliers(seg, depth, K, probs, RefineConfig())
+    assert max((_iou(by_distance.instances == k, chamfer) for k in range(2, by_distance.num_instances + 1)),
+               default=0.0) < 0.5
+    out = split_plane_outliers(seg, depth, K, probs, RefineConfig(), normals=normals)
+    assert out.num_instances == 2 and out.labels[2] == plane_u
+    assert _iou(out.instances == 2, chamfer) > 0.7  # the normals' smoothing blurs a row or two at each side
+    assert _iou(out.instances == 1, part & ~chamfer) > 0.95
+    # where the network calls the chamfer the top's own class, the normals alone do not split it
+    same = split_plane_outliers(seg, depth, K, _probs(np.full((H, W), PLANE_Z)), RefineConfig(), normals=normals)
+    assert max((_iou(same.instances == k, chamfer) for k in range(2, same.num_instances + 1)), default=0.0) < 0.5
+
+
+def _shaft(step_m: float, noise_m: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(depth, part) of a horizontal shaft (axis along camera x at y = 0, z = 0.5 m) of radius 50 mm for x < 0
+    and 50 mm + step_m for x >= 0, with Gaussian depth noise: two coaxial faces whose shoulder is under a pixel
+    wide."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+    d = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
+    z0 = 0.5
+    depth = np.zeros((H, W))
+    for r, on_right in ((0.05, False), (0.05 + step_m, True)):
+        a = d[..., 1] ** 2 + 1.0
+        b = -2.0 * z0
+        c = z0 ** 2 - r ** 2
+        disc = b * b - 4 * a * c
+        t = np.where(disc > 0, (-b - np.sqrt(np.maximum(disc, 0))) / (2 * a), 0.0)
+        side = (t * d[..., 0] >= 0) == on_right
+        depth = np.where((disc > 0) & side, t, depth)
+    part = depth > 0
+    return np.where(part, depth + rng.normal(0.0, noise_m, depth.shape), 0.0), part
+
+
+def test_coaxial_radius_step_is_split_and_a_plain_shaft_is_not() -> None:
+    from v2c.segment.refine import split_coaxial_steps
+
+    for step_m in (0.004, 0.0):  # a 4 mm step (0.01 part sizes), then none
+        depth, part = _shaft(step_m, 0.0005, seed=5)
+        seg = Segmentation(part.astype(np.int32), np.array([0, label_of("cylinder", "X")], np.uint8),
+                           np.array([0, 0.9], np.float32), "learned")
+        out = split_coaxial_steps(seg, depth, K, RefineConfig())
+        if step_m == 0.0:
+            assert out is seg
+            continue
+        right = part & (np.arange(W)[None, :] >= K[0, 2])
+        assert out.num_instances == 2 and out.labels[2] == out.labels[1]
+        assert max(_iou(out.instances == k, right) for k in (1, 2)) > 0.95
+        assert max(_iou(out.instances == k, part & ~right) for k in (1, 2)) > 0.95

@@ -95,3 +95,4 @@ def test_extracted_meshes_lie_in_front_of_the_camera_on_their_surfaces():
         mv = np.asarray(f.mesh_vertices, float)
         assert len(mv) and mv[:, 2].min() > 0.1
         assert np.abs(from_dict(f.primitive).signed_distance(mv)).max() <= 1e-7
+

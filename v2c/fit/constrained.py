@@ -81,8 +81,9 @@ def fit_with_axis(prim: Primitive, x: np.ndarray, n: np.ndarray, a: np.ndarray, 
     best, cost = prim, np.inf
     starts = [start_with_axis(prim.type, x, n, a, by_points)
               for by_points in ((False, True) if prim.type in ("cylinder", "torus") else (False,))]
-    if isinstance(prim, Torus):  # the free fit turned onto the axis: the closed-form cross-section circle of a
-        # noisy arc can be far off (a 11 mm tube started at 27 mm) while the free fit's radii are good
+    if isinstance(prim, (Torus, Cone)):  # the free fit turned onto the axis: the closed-form cross-section circle
+        # of a noisy arc can be far off (a 11 mm tube started at 27 mm), and so can a cone's half angle from the
+        # normals of a small patch (64 degrees for a 5-degree taper), while the free fit's are good
         starts.append(prim.from_local(np.zeros(prim.local_size), a))
     for start in starts:
         if start is None:

@@ -236,6 +236,16 @@ def torus_ok(prim: Primitive, x: np.ndarray, config: FitConfig, slack: float = 1
             and prim.radius > config.torus_min_ratio * prim.minor_radius / slack and prim.radius > 0)
 
 
+def cone_ok(prim: Primitive, x: np.ndarray, scale: float, config: FitConfig) -> bool:
+    """True unless ``prim`` is a cone whose radius at its points ``x`` (median over them) is not within
+    (0, max_radius * scale): a near-cylinder cone's apex is far away, and an unbounded solve can trade its half
+    angle against the apex distance until the surface is a wide, almost flat funnel through the points."""
+    if not isinstance(prim, Cone) or len(x) == 0:
+        return True
+    rho = float(np.median(((x - prim.origin) @ prim.axis) * np.tan(prim.half_angle)))
+    return 0 < rho < config.max_radius * scale
+
+
 def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: FitConfig) -> float:
     """Comparable score of torus candidates on the same points ``x`` (lower is better): the truncated squared
     distance (MSAC, in part-size units) plus the refinement's weak prior on the minor radius."""

@@ -15,7 +15,7 @@ from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.points import InstancePoints, backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import fit_instance, inlier_mask, plausible, torus_ok
+from v2c.fit.ransac import cone_ok, fit_instance, inlier_mask, plausible, torus_ok
 from v2c.fit.result import ABLATIONS, FitResult
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive
@@ -171,12 +171,13 @@ def _joint_terms(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[in
 
 def _keep_plausible(new: list[Primitive], old: list[Primitive], terms: list[Term], frame: np.ndarray,
                     scale: float, config: FitConfig) -> list[Primitive]:
-    """A joint solve has no bounds: a primitive it drove out of range (cone half angle beyond 90 degrees, negative
-    radius, a torus outside its data-derived radius bounds `ransac.torus_limits`) goes back to its value before
-    the solve, its axis re-set from the current frame when aligned."""
+    """A joint solve has no bounds: a primitive it drove out of range (cone half angle beyond 90 degrees or a cone
+    wider than max_radius at its points, negative radius, a torus outside its data-derived radius bounds
+    `ransac.torus_limits`) goes back to its value before the solve, its axis re-set from the current frame when
+    aligned."""
     out = []
     for p, q, tm in zip(new, old, terms, strict=True):
-        if plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2):
+        if plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2) and cone_ok(p, tm.points, scale, config):
             out.append(p)
         elif tm.axis_index is not None and tm.axis_index >= 0:
             out.append(q.from_local(np.zeros(q.local_size), tm.axis_sign * frame[tm.axis_index]))

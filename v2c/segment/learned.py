@@ -119,7 +119,7 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
 
         region = part_region(scan, GeometricConfig())[0]
     seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat, part=region)
-    return refine_instances(seg, scan.depth, scan.K, probs, cfg.refine)
+    return refine_instances(seg, scan.depth, scan.K, probs, cfg.refine, normals=feat[3:6])
 
 
 def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig,

@@ -1,12 +1,20 @@
-"""Geometric check of learned instances: split off what a plane instance's own plane cannot explain, and merge
-plane fragments that lie on one plane.
+"""Geometric check of learned instances: split off what a plane instance's own plane cannot explain, split a
+cylinder instance at a step of its radius, and merge plane fragments that lie on one plane.
 
 The network's commonest miss is a thin face (a hole's wall, a boss's side, a narrow step) painted with the label of
 the plane around it, with no predicted boundary between them (docs/segmentation.md). Depth sees what colour and
 label maps miss: the thin face lies off the plane. For every instance labelled plane, a plane is fitted to its
 points (RANSAC, then least squares on the inliers); connected sets of valid pixels further from it than the
 tolerance become instances of their own, labelled by the network's most probable class there, or join a
-neighbouring instance of that label (the rest of the face they belong to).
+neighbouring instance of that label (the rest of the face they belong to). Pixels whose normal turns away from the
+plane where the network's most probable class is another count as off the plane too (a narrow chamfer).
+
+Coaxial shaft sections whose radii differ by a few thousandths of the part size meet at a shoulder one or two
+pixels wide: no label, colour or predicted boundary separates them. Depth does: for every instance labelled
+cylinder, the change point of the residuals of one cylinder fit (ordered along its axis) splits the points in two,
+one coaxial fit with a radius per side (shared axis line) measures the step, and a step both larger than
+coax_step_part and coax_z noise standard errors splits the instance there; each side is tested again, to
+coax_max_splits levels.
 """
 
 from __future__ import annotations
@@ -15,10 +23,15 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.optimize import least_squares
 
-from v2c.fit.points import backproject, estimate_part_size
+from v2c.fit.config import FitConfig
+from v2c.fit.points import backproject, estimate_part_size, instance_points
+from v2c.fit.ransac import ransac_fit
 from v2c.groups import groups_sharing_keys
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL
+from v2c.primitives import Cylinder
+from v2c.primitives.directions import tangent_basis
 from v2c.segment.types import Segmentation
 
 
@@ -35,6 +48,17 @@ class RefineConfig:
     min_split_share: float = 0.02  # ... and at least this share of the parent instance (fraction)
     max_split_share: float = 0.5  # ... and at most this share (fraction; a larger set is more likely the face
     # itself, with the plane fitted to what it wrongly took in)
+    normal_split_deg: float = 20.0  # with normals: pixels whose normal is this far from the plane's and whose most
+    # probable class is not the instance's also count as off the plane (degrees): a narrow chamfer stays within
+    # tol_part of the plane it leaves
+    coax: bool = True  # split cylinder instances at a radius step (module docstring)
+    coax_min_px: int = 300  # cylinder instances with fewer valid pixels are left alone (pixels)
+    coax_min_side_px: int = 150  # each side of a split holds at least this many valid pixels (pixels)
+    coax_min_side_share: float = 0.1  # ... and this share of the instance (fraction)
+    coax_step_part: float = 0.0025  # smallest radius step that splits (part-size units)
+    coax_z: float = 15.0  # ... and at least this many standard errors of the two radii's difference (ratio)
+    coax_fit_points: int = 800  # points of the coaxial two-radius fit (count)
+    coax_max_splits: int = 2  # levels of splitting: a split's sides are tested again until this depth (count)
     merge: bool = True  # merge adjacent plane instances of one label that lie on one plane (fragments of a face)
     merge_angle_deg: float = 5.0  # ... normals within this angle (degrees)
     merge_tol_part: float = 0.01  # ... and each one's points within this median distance of the other's plane
@@ -46,6 +70,7 @@ class RefineConfig:
 
 
 _PLANE = TYPE_NAMES.index("plane")
+_CYLINDER = TYPE_NAMES.index("cylinder")
 
 
 def _is_plane(labels: np.ndarray) -> np.ndarray:
@@ -61,12 +86,13 @@ def scan_geometry(depth: np.ndarray, K: np.ndarray, inst: np.ndarray) -> tuple[n
 
 
 def refine_instances(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
-                     cfg: RefineConfig = RefineConfig()) -> Segmentation:
-    """`split_plane_outliers`, then `merge_coplanar`, on one point map."""
+                     cfg: RefineConfig = RefineConfig(), normals: np.ndarray | None = None) -> Segmentation:
+    """`split_plane_outliers`, then `merge_coplanar`, on one point map (normals: see `split_plane_outliers`)."""
     if not cfg.enabled:
         return seg
     geometry = scan_geometry(depth, K, seg.instances)
-    seg = split_plane_outliers(seg, depth, K, probs, cfg, geometry)
+    seg = split_plane_outliers(seg, depth, K, probs, cfg, geometry, normals)
+    seg = split_coaxial_steps(seg, depth, K, cfg, geometry)
     return merge_coplanar(seg, depth, K, cfg, geometry)
 
 
@@ -104,10 +130,12 @@ def _same_label_neighbour(inst: np.ndarray, sel: np.ndarray, parent: int, label:
 
 def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
                          cfg: RefineConfig = RefineConfig(),
-                         geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
+                         geometry: tuple[np.ndarray, float] | None = None,
+                         normals: np.ndarray | None = None) -> Segmentation:
     """``seg`` with the off-plane parts of its plane instances split off (module docstring). depth: (H, W) metres
     (0 = no reading); probs: the network's (18, H, W) class probabilities, which label the new instances;
-    geometry: `scan_geometry` of the scan when already computed."""
+    geometry: `scan_geometry` of the scan when already computed; normals: (3, H, W) unit surface normals in any
+    one frame (the network's input features), for the normal test (normal_split_deg; None: distance only)."""
     inst = np.asarray(seg.instances).astype(np.int32).copy()
     valid = (np.asarray(depth) > 0) & (inst > 0)
     if not cfg.enabled or not valid.any():
@@ -133,6 +161,12 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
         inl = np.abs(r) < 0.5 * tol
         sigma = 1.4826 * float(np.median(np.abs(r[inl]))) if inl.any() else 0.0
         off_plane = np.abs(r) > max(tol, cfg.tol_noise * sigma)
+        if normals is not None:
+            nm = normals[:, m].T
+            ref = np.median(nm[inl], axis=0) if inl.any() else np.zeros(3)
+            ref /= max(float(np.linalg.norm(ref)), 1e-12)
+            off_plane |= (np.abs(nm @ ref) < np.cos(np.deg2rad(cfg.normal_split_deg))) \
+                & (probs[:, m].argmax(axis=0) != labels[i])
         far = np.zeros(m.shape, np.uint8)
         far[m] = off_plane
         if cfg.open_px > 0:
@@ -153,6 +187,80 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
                 scores.append(float(p[new] / max(p.sum(), 1e-9)))
             inst[sel] = target
             changed = True
+    if not changed:
+        return seg
+    return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
+
+
+def _coaxial_step(x: np.ndarray, side: np.ndarray, cyl: Cylinder, size: float, cfg: RefineConfig,
+                  rng: np.random.Generator) -> tuple[float, float]:
+    """(radius step r_side - r_other in part sizes, its size in standard errors) of one coaxial fit of points x
+    (n, 3) with a radius per side (bool (n,)): shared axis line (two tilt and two shift parameters about
+    ``cyl``'s), soft-l1 distances in part sizes."""
+    if len(x) > cfg.coax_fit_points:
+        sel = rng.choice(len(x), cfg.coax_fit_points, replace=False)
+        x, side = x[sel], side[sel]
+    t1, t2 = tangent_basis(cyl.axis)
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        a = cyl.axis + p[0] * t1 + p[1] * t2
+        a = a / np.linalg.norm(a)
+        v = x - (cyl.origin + size * (p[2] * t1 + p[3] * t2))
+        rho = np.linalg.norm(v - np.outer(v @ a, a), axis=1)
+        return rho / size - np.where(side, p[5], p[4])
+
+    r0 = cyl.radius / size
+    sol = least_squares(residuals, [0.0, 0.0, 0.0, 0.0, r0, r0], loss="soft_l1", f_scale=cfg.coax_step_part)
+    sigma = 1.4826 * float(np.median(np.abs(sol.fun)))
+    n_small = min(int(side.sum()), int((~side).sum()))
+    step = float(sol.x[5] - sol.x[4])
+    return step, abs(step) / max(sigma * np.sqrt(2.0 / max(n_small, 1)), 1e-12)
+
+
+def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
+                        geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
+    """``seg`` with each cylinder instance split where its radius steps (module docstring); the new instance keeps
+    the label and score. depth: (H, W) metres (0 = no reading); geometry: `scan_geometry` when already computed."""
+    inst = np.asarray(seg.instances).astype(np.int32).copy()
+    valid = (np.asarray(depth) > 0) & (inst > 0)
+    if not (cfg.enabled and cfg.coax) or not valid.any():
+        return seg
+    pts, size = geometry or scan_geometry(depth, K, inst)
+    labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores))
+    fit_cfg = FitConfig()
+    rng = np.random.default_rng(cfg.seed)
+    todo = [(i, 0) for i in range(1, len(labels)) if TYPE_OF_LABEL[int(labels[i])] == _CYLINDER]
+    changed = False
+    while todo:  # loop over instances (a split's two sides are queued again)
+        i, depth_level = todo.pop(0)
+        ip = instance_points(pts, valid, inst, np.array([i]), fit_cfg.normal_window_px,
+                             fit_cfg.normal_sobel_px).get(i)
+        if ip is None or len(ip.points) < cfg.coax_min_px or depth_level >= cfg.coax_max_splits:
+            continue
+        got = ransac_fit("cylinder", ip.points, ip.normals, size, fit_cfg, rng)
+        if got is None:
+            continue
+        cyl = got.primitive
+        x = ip.points
+        order = np.argsort((x - cyl.origin) @ cyl.axis)
+        n = len(x)
+        lo = max(cfg.coax_min_side_px, int(np.ceil(cfg.coax_min_side_share * n)))
+        if n - 2 * lo < 1:
+            continue
+        e = cyl.signed_distance(x[order])
+        cusum = np.cumsum(e - np.median(e))
+        k = lo + int(np.argmax(np.abs(cusum[lo:n - lo])))  # the change point of the residuals along the axis
+        side = np.zeros(n, bool)
+        side[order[k:]] = True
+        step, z = _coaxial_step(x, side, cyl, size, cfg, rng)
+        if abs(step) < cfg.coax_step_part or z < cfg.coax_z:
+            continue
+        new = len(labels)
+        labels.append(labels[i])
+        scores.append(scores[i])
+        inst.ravel()[ip.pixels[side]] = new
+        todo += [(i, depth_level + 1), (new, depth_level + 1)]
+        changed = True
     if not changed:
         return seg
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
