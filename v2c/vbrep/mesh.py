@@ -5,8 +5,9 @@ up to one step outside the region are pulled onto the region's outline (the near
 pixel outwards), so that the mesh reaches the face's edges. Every grid point is back-projected onto the face's
 surface sheet by ray-surface intersection (exact on the surface, covering exactly what the camera sees of the
 face), and the grid is triangulated: two triangles per grid square whose four corners are present, one where three
-are. Triangles with a side longer than ``max_edge`` metres (a jump between crossings where the sheet is absent) are
-dropped. Triangles are wound to face the camera.
+are. A triangle with a corner on the outline whose centre pixel is not the region's spans a gap of it (a small
+hole, a narrow notch where another face cuts in) and is dropped. Triangles with a side longer than ``max_edge``
+metres (a jump between crossings where the sheet is absent) are dropped. Triangles are wound to face the camera.
 
 A grid point whose ray yields no usable point is left out with its triangles: a depth outside ``window`` (at or
 behind the camera centre, e.g. a plane seen edge-on through the camera centre gives z = 0 for every ray) or not
@@ -96,8 +97,11 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
         three = (t0 >= 0) & (t1 >= 0) & (t2 >= 0) & (miss < 0)
         tris.append(np.stack([t0, t1, t2], 1)[three])
     tri = np.concatenate(tris).astype(np.int64)
-    if len(tri):  # a triangle of outline points only (``out``, per vertex) spans a gap (a small hole) of the region
-        tri = tri[~out[tri].all(axis=1)]
+    if len(tri):  # a triangle with an outline corner (``out``) whose centre pixel lies off the region spans a gap of
+        # it (a small hole, a narrow notch where another face cuts in) and would hide that face when rendered
+        rim = out[tri].any(axis=1)
+        c = np.clip(np.rint(uv[tri].mean(axis=1)).astype(int), 0, [w - 1, h - 1])
+        tri = tri[~(rim & ~region[c[:, 1], c[:, 0]])]
     if len(tri) == 0:
         return np.zeros((0, 3)), tri
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
