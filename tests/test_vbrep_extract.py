@@ -200,3 +200,33 @@ def test_labelled_plane_fallback_uses_the_frame_axis() -> None:
     scattered = X + rng.normal(0, 0.01, X.shape)
     assert _labelled_fallback(1, seg, fit, scattered, 0.1, cfg) is None
     assert fit_axis_plane_points(X[:2], y) is None
+
+
+def test_labelled_fallback_from_one_edge() -> None:
+    # A grazing ledge under a face-on plane: the ledge has no depth and one fitted neighbour, so its evidence is a
+    # single line (its edge with that plane). A free plane is not fixed by one line and is not drawn; labelled
+    # plane Y, the ledge becomes the plane normal to the frame's Y axis through that edge.
+    from types import SimpleNamespace
+
+    from v2c.labels import label_of
+    from v2c.primitives import Plane
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.extract import _face_geoms
+
+    K = np.array([[600.0, 0.0, 160.0], [0.0, 600.0, 120.0], [0.0, 0.0, 1.0]])
+    inst = np.zeros((240, 320), np.int32)
+    inst[60:140, 100:220] = 1
+    inst[140:150, 100:220] = 2
+    depth = np.where(inst == 1, 0.5, 0.0)
+    fit = SimpleNamespace(primitives={1: Plane([0.0, 0.0, 0.5], [0.0, 0.0, -1.0])}, residuals={1: 0.0},
+                          axis_labels={1: "Z"}, frame=np.eye(3))
+    edge_y = (139.5 - 120.0) / 600.0 * 0.5  # metres: where the ledge meets the plane (between rows 139 and 140)
+    for label, drawn in ((label_of("plane", "Y"), True), (label_of("plane", "U"), False)):
+        seg = SimpleNamespace(instances=inst, labels=np.array([0, label_of("plane", "Z"), label], np.uint8))
+        faces, _ = _face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig())
+        assert (2 in faces) == drawn
+        if drawn:
+            ledge = faces[2].prim
+            assert abs(abs(ledge.axis_vector[1]) - 1.0) < 1e-12  # the frame's Y axis
+            assert abs(abs(ledge.axis_vector @ ledge.origin) - edge_y) < 0.001  # through the edge: within 1 mm
+            assert faces[2].extra.get("fallback")

@@ -307,12 +307,15 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
         if inst == 0 or int(inst) in faces:
             continue
         sources = fallback_plane_points(int(inst), inst_map, depth, K, faces, window)
-        if len(sources) < 2:  # one neighbour's edge alone does not fix a plane (it may lie in that neighbour)
+        if not sources:
             continue
         evidence = np.concatenate(sources)
+        # one source (one neighbour's edge, no depth of its own) places a surface whose axis the label gives
         lab = _labelled_fallback(int(inst), seg, fit, evidence, scale, cfg)
         if lab is not None and not (lab[0].type == "plane" and coincides(lab[0])):
             add(int(inst), lab[0], lab[1], lab[2], {"fallback": True})
+            continue
+        if len(sources) < 2:  # one neighbour's edge alone does not fix a free plane (it may lie in that neighbour)
             continue
         got = fit_plane_points(evidence)
         if got is None:
