@@ -4,8 +4,10 @@ Closed-form starts, then the robust refinement of `ransac.refine_primitive` with
 - plane: offset = median of n . x.
 - cylinder: the axis line is the least-squares meeting point of the normal lines projected along the axis;
   radius = median distance to it.
-- cone: half angle from the median normal-axis angle; axis line as for the cylinder; apex height from the
-  median of h - rho / tan(a) (axis flipped if the radius shrinks along it).
+- cone: half angle from the median normal-axis angle, or (by points) from the slope of the radius over the height
+  around a circle-fitted axis line; axis line as for the cylinder; apex height from the median of h - rho / tan(a)
+  (axis flipped if the radius shrinks along it). A refit wider than max_radius at its points (`ransac.cone_ok`, a
+  funnel through a small patch) is taken only when no other start gives a plausible cone.
 - torus: axis line as for the cylinder; the tube's cross-section is a circle in the (rho, h) half-plane
   (algebraic circle fit) giving major radius, height of the centre and minor radius; also the free fit's torus
   turned onto the axis. The refinement keeps the radii within `ransac.torus_limits`.
@@ -16,9 +18,12 @@ from __future__ import annotations
 import numpy as np
 
 from v2c.fit.config import FitConfig
-from v2c.fit.ransac import circle_2d, refine_primitive, torus_msac
+from v2c.fit.ransac import circle_2d, cone_ok, refine_primitive, torus_msac
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.directions import tangent_basis
+
+
+_FUNNEL_COST = 1e3  # metres added to an implausible cone's median residual: any plausible candidate wins
 
 
 def _axis_line(x: np.ndarray, n: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -54,16 +59,20 @@ def start_with_axis(ptype: str, x: np.ndarray, n: np.ndarray, a: np.ndarray,
     if ptype == "sphere":
         return None
     c, rho, h = _axis_line(x, n, a)
-    if by_points and ptype in ("cylinder", "torus"):
+    if by_points and ptype in ("cylinder", "torus", "cone"):
         c = _circle_axis(x, a)
         rho = np.linalg.norm((x - c) - np.outer((x - c) @ a, a), axis=1)
     if ptype == "cylinder":
         return Cylinder(c, a, float(np.median(rho)))
     if ptype == "cone":
-        s = np.clip(np.median(np.abs(n @ a)), 0.035, 0.999)  # keep the start half angle in (2, 87.5) degrees
-        half = float(np.arcsin(s))
         if len(h) > 2 and np.corrcoef(h, rho)[0, 1] < 0:
             a, h = -a, -h
+        # the start half angle stays within (2, 88) degrees
+        if by_points:  # from the radius' growth along the axis (least-squares slope of rho over h)
+            slope = np.polyfit(h, rho, 1)[0] if len(h) > 2 and np.ptp(h) > 0 else 0.0
+            half = float(np.clip(np.arctan(max(slope, 0.0)), 0.035, 1.535))
+        else:  # from the normals' angle to the axis
+            half = float(np.arcsin(np.clip(np.median(np.abs(n @ a)), 0.035, 0.999)))
         h0 = float(np.median(h - rho / np.tan(half)))
         return Cone(c + (h0 - c @ a) * a, a, half)
     if ptype == "torus":
@@ -80,7 +89,7 @@ def fit_with_axis(prim: Primitive, x: np.ndarray, n: np.ndarray, a: np.ndarray, 
         return prim
     best, cost = prim, np.inf
     starts = [start_with_axis(prim.type, x, n, a, by_points)
-              for by_points in ((False, True) if prim.type in ("cylinder", "torus") else (False,))]
+              for by_points in ((False, True) if prim.type in ("cylinder", "torus", "cone") else (False,))]
     if isinstance(prim, (Torus, Cone)):  # the free fit turned onto the axis: the closed-form cross-section circle
         # of a noisy arc can be far off (a 11 mm tube started at 27 mm), and so can a cone's half angle from the
         # normals of a small patch (64 degrees for a 5-degree taper), while the free fit's are good
@@ -98,6 +107,8 @@ def fit_with_axis(prim: Primitive, x: np.ndarray, n: np.ndarray, a: np.ndarray, 
         else:
             q = refine_primitive(start, x, scale, config, axis=start.axis_vector)
             c = float(np.median(np.abs(q.signed_distance(x))))
+            if not cone_ok(q, x, scale, config):  # a funnel wider than max_radius: only if nothing else fits
+                c += _FUNNEL_COST
         if c < cost:
             best, cost = q, c
     return best
