@@ -86,9 +86,13 @@ def test_fragments_of_one_plane_are_merged_and_a_step_is_not() -> None:
     out = merge_coplanar(seg, depth, K, RefineConfig())
     assert np.array_equal(out.instances == 1, inst <= 2) and np.array_equal(out.instances == 2, inst == 3)
     assert list(out.labels) == [0, PLANE_Z, PLANE_Z]  # ids renumbered: labels[k] stays instance k's
-    other = Segmentation(inst, np.array([0, PLANE_Z, label_of("plane", "X"), PLANE_Z], np.uint8), seg.scores,
+    # a fragment with another axis class on the same plane merges too, under the larger piece's label
+    other = Segmentation(inst, np.array([0, label_of("plane", "X"), PLANE_Z, PLANE_Z], np.uint8), seg.scores,
                          "learned")
-    assert merge_coplanar(other, depth, K, RefineConfig()) is other  # labels differ: never merged
+    out = merge_coplanar(other, depth, K, RefineConfig())
+    assert out.num_instances == 2 and np.array_equal(out.instances == 2, inst == 3)
+    merged = out.labels[out.instances[0, 0]]
+    assert merged == (PLANE_Z if (inst == 2).sum() > (inst == 1).sum() else label_of("plane", "X"))
 
 
 def _chamfered_top(width_px: int = 8, slope_deg: float = 25.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -59,7 +59,7 @@ class RefineConfig:
     coax_z: float = 15.0  # ... and at least this many standard errors of the two radii's difference (ratio)
     coax_fit_points: int = 800  # points of the coaxial two-radius fit (count)
     coax_max_splits: int = 2  # levels of splitting: a split's sides are tested again until this depth (count)
-    merge: bool = True  # merge adjacent plane instances of one label that lie on one plane (fragments of a face)
+    merge: bool = True  # merge adjacent plane instances that lie on one plane (fragments of a face)
     merge_angle_deg: float = 5.0  # ... normals within this angle (degrees)
     merge_tol_part: float = 0.01  # ... and each one's points within this median distance of the other's plane
     #                                (part-size units)
@@ -268,9 +268,10 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
 
 def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
                    geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
-    """``seg`` with adjacent plane instances of the same label merged where they lie on one plane (normals within
-    merge_angle_deg, each one's points within merge_tol_part part sizes of the other's plane, median): the network
-    cut a face where it saw a print edge, a shadow or noise. Only touching instances (4-neighbour pixel pairs)."""
+    """``seg`` with adjacent plane instances merged where they lie on one plane (normals within merge_angle_deg,
+    each one's points within merge_tol_part part sizes of the other's plane, median): the network cut a face where
+    it saw a print edge, a shadow or noise, sometimes with two axis classes. The merged instance keeps the largest
+    piece's label and score. Only touching instances (4-neighbour pixel pairs)."""
     inst = np.asarray(seg.instances).astype(np.int32)
     valid = (np.asarray(depth) > 0) & (inst > 0)
     if not (cfg.enabled and cfg.merge) or not valid.any():
@@ -283,7 +284,7 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
                             np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)])
     pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
     pairs = np.unique(np.sort(pairs, axis=1), axis=0)
-    pairs = pairs[is_plane[pairs[:, 0]] & is_plane[pairs[:, 1]] & (labels[pairs[:, 0]] == labels[pairs[:, 1]])]
+    pairs = pairs[is_plane[pairs[:, 0]] & is_plane[pairs[:, 1]]]
     if not len(pairs):
         return seg
     rng = np.random.default_rng(cfg.seed)
@@ -308,9 +309,10 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
         return seg
     items = sorted(keys)
     lut = np.arange(len(labels), dtype=np.int32)
+    area = np.bincount(inst.ravel(), minlength=len(labels))
     for group in groups_sharing_keys([keys[i] for i in items]):
         ids = [items[g] for g in group]
-        lut[ids] = min(ids)
+        lut[ids] = max(ids, key=lambda j: (area[j], -j))  # the largest piece's label and score stand
     roots = np.unique(lut)  # ids 0..N renumbered without the merged ones (labels[k] is instance k's)
     compact = np.zeros(len(labels), np.int32)
     compact[roots] = np.arange(len(roots), dtype=np.int32)
