@@ -82,8 +82,6 @@ class VBRepConfig:
     # --- meshes
     mesh_stride_px: int = 2  # pixels: spacing of the back-projected pixel grid of each face mesh
     mesh_max_edge: float = 0.2  # scale units: triangles with a longer side (jumps between crossings) are dropped
-    mesh_max_edge_plane: float = 0.5  # scale units: the same for planes (one crossing per ray: no jumps, but a
-    # grazing plane's grid steps lie centimetres apart; longer sides run off towards the plane's horizon)
     mesh_surface_tol: float = 0.05  # scale units: a mesh ray's closest approach to a sheet it misses is moved onto
     #                                 the surface when within this of it, else dropped (as are vertices outside the
     #                                 depth window, e.g. at the camera centre); d_int's value

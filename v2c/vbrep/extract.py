@@ -620,9 +620,8 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
     for inst in inst_ids:
         fg = ctx.faces[inst]
         region = ctx.instances == inst
-        max_edge = (cfg.mesh_max_edge_plane if fg.prim.type == "plane" else cfg.mesh_max_edge) * scale
-        mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px, max_edge,
-                           cfg.mesh_surface_tol * scale)
+        mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px,
+                           cfg.mesh_max_edge * scale, cfg.mesh_surface_tol * scale)
         ch = ctx.sheets[inst]
         vfaces.append(VFace(fid[inst], inst, fg.prim.to_dict(), fg.axis_label, loops.get(fid[inst], []), mv, mt,
                             round(face_confidence(fg.residual, ch.errors, ch.sheet, scale, cfg), 4)))
