@@ -22,7 +22,6 @@ from v2c.fit.ransac import circle_2d, cone_ok, refine_primitive, torus_msac
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.directions import tangent_basis
 
-
 _FUNNEL_COST = 1e3  # metres added to an implausible cone's median residual: any plausible candidate wins
 
 
