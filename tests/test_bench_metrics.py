@@ -282,3 +282,20 @@ def test_vbrep_chamfer_is_the_exact_visible_chamfer(box):
     V, T, _ = M.vbrep_mesh(vb)
     R = M.sample_surface(V, T, 20000, rng)
     assert M.visible_points(R, M.MeshCaster(V, T), 1e-4 * M.part_size(scan)).all()
+
+
+def test_v2c_bench_segmentation_only(tmp_path):
+    # the segmenters alone on the bench's scans: the oracle's instances are the gt faces, so every face of
+    # >= 50 px is matched with the right type and axis
+    from v2c.cli import main
+
+    out = tmp_path / "seg.json"
+    res = CliRunner().invoke(main, ["bench", "--segmentation-only", "--n", "2", "--segmentation", "oracle",
+                                    "--size", "320x240", "--jobs", "1", "--cache", str(tmp_path / "c"),
+                                    "--json", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    assert "| oracle | 2 |" in res.output
+    s = json.loads(out.read_text())["oracle"]["summary"]
+    assert s["scans"] == 2
+    assert s["precision"] == s["recall"] == s["type_acc"] == s["axis_acc"] == 1.0
+    assert s["seconds_median"] >= 0

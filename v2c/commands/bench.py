@@ -1,5 +1,6 @@
 """`v2c bench`: every metric of BENCHMARK.md per ablation on synthetic scans, as a table like the paper's Table 1
-(docs/bench.md); ``--real DIR``: `v2c to-step` on real frames with regions of interest."""
+(docs/bench.md); ``--real DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``:
+the segmenters alone (their instances against the ground-truth faces, docs/segmentation.md)."""
 
 from __future__ import annotations
 
@@ -66,11 +67,15 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
               help="Write each scan's result figure (first column) and grid.png of the first 12 here.")
 @click.option("--weights", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Weights of the learned segmenter (default: the shipped v2c/segment/weights/unet.pt).")
+@click.option("--segmentation-only", "seg_only", is_flag=True,
+              help="Instead: score the segmentation alone (its instances matched to the gt faces: precision, "
+                   "recall, type / axis accuracy, mean IoU, seconds per scan) on the same scans.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
             cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
-            out_dir: Path | None, figure_dir: Path | None, weights: Path | None, quiet: bool) -> None:
+            out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool,
+            quiet: bool) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md)."""
@@ -87,6 +92,9 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
                           ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
                           scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
+    if seg_only:
+        _segmentation_only(cfg, json_out, quiet)
+        return
     try:
         result = run.run_benchmark(cfg, progress=not quiet)
     except ValueError as e:
@@ -97,6 +105,27 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     click.echo(run.format_table(result))
     click.echo(run.format_notes(result))
     _write_json(json_out, result)
+
+
+def _segmentation_only(cfg, json_out: Path | None, quiet: bool) -> None:
+    """The segmenters of ``cfg`` on its scans, scored alone (`v2c.bench.segmentation`)."""
+    from v2c.bench import run
+    from v2c.bench import segmentation as S
+    from v2c.segment import segment
+
+    try:
+        scans = run.prepare_scans(cfg, progress=not quiet)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+
+    def seg_fn(scan, method: str):
+        return segment(scan, method, **({"weights": cfg.weights} if method == "learned" and cfg.weights else {}))
+
+    result = S.run(scans, list(cfg.segmentations), seg_fn, log=(lambda *a: None) if quiet else
+                   (lambda m: click.echo(m, err=True)))
+    click.echo(f"{len(scans)} scans, segmentation alone")
+    click.echo(S.format_table(result))
+    _write_json(json_out, run._jsonable(result))
 
 
 def _write_json(path: Path | None, data: dict) -> None:
