@@ -183,6 +183,13 @@ def _error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}{where}"
 
 
+def segment_scan(scan: Any, method: str, weights: str | Path | None = None) -> Any:
+    """`v2c.segment.segment` of one scan; ``weights`` (None: the shipped file) go to the learned segmenter only."""
+    from v2c.segment import segment
+
+    return segment(scan, method, **({"weights": weights} if method == "learned" and weights else {}))
+
+
 def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations: Sequence[str],
                   metrics: MetricConfig | None = None, step: bool = True,
                   figure_dir: str | Path | None = None, weights: str | None = None) -> list[dict[str, Any]]:
@@ -195,7 +202,6 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
     from v2c.bench.metrics import scan_metrics, vbrep_from_gt
     from v2c.pipeline import reconstruct
     from v2c.scan import load_scan
-    from v2c.segment import segment
 
     metrics = metrics or MetricConfig()
     scan_dir = Path(scan_dir)
@@ -218,7 +224,7 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
         for method in segmentations:
             t, c = time.perf_counter(), time.process_time()
             try:
-                seg = segment(scan, method, **({"weights": weights} if method == "learned" and weights else {}))
+                seg = segment_scan(scan, method, weights)
                 seg_error = None
             except Exception as exc:  # noqa: BLE001
                 seg, seg_error = None, _error_text(exc)

@@ -111,18 +111,13 @@ def _segmentation_only(cfg, json_out: Path | None, quiet: bool) -> None:
     """The segmenters of ``cfg`` on its scans, scored alone (`v2c.bench.segmentation`)."""
     from v2c.bench import run
     from v2c.bench import segmentation as S
-    from v2c.segment import segment
 
     try:
         scans = run.prepare_scans(cfg, progress=not quiet)
     except ValueError as e:
         raise click.ClickException(str(e)) from None
-
-    def seg_fn(scan, method: str):
-        return segment(scan, method, **({"weights": cfg.weights} if method == "learned" and cfg.weights else {}))
-
-    result = S.run(scans, list(cfg.segmentations), seg_fn, log=(lambda *a: None) if quiet else
-                   (lambda m: click.echo(m, err=True)))
+    result = S.run(scans, list(cfg.segmentations), lambda scan, method: run.segment_scan(scan, method, cfg.weights),
+                   log=(lambda *a: None) if quiet else (lambda m: click.echo(m, err=True)))
     click.echo(f"{len(scans)} scans, segmentation alone")
     click.echo(S.format_table(result))
     _write_json(json_out, run._jsonable(result))

@@ -87,7 +87,8 @@ def scan_geometry(depth: np.ndarray, K: np.ndarray, inst: np.ndarray) -> tuple[n
 
 def refine_instances(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
                      cfg: RefineConfig = RefineConfig(), normals: np.ndarray | None = None) -> Segmentation:
-    """`split_plane_outliers`, then `merge_coplanar`, on one point map (normals: see `split_plane_outliers`)."""
+    """`split_plane_outliers`, `split_coaxial_steps`, then `merge_coplanar`, on one point map (normals: see
+    `split_plane_outliers`)."""
     if not cfg.enabled:
         return seg
     geometry = scan_geometry(depth, K, seg.instances)
@@ -233,9 +234,11 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
     changed = False
     while todo:  # loop over instances (a split's two sides are queued again)
         i, depth_level = todo.pop(0)
+        if depth_level >= cfg.coax_max_splits:
+            continue
         ip = instance_points(pts, valid, inst, np.array([i]), fit_cfg.normal_window_px,
                              fit_cfg.normal_sobel_px).get(i)
-        if ip is None or len(ip.points) < cfg.coax_min_px or depth_level >= cfg.coax_max_splits:
+        if ip is None or len(ip.points) < cfg.coax_min_px:
             continue
         got = ransac_fit("cylinder", ip.points, ip.normals, size, fit_cfg, rng)
         if got is None:
