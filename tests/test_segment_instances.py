@@ -171,3 +171,43 @@ def test_open_contact_keeps_confident_faces_of_two_types_apart() -> None:
         if apart:
             assert np.array_equal(seg.instances == seg.instances[10, 10], patch)
             assert seg.labels[seg.instances[10, 10]] == 7
+
+
+def _edge_on_face() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A 12-px strip (face 2) seen nearly edge-on between two faces, painted with its upper neighbour's label (two
+    planes of one axis class), the predicted boundary band covering it whole; the strip returns no depth."""
+    faces = np.zeros((60, 60), np.uint16)
+    faces[2:20, 2:58] = 1
+    faces[20:32, 2:58] = 2
+    faces[32:58, 2:58] = 3
+    labels = np.vectorize({0: 0, 1: 1, 2: 1, 3: 3}.get)(faces).astype(np.uint8)
+    prob = np.zeros(faces.shape, np.float32)
+    prob[17:35] = 0.9
+    return faces, labels, prob, faces == 2
+
+
+def test_edge_on_face_without_depth_gets_its_own_instance() -> None:
+    faces, labels, prob, unmeasured = _edge_on_face()
+    probs = _probs_of(labels, 0.9)
+    seg = extract_instances(labels, prob, probs=probs, unmeasured=unmeasured)
+    strip = seg.instances == seg.instances[26, 30]
+    iou = (strip & (faces == 2)).sum() / (strip | (faces == 2)).sum()
+    assert iou > 0.85, iou
+    assert seg.num_instances == 3
+    assert seg.labels[seg.instances[26, 30]] == 1
+    # the same band where the strip is measured (a boundary between measured faces), or with no depth map: the
+    # band beside face 1 is that face's edge, and the flooding splits the strip between its neighbours
+    for um in (np.zeros_like(unmeasured), None):
+        plain = extract_instances(labels, prob, probs=probs, unmeasured=um)
+        assert plain.num_instances == 2
+        for i in np.unique(plain.instances[faces == 2]):
+            got = plain.instances == i
+            assert (got & (faces == 2)).sum() / (got | (faces == 2)).sum() < 0.5
+    # a band of one label too thin for a core (under 2 x band_core_px + 1 = 7 px: here rows 17-22) is not a marker
+    thin = faces.copy()
+    thin[23:32] = 3
+    lab_thin = np.vectorize({0: 0, 1: 1, 2: 1, 3: 3}.get)(thin).astype(np.uint8)
+    prob_thin = np.zeros(faces.shape, np.float32)
+    prob_thin[17:26] = 0.9
+    seg_thin = extract_instances(lab_thin, prob_thin, probs=_probs_of(lab_thin, 0.9), unmeasured=thin == 2)
+    assert seg_thin.num_instances == 2

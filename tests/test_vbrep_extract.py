@@ -202,6 +202,44 @@ def test_labelled_plane_fallback_uses_the_frame_axis() -> None:
     assert fit_axis_plane_points(X[:2], y) is None
 
 
+def test_labelled_plane_fallback_when_the_frame_has_one_found_axis() -> None:
+    # The fit found only Z faces (a turned part): the frame's X and Y rows are a guess about Z. A grazing face
+    # labelled plane X (its true normal 35 degrees from the guessed X, across Z) is fitted with its normal across
+    # Z through its evidence, not normal to the guessed X; it is not called X of that frame. A labelled cylinder
+    # gets no fallback then.
+    from types import SimpleNamespace
+
+    from v2c.labels import label_of
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.extract import _labelled_fallback, fit_plane_normal_across
+
+    rng = np.random.default_rng(2)
+    frame = np.eye(3)
+    a = np.deg2rad(35.0)
+    n = np.array([np.cos(a), np.sin(a), 0.0])  # across Z
+    d = np.cross(n, frame[2])  # in the plane, across Z
+    base = np.array([0.02, -0.01, 0.5])
+    t = rng.uniform(-0.03, 0.03, (2, 60))
+    X = np.concatenate([base + t[0][:, None] * d, base + 0.02 * frame[2] + t[1][:, None] * d])
+    X += rng.normal(0, 2e-4, X.shape)
+    cfg = VBRepConfig()
+    seg = SimpleNamespace(labels=np.array([0, label_of("plane", "X"), label_of("cylinder", "X")], np.uint8))
+    fit = SimpleNamespace(frame=frame, axis_labels={5: "Z", 6: "Z", 7: "U"})
+    plane, rms, axl = _labelled_fallback(1, seg, fit, X, 0.1, cfg)
+    assert axl is None and rms < 5e-4
+    assert abs(abs(plane.axis_vector @ n) - 1.0) < 1e-4
+    assert abs(plane.signed_distance(base[None])[0]) < 2e-4
+    assert _labelled_fallback(2, seg, fit, X, 0.1, cfg) is None
+    # with X faces found too, the frame's X is measured and the label's axis is used as before: these points,
+    # spread 6 cm along a line 35 degrees off X's plane, fit no plane normal to X
+    fit_xz = SimpleNamespace(frame=frame, axis_labels={5: "Z", 6: "X"})
+    assert _labelled_fallback(1, seg, fit_xz, X, 0.1, cfg) is None
+    on_x = np.concatenate([base + t[0][:, None] * frame[1], base + 0.02 * frame[2] + t[1][:, None] * frame[1]])
+    plane_x, _, axl_x = _labelled_fallback(1, seg, fit_xz, on_x, 0.1, cfg)
+    assert axl_x == "X" and abs(abs(plane_x.axis_vector[0]) - 1.0) < 1e-12
+    assert fit_plane_normal_across(X[:2], frame[2]) is None
+
+
 def test_labelled_fallback_from_one_edge() -> None:
     # A grazing ledge under a face-on plane: the ledge has no depth and one fitted neighbour, so its evidence is a
     # single line (its edge with that plane). A free plane is not fixed by one line and is not drawn; labelled

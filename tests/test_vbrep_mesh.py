@@ -120,3 +120,30 @@ def test_extracted_meshes_lie_in_front_of_the_camera_on_their_surfaces():
         assert len(mv) and mv[:, 2].min() > 0.1
         assert np.abs(from_dict(f.primitive).signed_distance(mv)).max() <= 1e-7
 
+
+
+def test_edge_on_plane_keeps_long_triangles_inside_the_part_box_only():
+    # A plane seen nearly edge-on (a floor 5 cm below the camera's axis, rows 145-180): its depth runs from
+    # 1.2 m to 0.5 m over 35 rows, up to 4 cm per pixel step. Those triangles are longer than max_edge (2 cm), so
+    # without a box the far rows are dropped; inside the part's box they are kept, and nothing outside the box
+    # is (the far end of a wrong plane running past the part).
+    plane = from_dict({"type": "plane", "params": {"origin": [0.0, 0.05, 0.8], "normal": [0.0, 1.0, 0.0]}})
+    region = _region(100, 146, 200, 180)
+    depth = np.zeros((H, W), np.float32)
+    inner = _pixels(_region(100, 147, 200, 179), 0.3)[::3]
+    z_of = 0.05 * K[1, 1] / (inner[:, 1] - K[1, 2])  # the plane's depth at those image points (metres)
+    args = (plane, 0, region, depth, K, WINDOW, 1, 0.02)
+    v0, t0 = face_mesh(*args)
+    assert _covered(v0, t0, inner[z_of > 0.9]).mean() < 0.05  # far rows: steps over 2 cm
+    assert _covered(v0, t0, inner[z_of < 0.6]).mean() > 0.99
+    box = (np.array([-1.0, -1.0, 0.3]), np.array([1.0, 1.0, 1.5]))
+    v1, t1 = face_mesh(*args, np.inf, box, True)
+    assert _covered(v1, t1, inner).mean() > 0.99
+    near = (np.array([-1.0, -1.0, 0.3]), np.array([1.0, 1.0, 0.8]))
+    v2, t2 = face_mesh(*args, np.inf, near, True)
+    assert v2[:, 2].max() <= 0.8 + 1e-9
+    assert _covered(v2, t2, inner[z_of < 0.75]).mean() > 0.99
+    assert _covered(v2, t2, inner[z_of > 0.85]).mean() == 0.0
+    # a box without long_in_bounds only clips: the far rows stay dropped
+    _, t3 = face_mesh(*args, np.inf, box, False)
+    assert len(t3) == len(t0)

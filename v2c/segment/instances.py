@@ -9,6 +9,11 @@
    separates markers). With ``seed_split_px`` > 0 the seeds are eroded by that much first (conditional erosion:
    components that would vanish are kept whole), which cuts necks through gaps of the predicted boundary (off by
    default: it fragments faces more than it separates them).
+2b. A face seen edge-on returns no depth and looks like a boundary all across, so the boundary band covers it and
+   its markers are specks; where the band, with one label, is thicker than 2 x ``band_core_px`` + 1 pixels and
+   mostly unmeasured (``unmeasured``: no depth reading), its core is a marker, kept at ``band_core_min_px`` (a band's half beside its face is
+   thin, a boundary between measured faces has depth; tuning and validation sets: neutral within 0.001, it
+   recovers edge-on faces the flooding split between their neighbours).
 3. Markers under ``min_area_px`` are dissolved; the other part pixels are flooded from the markers in order of
    evidence (``flood_levels`` thresholds; within a level each pixel joins the nearest marker of its connected
    piece), so a region grows across low evidence first and two markers meet on the ridge of the predicted boundary
@@ -61,6 +66,11 @@ class InstanceConfig:
     band_marker_px: int = 35  # a face wholly inside the predicted boundary band (a thin wall or step) is an
     # instance of its own: connected band pixels of one label, at least this many, touching no marker of that label
     # (pixels; 0 = off)
+    band_core_px: int = 3  # a part of the band thicker than 2 x this + 1 pixels, of one label, is a marker (a face
+    # seen edge-on is boundary-like all across; a boundary band's half beside its face is thin) (pixels; 0 = off)
+    band_core_min_px: int = 30  # ... when its core (the pixels this far inside it) has at least this many pixels
+    band_core_unmeasured: float = 0.7  # ... of which at least this share have no depth reading (fraction; with a
+    # depth map: a face seen edge-on returns none, a boundary between two measured faces does)
     band_marker_prob: float = 0.55  # ... and a mean probability of its label at least this (with class
     # probabilities; label noise along a boundary is less sure than a thin face)
 
@@ -241,6 +251,31 @@ def _band_markers(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs:
     return np.where(keep[band], band + int(inst.max()), 0).astype(np.int32)
 
 
+def _band_cores(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs: np.ndarray | None,
+                unmeasured: np.ndarray, cfg: InstanceConfig) -> np.ndarray:
+    """``inst`` with new markers (numbered above its own) where the part pixels no marker holds are, with one label,
+    thicker than 2 x ``band_core_px`` + 1 pixels: the cores (pixels whose disk of that radius holds one band
+    component) of at least ``band_core_min_px`` pixels, a mean probability of their label of at least
+    ``band_marker_prob`` and at least ``band_core_unmeasured`` of their pixels ``unmeasured`` (no depth reading)."""
+    band = _components_per_label(labels, part & (inst == 0)).astype(np.float32)
+    if not band.any():
+        return inst
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * cfg.band_core_px + 1,) * 2)
+    core = (band > 0) & (cv2.erode(band, k, borderValue=0) == band) & (cv2.dilate(band, k) == band)
+    cores = _drop_small(_components_per_label(labels, core), cfg.band_core_min_px)
+    n = int(cores.max())
+    if n == 0:
+        return inst
+    ok = np.ones(n + 1, bool)
+    if probs is not None and cfg.band_marker_prob > 0:
+        ok &= _mean_prob_of(cores, _majority_label(cores, labels), probs) >= cfg.band_marker_prob
+    ok &= np.bincount(cores.ravel(), weights=unmeasured.ravel(), minlength=n + 1) \
+        >= cfg.band_core_unmeasured * np.bincount(cores.ravel(), minlength=n + 1)
+    ok[0] = False
+    cores = np.where(ok[cores], cores, 0)
+    return np.where(cores > 0, cores + int(inst.max()), inst).astype(np.int32)
+
+
 def _flood(inst: np.ndarray, part: np.ndarray, ev: np.ndarray, levels: tuple[float, ...]) -> np.ndarray:
     """Grow the instances over part pixels in order of evidence: for each level, every unassigned part pixel with
     evidence below it joins the nearest instance pixel of its connected piece of (assigned | allowed) pixels."""
@@ -289,8 +324,8 @@ def label_instances(inst: np.ndarray, labels: np.ndarray, probs: np.ndarray | No
     return lab.astype(np.uint8), score.astype(np.float32)
 
 
-def _instances(labels: np.ndarray, part: np.ndarray, ev: np.ndarray, probs: np.ndarray | None, cfg: InstanceConfig
-               ) -> np.ndarray:
+def _instances(labels: np.ndarray, part: np.ndarray, ev: np.ndarray, probs: np.ndarray | None, cfg: InstanceConfig,
+               unmeasured: np.ndarray | None = None) -> np.ndarray:
     """Steps 1-4 of the module docstring: (H, W) int32 instance ids (not yet renumbered)."""
     core = part & (ev <= cfg.boundary_threshold)
     seeds = core & (ev < cfg.seed_threshold) if cfg.seed_threshold < cfg.boundary_threshold else core
@@ -298,6 +333,8 @@ def _instances(labels: np.ndarray, part: np.ndarray, ev: np.ndarray, probs: np.n
         seeds = cv2.erode(seeds.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=cfg.core_erode_px) > 0
     inst = _markers(labels, seeds, cfg.seed_split_px)
     inst = _drop_small(inst, cfg.min_area_px)
+    if cfg.band_core_px > 0 and unmeasured is not None:
+        inst = _band_cores(inst, labels, part, probs, unmeasured, cfg)
     band = _band_markers(inst, labels, part, probs, cfg) if cfg.band_marker_px > 0 else None
     if cfg.flood_levels:
         inst = _flood(inst, part, ev, cfg.flood_levels)
@@ -312,13 +349,15 @@ def _instances(labels: np.ndarray, part: np.ndarray, ev: np.ndarray, probs: np.n
 
 def extract_instances(labels: np.ndarray, boundary: np.ndarray, region: np.ndarray | None = None,
                       probs: np.ndarray | None = None, cfg: InstanceConfig = InstanceConfig(),
-                      method: str = "learned", evidence: np.ndarray | None = None) -> Segmentation:
+                      method: str = "learned", evidence: np.ndarray | None = None,
+                      unmeasured: np.ndarray | None = None) -> Segmentation:
     """Instances from a per-pixel label map and a face-boundary map.
 
     labels: (H, W) int 18-class labels (0 = background; 255 treated as background). boundary: (H, W) bool, or
     float probabilities (thresholded at ``boundary_threshold``). region: optional (H, W) bool, pixels allowed to
     be part (mask/ROI). probs: optional (18, H, W) class probabilities for the instance labels and scores.
     evidence: optional (H, W) extra boundary evidence in [0, 1] (``feature_evidence``), combined by maximum.
+    unmeasured: optional (H, W) bool pixels without a depth reading (``band_core_unmeasured``).
     """
     labels = np.asarray(labels)
     bnd = np.asarray(boundary)
@@ -333,7 +372,7 @@ def extract_instances(labels: np.ndarray, boundary: np.ndarray, region: np.ndarr
     if len(rows):  # work on the part's bounding box (same result, less image to flood)
         box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
         inst[box] = _instances(labels[box], part[box], ev[box], None if probs is None else probs[(slice(None), *box)],
-                               cfg)
+                               cfg, None if unmeasured is None else np.asarray(unmeasured, bool)[box])
     inst = _relabel_raster(inst)
     lab, score = label_instances(inst, labels, probs)
     return Segmentation(instances=inst, labels=lab, scores=score, method=method)

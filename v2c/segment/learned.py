@@ -139,4 +139,5 @@ def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cf
             fg = probs[1:].argmax(axis=0).astype(np.uint8) + 1
             labels = np.where(region, fg, 0).astype(np.uint8)
     evidence = feature_evidence(feat, cfg) if feat is not None else None
-    return extract_instances(labels, bnd, region=region, probs=probs, cfg=cfg, method="learned", evidence=evidence)
+    return extract_instances(labels, bnd, region=region, probs=probs, cfg=cfg, method="learned", evidence=evidence,
+                             unmeasured=np.asarray(scan.depth) <= 0)

@@ -80,8 +80,18 @@ class VBRepConfig:
     #                                      depth, or a neighbour's edge each)
 
     # --- meshes
-    mesh_stride_px: int = 2  # pixels: spacing of the back-projected pixel grid of each face mesh
+    mesh_stride_px: int = 1  # pixels: spacing of the back-projected pixel grid of each face mesh
     mesh_max_edge: float = 0.2  # scale units: triangles with a longer side (jumps between crossings) are dropped
+    mesh_bound_pad: float = 0.05  # scale units: triangles with a corner outside the part's box (its observed points'
+    #                               0.5-99.5 percentiles per axis) padded by this are dropped (a wrong surface seen
+    #                               nearly edge-on runs off past the part; a cylinder or cone may reach one part
+    #                               size past the part's nearest point in depth: a hole's wall; negative: no box)
+    mesh_bound_pad_unmeasured: float = 0.1  # scale units: ... padded by this for a face with no depth reading on
+    #                                          more than mesh_unmeasured_share of its pixels (placed by its edges)
+    mesh_unmeasured_share: float = 0.7  # fraction
+    mesh_loose_min_conf: float = 0.5  # ... and a face confidence at least this (a wrong face seen edge-on is unsure)
+    mesh_plane_long: bool = True  # a plane's triangle longer than mesh_max_edge is kept inside that box (a plane
+    #                               seen nearly edge-on spans much depth per pixel, and it has one crossing)
     mesh_surface_tol: float = 0.05  # scale units: a mesh ray's closest approach to a sheet it misses is moved onto
     #                                 the surface when within this of it, else dropped (as are vertices outside the
     #                                 depth window, e.g. at the camera centre); d_int's value

@@ -215,12 +215,29 @@ def fit_axis_plane_points(X: np.ndarray, normal: np.ndarray) -> tuple[Plane, flo
     return Plane(X.mean(axis=0), n), float(np.std(X @ n))
 
 
+def fit_plane_normal_across(X: np.ndarray, axis: np.ndarray) -> tuple[Plane, float] | None:
+    """Least-squares plane whose normal is perpendicular to the unit ``axis`` (a face parallel to that axis)
+    through (N, 3) points: a line fitted to the points projected along the axis. Returns the plane and its RMS
+    distance (metres); None with fewer than 3 points."""
+    if len(X) < 3:
+        return None
+    t1, t2 = tangent_basis(axis / np.linalg.norm(axis))
+    q = np.stack([X @ t1, X @ t2], 1)
+    c = q.mean(axis=0)
+    _, _, vt = np.linalg.svd(q - c, full_matrices=False)
+    n = vt[1, 0] * t1 + vt[1, 1] * t2
+    return Plane(X.mean(axis=0), n), float(np.std(X @ n))
+
+
 def _labelled_fallback(inst: int, seg: Any, fit: Any, X: np.ndarray, scale: float, cfg: VBRepConfig
-                       ) -> tuple[Cylinder | Plane, float, str] | None:
+                       ) -> tuple[Cylinder | Plane, float, str | None] | None:
     """An unfitted instance labelled cylinder or plane with an aligned axis class (X / Y / Z): the cylinder on
     that axis of the shared frame (radius at most the part size: a tiny wall patch keeps its type instead of
     becoming a plane), or the plane normal to it, that fits its evidence within fallback_rms; else None. A face
-    seen at a grazing angle has hardly any depth; its label's axis fixes the plane that its edges alone cannot."""
+    seen at a grazing angle has hardly any depth; its label's axis fixes the plane that its edges alone cannot.
+    When the fit found faces of one axis class only, the frame's other two axes are a guess about it: a plane
+    labelled with another class is then fitted with its normal across the one found (it is parallel to it), and
+    a cylinder is left to the rules for unlabelled faces."""
     labels = np.asarray(getattr(seg, "labels", ()))
     frame = getattr(fit, "frame", None)
     if frame is None or inst >= len(labels) or not 1 <= int(labels[inst]) <= 16:
@@ -228,7 +245,16 @@ def _labelled_fallback(inst: int, seg: Any, fit: Any, X: np.ndarray, scale: floa
     ptype, ax = type_axis_of(int(labels[inst]))
     if ptype.value not in ("cylinder", "plane") or ax is None or ax.value == "U":
         return None
-    axis = np.asarray(frame, float)[{"X": 0, "Y": 1, "Z": 2}[ax.value]]
+    row = {"X": 0, "Y": 1, "Z": 2}
+    axis = np.asarray(frame, float)[row[ax.value]]
+    found = {v for v in getattr(fit, "axis_labels", {}).values() if v in row}
+    if len(found) == 1 and ax.value not in found:
+        if ptype.value != "plane":
+            return None
+        got = fit_plane_normal_across(X, np.asarray(frame, float)[row[found.pop()]])
+        if got is None or got[1] > cfg.fallback_rms * scale:
+            return None
+        return got[0], got[1], None
     if ptype.value == "plane":
         got = fit_axis_plane_points(X, axis)
     else:
@@ -616,15 +642,32 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
                            p.curve if p.type is EdgeType.INTERSECTION else None))
     vverts = [VVertex(k, v.kind, v.position, v.pixel) for k, v in enumerate(vertices)]
     loops = build_loops(protos, fid, ctx.K)
+    bounds = None  # the part's box: what its observed points span, padded
+    if cfg.mesh_bound_pad >= 0:
+        vv, uu = np.nonzero((ctx.depth > 0) & (ctx.instances > 0))
+        if len(uu):
+            q = pixel_rays(np.stack([uu, vv], 1).astype(float), ctx.K) * ctx.depth[vv, uu][:, None]
+            bounds = (np.percentile(q, 0.5, axis=0), np.percentile(q, 99.5, axis=0))
     vfaces = []
     for inst in inst_ids:
         fg = ctx.faces[inst]
         region = ctx.instances == inst
-        mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px,
-                           cfg.mesh_max_edge * scale, cfg.mesh_surface_tol * scale)
         ch = ctx.sheets[inst]
+        conf = face_confidence(fg.residual, ch.errors, ch.sheet, scale, cfg)
+        box = None
+        if bounds is not None:  # a sure face with few depth readings of its own is placed by its edges: looser box
+            loose = float(np.mean(ctx.depth[region] <= 0)) > cfg.mesh_unmeasured_share \
+                and conf >= cfg.mesh_loose_min_conf
+            pad = (cfg.mesh_bound_pad_unmeasured if loose else cfg.mesh_bound_pad) * scale
+            lo, hi = bounds[0] - pad, bounds[1] + pad
+            if not isinstance(fg.prim, Plane):  # a hole's wall may run deeper than any point seen: up to one part
+                hi[2] = max(hi[2], bounds[0][2] + scale + pad)  # size past the part's nearest point
+            box = (lo, hi)
+        mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px,
+                           cfg.mesh_max_edge * scale, cfg.mesh_surface_tol * scale, box,
+                           cfg.mesh_plane_long and isinstance(fg.prim, Plane))
         vfaces.append(VFace(fid[inst], inst, fg.prim.to_dict(), fg.axis_label, loops.get(fid[inst], []), mv, mt,
-                            round(face_confidence(fg.residual, ch.errors, ch.sheet, scale, cfg), 4)))
+                            round(conf, 4)))
     meta = {
         "segmentation": getattr(seg, "method", None),
         "faces": {str(fid[i]): {"sheet": ctx.sheets[i].sheet, "concave": ctx.sheets[i].concave,

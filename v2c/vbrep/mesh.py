@@ -7,7 +7,10 @@ surface sheet by ray-surface intersection (exact on the surface, covering exactl
 face), and the grid is triangulated: two triangles per grid square whose four corners are present, one where three
 are. A triangle with a corner on the outline whose centre pixel is not the region's spans a gap of it (a small
 hole, a narrow notch where another face cuts in) and is dropped. Triangles with a side longer than ``max_edge``
-metres (a jump between crossings where the sheet is absent) are dropped. Triangles are wound to face the camera.
+metres (a jump between crossings where the sheet is absent) are dropped, unless all three corners lie in
+``bounds`` (given for planes, which have one crossing: a plane seen nearly edge-on spans much depth per pixel, and
+the part's box, not a side length, tells a face from a plane running off past the part). Triangles are wound to
+face the camera.
 
 A grid point whose ray yields no usable point is left out with its triangles: a depth outside ``window`` (at or
 behind the camera centre, e.g. a plane seen edge-on through the camera centre gives z = 0 for every ray) or not
@@ -28,10 +31,12 @@ from v2c.vbrep.raycast import as_primitive, intersect, pixel_rays, sheet_depth
 
 def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray, K: np.ndarray,
               window: tuple[float, float], stride: int = 2, max_edge: float = np.inf,
-              surface_tol: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+              surface_tol: float = np.inf, bounds: tuple[np.ndarray, np.ndarray] | None = None,
+              long_in_bounds: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Mesh of one face. region: (H, W) bool pixels of the face; depth: (H, W) observed depth (metres, 0 = none)
     used to pick the crossing where the sheet is absent; window: (near, far) depths (metres) a vertex may have;
-    surface_tol: metres a ray's closest approach may lie off the surface to be moved onto it (farther: dropped).
+    surface_tol: metres a ray's closest approach may lie off the surface to be moved onto it (farther: dropped);
+    bounds: optional (low (3,), high (3,)) camera-frame box (metres) keeping triangles longer than max_edge.
     Returns vertices (n, 3) camera-frame metres and triangles (m, 3) int64; every vertex has
     window[0] <= z <= window[1] and lies on the surface."""
     vs, us = np.nonzero(region)
@@ -107,7 +112,11 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
     longest = np.max(np.stack([np.linalg.norm(p1 - p0, axis=1), np.linalg.norm(p2 - p1, axis=1),
                                np.linalg.norm(p0 - p2, axis=1)]), 0)
-    tri = tri[np.isfinite(longest) & (longest <= max_edge)]
+    keep = np.isfinite(longest) & (longest <= max_edge)
+    if bounds is not None:
+        inside = np.all((verts >= bounds[0]) & (verts <= bounds[1]), axis=1)[tri].all(axis=1)
+        keep = (keep | (np.isfinite(longest) & long_in_bounds)) & inside
+    tri = tri[keep]
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
     facing_away = np.einsum("ij,ij->i", np.cross(p1 - p0, p2 - p0), p0) > 0
     tri[facing_away] = tri[facing_away][:, [0, 2, 1]]
