@@ -11,7 +11,8 @@ plane where the network's most probable class is another count as off the plane 
 
 Coaxial shaft sections whose radii differ by a few thousandths of the part size meet at a shoulder one or two
 pixels wide: no label, colour or predicted boundary separates them. Depth does: for every instance labelled
-cylinder, the change point of the residuals of one cylinder fit (ordered along its axis) splits the points in two,
+cylinder, the change point of the residuals of one cylinder fit (ordered along its axis; the peak of the
+mean-shift cumulative sum of the residuals clipped at coax_clip_mad robust sigmas) splits the points in two,
 one coaxial fit with a radius per side (shared axis line) measures the step, and a step both larger than
 coax_step_part and coax_z noise standard errors splits the instance there; each side is tested again, to
 coax_max_splits levels.
@@ -57,6 +58,8 @@ class RefineConfig:
     coax_min_side_share: float = 0.1  # ... and this share of the instance (fraction)
     coax_step_part: float = 0.0025  # smallest radius step that splits (part-size units)
     coax_z: float = 15.0  # ... and at least this many standard errors of the two radii's difference (ratio)
+    coax_clip_mad: float = 3.0  # residuals clipped at this many robust sigmas before the mean-shift change point
+    # (ratio; 0: the median-centred sum)
     coax_fit_points: int = 800  # points of the coaxial two-radius fit (count)
     coax_max_splits: int = 2  # levels of splitting: a split's sides are tested again until this depth (count)
     merge: bool = True  # merge adjacent plane instances that lie on one plane (fragments of a face)
@@ -251,7 +254,13 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
         if n - 2 * lo < 1:
             continue
         e = cyl.signed_distance(x[order])
-        cusum = np.cumsum(e - np.median(e))
+        if cfg.coax_clip_mad > 0:  # mean-shift CUSUM of clipped residuals: zero at both ends, peaks at the step
+            med = np.median(e)
+            spread = cfg.coax_clip_mad * 1.4826 * np.median(np.abs(e - med))
+            e = np.clip(e, med - spread, med + spread)
+            cusum = np.cumsum(e - e.mean())
+        else:
+            cusum = np.cumsum(e - np.median(e))
         k = lo + int(np.argmax(np.abs(cusum[lo:n - lo])))  # the change point of the residuals along the axis
         side = np.zeros(n, bool)
         side[order[k:]] = True
