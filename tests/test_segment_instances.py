@@ -116,17 +116,25 @@ def _probs_of(labels: np.ndarray, p_own: float) -> np.ndarray:
     return probs
 
 
+def _three_faces(height: int, strip: tuple[int, int], strip_label: int, band: tuple[int, int]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(faces, labels, boundary probability) of a (height, 60) map: face 1 (label 1) above, a strip (face 2, rows
+    strip[0]:strip[1], label strip_label) and face 3 (label 3) below, all under one predicted boundary band (rows
+    band[0]:band[1], probability 0.9)."""
+    faces = np.zeros((height, 60), np.uint16)
+    faces[2:strip[0], 2:58] = 1
+    faces[strip[0]:strip[1], 2:58] = 2
+    faces[strip[1]:height - 2, 2:58] = 3
+    labels = np.vectorize({0: 0, 1: 1, 2: strip_label, 3: 3}.get)(faces).astype(np.uint8)
+    prob = np.zeros(faces.shape, np.float32)
+    prob[band[0]:band[1]] = 0.9
+    return faces, labels, prob
+
+
 def _thin_wall() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A 4-px strip (label 7, cylinder Z) between two planes (labels 1 and 3), all three under one predicted
     boundary band 8 px wide: the strip has no pixel of low boundary probability (a hole's wall under its rim)."""
-    faces = np.zeros((40, 60), np.uint16)
-    faces[2:18, 2:58] = 1
-    faces[18:22, 2:58] = 2
-    faces[22:38, 2:58] = 3
-    labels = np.vectorize({0: 0, 1: 1, 2: 7, 3: 3}.get)(faces).astype(np.uint8)
-    prob = np.zeros(faces.shape, np.float32)
-    prob[16:24] = 0.9
-    return faces, labels, prob
+    return _three_faces(40, (18, 22), 7, (16, 24))
 
 
 def test_face_inside_the_boundary_band_gets_its_own_instance() -> None:
@@ -176,13 +184,7 @@ def test_open_contact_keeps_confident_faces_of_two_types_apart() -> None:
 def _edge_on_face() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A 12-px strip (face 2) seen nearly edge-on between two faces, painted with its upper neighbour's label (two
     planes of one axis class), the predicted boundary band covering it whole; the strip returns no depth."""
-    faces = np.zeros((60, 60), np.uint16)
-    faces[2:20, 2:58] = 1
-    faces[20:32, 2:58] = 2
-    faces[32:58, 2:58] = 3
-    labels = np.vectorize({0: 0, 1: 1, 2: 1, 3: 3}.get)(faces).astype(np.uint8)
-    prob = np.zeros(faces.shape, np.float32)
-    prob[17:35] = 0.9
+    faces, labels, prob = _three_faces(60, (20, 32), 1, (17, 35))
     return faces, labels, prob, faces == 2
 
 
@@ -204,10 +206,6 @@ def test_edge_on_face_without_depth_gets_its_own_instance() -> None:
             got = plain.instances == i
             assert (got & (faces == 2)).sum() / (got | (faces == 2)).sum() < 0.5
     # a band of one label too thin for a core (under 2 x band_core_px + 1 = 7 px: here rows 17-22) is not a marker
-    thin = faces.copy()
-    thin[23:32] = 3
-    lab_thin = np.vectorize({0: 0, 1: 1, 2: 1, 3: 3}.get)(thin).astype(np.uint8)
-    prob_thin = np.zeros(faces.shape, np.float32)
-    prob_thin[17:26] = 0.9
+    thin, lab_thin, prob_thin = _three_faces(60, (20, 23), 1, (17, 26))
     seg_thin = extract_instances(lab_thin, prob_thin, probs=_probs_of(lab_thin, 0.9), unmeasured=thin == 2)
     assert seg_thin.num_instances == 2
