@@ -10,10 +10,11 @@
    components that would vanish are kept whole), which cuts necks through gaps of the predicted boundary (off by
    default: it fragments faces more than it separates them).
 2b. A face seen edge-on returns no depth and looks like a boundary all across, so the boundary band covers it and
-   its markers are specks; where the band, with one label, is thicker than 2 x ``band_core_px`` + 1 pixels and
-   mostly unmeasured (``unmeasured``: no depth reading), its core is a marker, kept at ``band_core_min_px`` (a band's half beside its face is
-   thin, a boundary between measured faces has depth; tuning and validation sets: neutral within 0.001, it
-   recovers edge-on faces the flooding split between their neighbours).
+   its markers are specks. Where the band, with one label, is thicker than 2 x ``band_core_px`` + 1 pixels and
+   mostly unmeasured (``unmeasured``: no depth reading), its core becomes a marker if it has at least
+   ``band_core_min_px`` pixels. A band's half beside its own face is thinner, and a boundary between measured
+   faces has depth. On the tuning and validation sets this is neutral within 0.001; it recovers edge-on faces that
+   the flooding split between their neighbours.
 3. Markers under ``min_area_px`` are dissolved; the other part pixels are flooded from the markers in order of
    evidence (``flood_levels`` thresholds; within a level each pixel joins the nearest marker of its connected
    piece), so a region grows across low evidence first and two markers meet on the ridge of the predicted boundary

@@ -7,10 +7,11 @@ surface sheet by ray-surface intersection (exact on the surface, covering exactl
 face), and the grid is triangulated: two triangles per grid square whose four corners are present, one where three
 are. A triangle with a corner on the outline whose centre pixel is not the region's spans a gap of it (a small
 hole, a narrow notch where another face cuts in) and is dropped. Triangles with a side longer than ``max_edge``
-metres (a jump between crossings where the sheet is absent) are dropped, unless all three corners lie in
-``bounds`` (given for planes, which have one crossing: a plane seen nearly edge-on spans much depth per pixel, and
-the part's box, not a side length, tells a face from a plane running off past the part). Triangles are wound to
-face the camera.
+metres (a jump between crossings where the sheet is absent) are dropped, unless ``long_in_bounds`` (given for
+planes, which have one crossing: a plane seen nearly edge-on spans much depth per pixel) and all three corners lie
+in ``bounds``. With ``bounds`` (the part's box) no triangle with a corner outside it is kept, however short: the
+box, not a side length, tells a face from a wrong surface running off past the part. Triangles are wound to face
+the camera.
 
 A grid point whose ray yields no usable point is left out with its triangles: a depth outside ``window`` (at or
 behind the camera centre, e.g. a plane seen edge-on through the camera centre gives z = 0 for every ray) or not
@@ -36,7 +37,8 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
     """Mesh of one face. region: (H, W) bool pixels of the face; depth: (H, W) observed depth (metres, 0 = none)
     used to pick the crossing where the sheet is absent; window: (near, far) depths (metres) a vertex may have;
     surface_tol: metres a ray's closest approach may lie off the surface to be moved onto it (farther: dropped);
-    bounds: optional (low (3,), high (3,)) camera-frame box (metres) keeping triangles longer than max_edge.
+    bounds: optional (low (3,), high (3,)) camera-frame box (metres) every kept triangle lies in;
+    long_in_bounds: with bounds, triangles longer than max_edge are kept too.
     Returns vertices (n, 3) camera-frame metres and triangles (m, 3) int64; every vertex has
     window[0] <= z <= window[1] and lies on the surface."""
     vs, us = np.nonzero(region)
