@@ -89,9 +89,10 @@ class VBRepConfig:
     mesh_bound_pad_unmeasured: float = 0.1  # scale units: ... padded by this for a face with no depth reading on
     #                                          more than mesh_unmeasured_share of its pixels (placed by its edges)
     mesh_unmeasured_share: float = 0.7  # fraction
-    mesh_loose_min_conf: float = 0.5  # ... and a face confidence at least this (a wrong face seen edge-on is unsure)
-    mesh_plane_long: bool = True  # a plane's triangle longer than mesh_max_edge is kept inside that box (a plane
-    #                               seen nearly edge-on spans much depth per pixel, and it has one crossing)
+    mesh_loose_min_conf: float = 0.6  # ... and a face confidence at least this (a wrong face seen edge-on is unsure)
+    mesh_plane_long: bool = True  # a plane's triangle longer than mesh_max_edge is kept inside that box when the
+    #                               face's confidence is at least mesh_loose_min_conf (a plane seen nearly edge-on
+    #                               spans much depth per pixel, and it has one crossing)
     mesh_surface_tol: float = 0.05  # scale units: a mesh ray's closest approach to a sheet it misses is moved onto
     #                                 the surface when within this of it, else dropped (as are vertices outside the
     #                                 depth window, e.g. at the camera centre); d_int's value

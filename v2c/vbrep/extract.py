@@ -665,7 +665,7 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
             box = (lo, hi)
         mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px,
                            cfg.mesh_max_edge * scale, cfg.mesh_surface_tol * scale, box,
-                           cfg.mesh_plane_long and isinstance(fg.prim, Plane))
+                           cfg.mesh_plane_long and isinstance(fg.prim, Plane) and conf >= cfg.mesh_loose_min_conf)
         vfaces.append(VFace(fid[inst], inst, fg.prim.to_dict(), fg.axis_label, loops.get(fid[inst], []), mv, mt,
                             round(conf, 4)))
     meta = {
