@@ -140,6 +140,12 @@ class ExtractContext:
     stats: dict[str, Any] = field(default_factory=dict)
 
 
+def measured_points(mask: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(N, 3) camera-frame points (metres) of the pixels of ``mask`` that have a depth reading."""
+    vs, us = np.nonzero(mask & (depth > 0))
+    return pixel_rays(np.stack([us, vs], 1).astype(float), K) * depth[vs, us, None]
+
+
 def fit_plane_points(X: np.ndarray, trim: float = 0.8) -> tuple[Plane, float, float] | None:
     """Total-least-squares plane through (N, 3) points, refitted on the ``trim`` share closest to the first fit.
     Returns the plane (normal towards the camera), its RMS distance (metres) and its flatness (second singular
@@ -246,12 +252,13 @@ def _labelled_fallback(inst: int, seg: Any, fit: Any, X: np.ndarray, scale: floa
     if ptype.value not in ("cylinder", "plane") or ax is None or ax.value == "U":
         return None
     row = {"X": 0, "Y": 1, "Z": 2}
-    axis = np.asarray(frame, float)[row[ax.value]]
+    frame = np.asarray(frame, float)
+    axis = frame[row[ax.value]]
     found = {v for v in getattr(fit, "axis_labels", {}).values() if v in row}
     if len(found) == 1 and ax.value not in found:
         if ptype.value != "plane":
             return None
-        got = fit_plane_normal_across(X, np.asarray(frame, float)[row[found.pop()]])
+        got = fit_plane_normal_across(X, frame[row[found.pop()]])
         if got is None or got[1] > cfg.fallback_rms * scale:
             return None
         return got[0], got[1], None
@@ -273,9 +280,7 @@ def fallback_plane_points(inst: int, inst_map: np.ndarray, depth: np.ndarray, K:
     fitted neighbour lifted onto that neighbour's surface (where two faces meet, the edge lies on both). Returns
     the point sets of each source with at least 3 points."""
     m = inst_map == inst
-    vs, us = np.nonzero(m)
-    ok = depth[vs, us] > 0
-    pts = [pixel_rays(np.stack([us[ok], vs[ok]], 1).astype(float), K) * depth[vs[ok], us[ok], None]]
+    pts = [measured_points(m, depth, K)]
     ring = cv2.dilate(m.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~m
     for j in np.unique(inst_map[ring]):
         if int(j) not in faces:
@@ -314,8 +319,7 @@ def _face_geoms(fit: Any, seg: Any, depth: np.ndarray, K: np.ndarray, window: tu
             # a curved face with invalid parameters (e.g. a torus with a negative major radius): the nearest
             # valid surface, a least-squares sphere through its depth points, if it fits them; else it is left
             # to the unfitted-face rule below
-            vs, us = np.nonzero((inst_map == inst) & (depth > 0))
-            got = fit_sphere_points(pixel_rays(np.stack([us, vs], 1).astype(float), K) * depth[vs, us, None])
+            got = fit_sphere_points(measured_points(inst_map == inst, depth, K))
             if got is not None and got[1] <= cfg.fallback_rms * scale:
                 add(int(inst), got[0], got[1], None, {"refit": "sphere"})
             continue
@@ -644,9 +648,8 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
     loops = build_loops(protos, fid, ctx.K)
     bounds = None  # the part's box: what its observed points span, padded
     if cfg.mesh_bound_pad >= 0:
-        vv, uu = np.nonzero((ctx.depth > 0) & (ctx.instances > 0))
-        if len(uu):
-            q = pixel_rays(np.stack([uu, vv], 1).astype(float), ctx.K) * ctx.depth[vv, uu][:, None]
+        q = measured_points(ctx.instances > 0, ctx.depth, ctx.K)
+        if len(q):
             bounds = (np.percentile(q, 0.5, axis=0), np.percentile(q, 99.5, axis=0))
     vfaces = []
     for inst in inst_ids:
