@@ -7,21 +7,17 @@ from collections import defaultdict
 from typing import TYPE_CHECKING
 
 import numpy as np
-from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
 from OCP.BRepCheck import BRepCheck_Analyzer
-from OCP.BRepLib import BRepLib
-from OCP.GCE2d import GCE2d_MakeSegment
-from OCP.gp import gp_Pnt, gp_Pnt2d
 from OCP.ShapeBuild import ShapeBuild_ReShape
 from OCP.ShapeFix import ShapeFix_Face
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_REVERSED
 from OCP.TopExp import TopExp, TopExp_Explorer
-from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Vertex, TopoDS_Wire
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Wire
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from exporters.occ_curves import curve_points
 from exporters.occ_surfaces import AnalyticSurface, distance_to_surface
-from exporters.polygons import mesh_boundary_loop, polygon_crossings, signed_area, simplify_closed
+from exporters.polygons import polygon_crossings, signed_area
 
 if TYPE_CHECKING:
     from exporters.brep_edges import EdgeBuilder
@@ -163,7 +159,7 @@ class FaceBuilder:
             ends.append((v1, v0) if rev else (v0, v1))
         return all(ends[i][1] == ends[(i + 1) % len(ends)][0] for i in range(len(ends)))
 
-    def _orient_to_camera(self, face: TopoDS_Face, f: VFace) -> TopoDS_Face:
+    def orient_to_camera(self, face: TopoDS_Face, f: VFace) -> TopoDS_Face:
         s = self.surfaces[f.id]
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         if len(pts) == 0:
@@ -216,7 +212,7 @@ class FaceBuilder:
             return None
         for old, new in replaced:
             self.ctx.Replace(old, new)
-        return self._orient_to_camera(face, f)
+        return self.orient_to_camera(face, f)
 
     def _replacements_keep_faces_valid(self, replaced: list[tuple[TopoDS_Shape, TopoDS_Shape]]) -> bool:
         """Whether the faces built so far stay valid when ShapeFix's replacements of shared edges (made while
@@ -300,49 +296,3 @@ class FaceBuilder:
                     self.warnings.append(f"face {f.id}: {why}")
                 return face, loops
         return None
-
-    def build_fallback_face(self, f: VFace) -> TopoDS_Face | None:
-        """The face bounded by its mesh's longest boundary loop, simplified and projected onto its surface: a
-        polygon of straight (u, v) segments, which lie on the surface exactly."""
-        loop = mesh_boundary_loop(np.asarray(f.mesh_triangles, int))
-        if loop is None or len(loop) < 3:
-            return None
-        s = self.surfaces[f.id]
-        pts = s.project(self.fmap.points(np.asarray(f.mesh_vertices, float)[loop]))
-        pts = pts[simplify_closed(pts, self.fit_tol)]
-        if len(pts) < 3:
-            return None
-        uv = s.uv(pts)
-        uv = s.unwrap(uv)
-        if signed_area(uv) < 0:
-            uv = uv[::-1]  # outer wire counter-clockwise in (u, v)
-        xyz = s.evaluate(uv)
-        try:
-            verts = []
-            for q in xyz:
-                vx = TopoDS_Vertex()
-                self.bb.MakeVertex(vx, gp_Pnt(*map(float, q)), self.cfg.min_tolerance)
-                verts.append(vx)
-            w = TopoDS_Wire()
-            self.bb.MakeWire(w)
-            for i in range(len(uv)):
-                j = (i + 1) % len(uv)
-                seg = GCE2d_MakeSegment(gp_Pnt2d(*uv[i]), gp_Pnt2d(*uv[j])).Value()
-                mk = BRepBuilderAPI_MakeEdge(seg, s.geom, verts[i], verts[j], seg.FirstParameter(),
-                                             seg.LastParameter())
-                if not mk.IsDone():
-                    return None
-                edge = mk.Edge()
-                BRepLib.BuildCurves3d_s(edge)
-                self.bb.Add(w, edge)
-            w.Closed(True)
-            face = TopoDS_Face()
-            self.bb.MakeFace(face, s.geom, self.cfg.fix_precision)
-            self.bb.Add(face, w)
-            face = self._fix_face(face)
-        except Exception as exc:  # noqa: BLE001 - any OCCT failure: the face is skipped, reported
-            self.warnings.append(f"face {f.id}: fallback failed ({exc})")
-            return None
-        if not BRepCheck_Analyzer(face).IsValid():
-            return None
-        return self._orient_to_camera(face, f)

@@ -21,25 +21,6 @@ def subsample(points: np.ndarray, n: int) -> np.ndarray:
     return points[np.unique(np.round(np.linspace(0, len(points) - 1, n)).astype(int))]
 
 
-def simplify_closed(points: np.ndarray, tol: float, max_points: int = 64) -> np.ndarray:
-    """Indices of a closed polyline's points kept by Ramer-Douglas-Peucker within ``tol`` (same units), at
-    most ``max_points`` (the tolerance doubles until they fit). The loop is split at the point farthest from
-    its first one."""
-    n = len(points)
-    if n <= 3:
-        return np.arange(n)
-    far = int(np.argmax(np.linalg.norm(points - points[0], axis=1)))
-    ext = np.concatenate([points, points[:1]])  # index n is point 0 again
-    t = tol
-    while True:
-        first = rdp_indices(ext[: far + 1], t)
-        second = far + rdp_indices(ext[far:], t)
-        keep = np.unique(np.concatenate([first, second[second < n]]))
-        if len(keep) <= max_points:
-            return keep
-        t *= 2
-
-
 def densify(pts: np.ndarray, n_max: int = 120) -> np.ndarray:
     """A polyline (N, D) resampled by linear interpolation to about ``n_max`` points, its vertices kept."""
     seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
@@ -83,32 +64,6 @@ def polygon_crossings(polygons: list[np.ndarray]) -> np.ndarray:
         return np.zeros((0, 2))
     t = d1[i, j] / (d1[i, j] - d2[i, j])  # where segment j crosses the line of segment i
     return segs[j, 0] + t[:, None] * (segs[j, 1] - segs[j, 0])
-
-
-def mesh_boundary_loop(triangles: np.ndarray) -> np.ndarray | None:
-    """Vertex indices of the longest closed boundary loop of a triangle mesh (edges used by one triangle)."""
-    if len(triangles) == 0:
-        return None
-    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = e[cnt[inv.ravel()] == 1]
-    nxt: dict[int, int] = {}
-    for a, b in bnd:
-        nxt.setdefault(int(a), int(b))
-    best: list[int] = []
-    seen: set[int] = set()
-    for start in list(nxt):
-        if start in seen:
-            continue
-        loop, v = [], start
-        while v in nxt and v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = nxt[v]
-        if v == start and len(loop) > len(best):
-            best = loop
-    return np.asarray(best, int) if best else None
 
 
 def connected_groups(face_edges: dict[int, set[int]]) -> list[list[int]]:

@@ -45,7 +45,7 @@ from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape
 
-from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, translate_built
+from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, face_area, translate_built
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
 from v2c.labels import PrimitiveType
@@ -103,7 +103,9 @@ class StepExportError(RuntimeError):
 class StepReport:
     """What `write` did. seconds: wall time of the whole write (build + XCAF + file), s. frame_map: camera
     metres -> the file's millimetres. face_edges: VFace id -> the VEdge ids its boundary holds in the file.
-    shape_valid: BRepCheck of the whole assembled shape."""
+    shape_valid: BRepCheck of the whole assembled shape. fallback_faces: faces bounded by their mesh outline;
+    dropped_edges: VEdge ids on no face not written (an outline carries their name, or they lie outside the
+    part's box)."""
 
     path: Path
     frame: Frame
@@ -118,6 +120,7 @@ class StepReport:
     frame_map: FrameMap | None = None
     face_edges: dict[int, set[int]] = field(default_factory=dict)
     shape_valid: bool = True
+    dropped_edges: list[int] = field(default_factory=list)
 
 
 @contextmanager
@@ -134,7 +137,8 @@ def quiet_occt() -> Iterator[None]:
             p.SetTraceLevel(lvl)
 
 
-def build(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None) -> BuiltBRep:
+def build(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None,
+          force_outline: frozenset[int] = frozenset()) -> BuiltBRep:
     """The OCCT topology of a VB-Rep in ``frame`` (millimetres); see `exporters.brep`.
 
     Part frame: the footprint origin (`exporters.frames`) is measured on the built faces and edges, so the
@@ -142,7 +146,7 @@ def build(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | No
     metres into it.
     """
     frame = Frame(frame)
-    built = build_brep(vbrep, frame_map(vbrep, frame), config)
+    built = build_brep(vbrep, frame_map(vbrep, frame), config, force_outline)
     if frame is Frame.PART and (built.faces or built.edges):
         lo, hi = bounding_box(built.shape)
         shift = -np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
@@ -152,14 +156,25 @@ def build(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | No
 
 
 def _attributes(vbrep: VBRep, built: BuiltBRep) -> list[SubShapeAttrs]:
+    """Names of every face (each piece of an outline-bounded face too) and name, layer and colour of every
+    edge: the VB-Rep edges, and the outline edges under the VB-Rep edge each was named after."""
     subs = []
     for f in vbrep.faces:
-        if f.id in built.faces:
-            subs.append(SubShapeAttrs(built.faces[f.id], face_name(f)))
-    for e in vbrep.edges:
+        for shape in built.face_parts.get(f.id, [built.faces[f.id]] if f.id in built.faces else []):
+            subs.append(SubShapeAttrs(shape, face_name(f)))
+
+    def edge_attrs(shape: TopoDS_Shape, e: VEdge) -> SubShapeAttrs:
         t = EdgeType(e.type)
+        return SubShapeAttrs(shape, edge_name(e), edge_layer(t), EDGE_COLORS[t])
+
+    for e in vbrep.edges:
         for shape in built.edges.get(e.id, []):
-            subs.append(SubShapeAttrs(shape, edge_name(e), edge_layer(t), EDGE_COLORS[t]))
+            subs.append(edge_attrs(shape, e))
+    by_id = {e.id: e for e in vbrep.edges}
+    for pairs in built.outline_edges.values():
+        for shape, eid in pairs:
+            if eid in by_id:
+                subs.append(edge_attrs(shape, by_id[eid]))
     return subs
 
 
@@ -179,24 +194,35 @@ def write(
     t0 = time.perf_counter()
     path = Path(path)
     frame = Frame(frame)
-    built = build(vbrep, frame, config)
+    cfg = config or BrepConfig()
+    built = build(vbrep, frame, cfg)
     if not built.faces:
         # A product of edges alone is useless and crashes FreeCAD 0.20's import: refuse rather than write it.
         detail = "; ".join(built.warnings[:3]) or "the VB-Rep has no faces"
         raise StepExportError(f"{path}: no face could be built ({detail})")
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix or '.step'}")
+    try:
+        with quiet_occt():
+            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
+            # The file must hold what was built: OCCT's reader heals faces (and may split one, losing its
+            # name). Faces the round trip changed are written again from their mesh outline.
+            areas = written_face_areas(tmp)
+            changed = frozenset(
+                fid for fid, a in built.built_area.items()
+                if abs(areas.get(fid, 0.0) - a) > cfg.roundtrip_tol_rel * a
+            )
+            if changed:
+                built = build(vbrep, frame, cfg, force_outline=changed)
+                write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
     invalid = [fid for fid, face in built.faces.items() if not BRepCheck_Analyzer(face).IsValid()]
     shape_valid = BRepCheck_Analyzer(built.shape).IsValid()
     warnings = list(built.warnings) + [f"face {fid}: fails BRepCheck" for fid in invalid]
     if not shape_valid and not invalid:
         warnings.append("the assembled shape fails BRepCheck")
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix or '.step'}")
-    try:
-        with quiet_occt():
-            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return StepReport(
         path=path,
         frame=frame,
@@ -211,10 +237,23 @@ def write(
         frame_map=built.fmap,
         face_edges=built.face_edges,
         shape_valid=shape_valid,
+        dropped_edges=built.dropped_edges,
     )
 
 
 # ------------------------------------------------------------------------------------------------ reading
+def written_face_areas(path: str | Path) -> dict[int, float]:
+    """VFace id -> the area (mm²) of the faces named after it in a STEP written by `write` (all pieces)."""
+    rs = read_xcaf_step(path)
+    out: dict[int, float] = {}
+    for f in rs.faces:
+        fid = _parse_face(f.name)[0]
+        if fid is not None:
+            out[fid] = out.get(fid, 0.0) + face_area(TopoDS.Face_s(f.shape))
+    return out
+
+
+
 def _edge_type(text: str | None) -> EdgeType | None:
     try:
         return EdgeType(text) if text else None

@@ -208,25 +208,33 @@ def test_all_surface_types_exercised() -> None:
 
 
 def test_broken_loop_falls_back_and_keeps_every_edge(tmp_path: Path) -> None:
-    """A face whose loop misses an edge is rebuilt from its mesh outline (a warning, not a crash); the VB-Rep
-    edges it no longer holds are free edges of the product, still named, layered and coloured."""
+    """A face whose loop misses an edge is rebuilt from its mesh outline (a warning, not a crash) at its full
+    area; the outline's edges carry the names, layers and colours of the VB-Rep edges they follow, so no edge
+    of the file is untyped and the edges only that face held are not written twice."""
+    from exporters.readback import check_written
+
     vb = box_corner()
     vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]  # edge 4 missing: the loop does not close
     path = tmp_path / "broken.step"
     report = step.write(vb, path)
     assert report.fallback_faces == [0]
     assert any("mesh outline" in w for w in report.warnings)
-    assert report.free_edges == [3, 4]
+    assert report.free_edges == []
     back = step.read_typed(path)
     assert len(back.faces) == 3 and {f.surface for f in back.faces} == {"plane"}
+    assert all(e.type is not None for e in back.edges)
     for e in vb.edges:
-        (g,) = back.edge(e.id)
+        got = back.edge(e.id)
+        assert got, e.id
         t = EdgeType(e.type)
-        assert g.type is t and g.layer_type is t and g.color_type is t
-    assert [back.edge(i)[0].n_faces for i in (3, 4)] == [0, 0]
-    # the fallback face spans the X face of the box: 60 x 80 mm
+        assert all(g.type is t and g.layer_type is t and g.color_type is t for g in got)
     (f0,) = [f for f in back.faces if f.id == 0]
     assert f0.name == "plane:X:f0"
+    # the outline face spans the X face of the box: its full mesh area, within 1 %
+    rb = check_written(vb, path, report.frame_map)
+    (a0,) = [f for f in rb.faces if f.id == 0]
+    assert a0.written == pytest.approx(a0.reconstructed, rel=0.01) and a0.reconstructed > 0
+    assert rb.untyped_edges == 0 and rb.box_inside(0.01)
 
 
 def test_write_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

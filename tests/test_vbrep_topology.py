@@ -56,9 +56,18 @@ def test_scene_vbrep_is_consistent(scene):
 # 0/12, turned 0/8 (two slivers of 23 and 26 px whose edges were all shorter than min_edge_px are left out), knob
 # 2/5 (27/188, 5 skipped). The knob's are curved faces whose fitted surfaces do not meet their neighbours
 # (GeomAPI_IntSS finds no curve there), a limit of the fits; with the fits of earlier that day it had 4/5.
-@pytest.mark.parametrize("name, max_fallback", [("bracket_planes_cylinders", 0), ("turned_unaligned", 0),
+#
+# 2026-11-25: the STEP must be the reconstruction, so a face whose loops bound far more (or less) than its mesh,
+# or reach outside the part's box, is now written from its mesh outline. The bracket's face 4 (a plane whose
+# silhouette edge, a 3-point polyline, is fitted as a curve that swings out) had loops bounding 17,900 mm² for
+# an 8,608 mm² mesh, reaching outside the part's box: it was counted as a good face before and is an outline
+# face now. Its face 8 (6,881 mm²) was built valid but OCCT's STEP reader split it and lost its name: the file
+# held it as two unnamed faces, and the loss went unseen. Faces a round trip changes are now written from their
+# outline. Every face of these samples is written at its reconstructed area (checked below).
+@pytest.mark.parametrize("name, max_fallback", [("bracket_planes_cylinders", 2), ("turned_unaligned", 1),
                                                 ("knob_cone_torus_sphere", 4)])
 def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):
+    from exporters.readback import check_written
     from v2c.pipeline import reconstruct
 
     v = reconstruct(SAMPLES / name, "oracle")
@@ -67,3 +76,8 @@ def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):
     rep = step.write(v, tmp_path / "x.step", frame="camera")
     assert rep.shape_valid and not rep.invalid_faces
     assert len(rep.fallback_faces) <= max_fallback, rep.warnings
+    back = check_written(v, tmp_path / "x.step", rep.frame_map)
+    assert back.untyped_edges == 0 and back.box_inside(0.05)
+    # every face is in the file (read back by name), none losing or gaining more than half its mesh area (the
+    # bracket's grazing plane f1 keeps its loops at 0.57 of a mesh that runs past the plate: the loops are right)
+    assert all(0.5 <= f.ratio <= 1.5 for f in back.faces), [(f.id, f.ratio) for f in back.faces]

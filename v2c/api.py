@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from exporters.readback import Readback
     from exporters.step import StepReport
     from v2c.scan import Scan
     from v2c.vbrep.model import VBRep
@@ -31,7 +32,9 @@ SCAN_MARKERS = ("camera.json", "depth.png", "depth.npy", "color.png", "color.jpg
 @dataclass
 class ScanExport:
     """What `scan_to_step` wrote for one scan. seconds: wall time per step ("load", "reconstruct", "step",
-    "extras"); warnings: non-fatal problems (faces rebuilt from their mesh outline, a missing figure, ...)."""
+    "extras"); warnings: non-fatal problems (faces rebuilt from their mesh outline, a missing figure, ...);
+    readback: the STEP read back through OCCT and compared with the reconstruction (per-face written vs
+    reconstructed area, untyped edges, bounding box)."""
 
     scan: Path
     step: Path
@@ -40,6 +43,7 @@ class ScanExport:
     figure: Path | None = None
     warnings: list[str] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    readback: Readback | None = None
 
 
 def is_scan_dir(path: Path) -> bool:
@@ -91,6 +95,7 @@ def scan_to_step(
     whatever the pipeline raises; on any error no STEP is written."""
     from exporters import step as step_export
     from exporters.figure import result_figure
+    from exporters.readback import check_written
     from v2c import pipeline
     from v2c.scan import load_scan
 
@@ -108,14 +113,18 @@ def scan_to_step(
     t = time.perf_counter()
     report = step_export.write(vbrep, out, frame=frame, product=scan_dir.name)
     seconds["step"] = time.perf_counter() - t
+    t = time.perf_counter()
+    readback = check_written(vbrep, out, report.frame_map)
+    seconds["readback"] = time.perf_counter() - t
     result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
-                        seconds=seconds)
+                        seconds=seconds, readback=readback)
     if extras:
         t = time.perf_counter()
         json_path, png_path = extras_paths(out)
         result.vbrep_json = vbrep.save(json_path)
         try:
-            result_figure(scan, seg.instances, vbrep, png_path)  # written atomically by exporters.figure
+            # drawn from the file as read back: the figure shows what the user got
+            result_figure(scan, seg.instances, readback.drawn or vbrep, png_path)
             result.figure = png_path
         except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
             result.warnings.append(f"figure not written ({type(exc).__name__}: {exc})")

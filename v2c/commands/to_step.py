@@ -77,6 +77,8 @@ def command(scans: tuple[Path, ...], out: Path | None, frame: str, segmentation:
         outline = f", {len(r.fallback_faces)} bounded by their mesh outline" if r.fallback_faces else ""
         tqdm.write(f"{res.step}: {r.n_faces} faces{outline}, {r.n_edges} edges ({len(r.free_edges)} free), "
                    f"written in {r.seconds:.2f} s")
+        if res.readback is not None:
+            tqdm.write(f"  {res.readback.summary()}")
         for w in res.warnings:
             tqdm.write(f"  warning: {w}")
     bar.close()

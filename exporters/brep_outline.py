@@ -1,0 +1,249 @@
+"""Faces bounded by their mesh outline: the fallback of `exporters.brep_faces` when a face's loops do not bound a
+valid face, or bound one whose area disagrees with the reconstruction.
+
+The face's mesh (the VB-Rep's bounded surface mesh) is projected onto its analytic surface, its triangles are
+united in the surface's (u, v) parameters (scaled to millimetres, so tolerances mean lengths), and every piece of
+that union (outer ring and holes) becomes one OCCT face on the surface, bounded by straight (u, v) segments that
+lie on the surface exactly. So the written face covers what the reconstruction covers, to the simplification
+tolerance, whatever its loops were. Each boundary segment is named after the nearest VB-Rep edge of the face, so
+every edge of the file keeps a type, confidence, layer and colour.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+from OCP.BRep import BRep_Builder
+from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+from OCP.BRepCheck import BRepCheck_Analyzer
+from OCP.BRepLib import BRepLib
+from OCP.GCE2d import GCE2d_MakeSegment
+from OCP.gp import gp_Pnt, gp_Pnt2d
+from OCP.TopoDS import TopoDS_Edge, TopoDS_Face, TopoDS_Vertex, TopoDS_Wire
+
+from exporters.occ_surfaces import AnalyticSurface
+
+if TYPE_CHECKING:
+    from exporters.frames import FrameMap
+    from v2c.vbrep.model import VBRep, VFace
+
+
+@dataclass
+class OutlinePiece:
+    """One OCCT face of an outline-bounded VB-Rep face and the VEdge id each of its boundary edges is named
+    after (-1 when the VB-Rep face has no edge to name it after)."""
+
+    face: TopoDS_Face
+    edges: list[tuple[TopoDS_Edge, int]] = field(default_factory=list)
+
+
+def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """Total area of a triangle mesh (vertices (N, 3), triangles (M, 3)), in the vertices' units squared."""
+    t = np.asarray(triangles, int).reshape(-1, 3)
+    if len(t) == 0:
+        return 0.0
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    return float(np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1).sum() / 2)
+
+
+def _metric_scale(s: AnalyticSurface, uv0: np.ndarray, step: float = 1e-4) -> np.ndarray:
+    """Millimetres per unit of u and of v at ``uv0`` (finite differences of the surface)."""
+    d = []
+    for k in range(2):
+        du = np.zeros(2)
+        du[k] = step
+        p = s.evaluate(np.stack([uv0 - du, uv0 + du]))
+        d.append(np.linalg.norm(p[1] - p[0]) / (2 * step))
+    return np.maximum(np.array(d), 1e-9)
+
+
+def outline_polygons(
+    s: AnalyticSurface, points: np.ndarray, triangles: np.ndarray, tol: float, min_area: float
+) -> tuple[list[shapely.Polygon], np.ndarray]:
+    """The union of a mesh's triangles in the surface's scaled (u, v) (millimetres), simplified within ``tol``
+    mm, as polygons (pieces and holes under ``min_area`` mm² dropped); and the (u, v) -> scaled factors (2,).
+
+    points: (N, 3) mesh vertices in millimetres (output frame); triangles: (M, 3) indices.
+    """
+    uv = s.uv(points)
+    if not np.all(np.isfinite(uv)):
+        return [], np.ones(2)
+    scale = _metric_scale(s, np.median(uv, axis=0))
+    tri = (uv * scale)[np.asarray(triangles, int).reshape(-1, 3)]
+    area = 0.5 * np.abs(
+        (tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1])
+        - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0])
+    )
+    tri = tri[area > 1e-12]
+    if len(tri) == 0:
+        return [], scale
+    union = shapely.union_all(shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1)))
+    union = shapely.simplify(union, tol, preserve_topology=True)
+    out = []
+    for poly in getattr(union, "geoms", [union]):
+        if not isinstance(poly, shapely.Polygon) or poly.is_empty or poly.area < min_area:
+            continue
+        holes = [r for r in poly.interiors if shapely.Polygon(r).area >= min_area]
+        out.append(shapely.Polygon(poly.exterior, holes))
+    return out, scale
+
+
+def _nearest_edges(midpoints: np.ndarray, candidates: list[tuple[int, np.ndarray]]) -> np.ndarray:
+    """For each midpoint (K, 3) the id of the candidate edge (id, polyline (P, 3)) whose polyline passes
+    nearest; -1 without candidates."""
+    if not candidates:
+        return np.full(len(midpoints), -1)
+    best = np.full(len(midpoints), np.inf)
+    ids = np.full(len(midpoints), -1)
+    for eid, poly in candidates:
+        if len(poly) == 0:
+            continue
+        a, b = poly[:-1], poly[1:]
+        if len(a) == 0:
+            d = np.linalg.norm(midpoints - poly[0], axis=1)
+        else:
+            ab = b - a
+            t = np.einsum("kpj,pj->kp", midpoints[:, None] - a[None], ab) / np.maximum((ab * ab).sum(1), 1e-300)
+            q = a[None] + np.clip(t, 0, 1)[..., None] * ab[None]
+            d = np.linalg.norm(midpoints[:, None] - q, axis=2).min(1)
+        better = d < best
+        best[better], ids[better] = d[better], eid
+    return ids
+
+
+def _simplify_keeping_area(poly: shapely.Polygon, tol: float, area_rel: float, tries: int = 6,
+                           ) -> shapely.Geometry:
+    """``poly`` simplified within ``tol`` (its units), the tolerance halved (up to ``tries`` times) until the
+    area moves by at most ``area_rel`` of it. A pixel staircase simplifies to its centre line at the first
+    try; only fine detail needs the smaller tolerances."""
+    for _ in range(tries):
+        simple = shapely.simplify(poly, tol, preserve_topology=True)
+        if abs(simple.area - poly.area) <= area_rel * poly.area:
+            return simple
+        tol /= 2
+    return poly
+
+
+def _separate_rings(poly: shapely.Geometry, gap: float, min_area: float) -> list[shapely.Polygon]:
+    """Polygons whose rings do not touch, as OCCT wants a face's wires: a hole touching the outer ring (or
+    another hole) at a point is opened by shrinking the polygon by ``gap`` (a sharp-cornered inward offset:
+    the pinch becomes a notch or splits the piece); a hole still touching after that is dropped. Pieces and
+    holes under ``min_area`` are dropped."""
+    shrunk = shapely.buffer(poly, -gap, join_style="mitre", mitre_limit=10.0)
+    out = []
+    for part in getattr(shrunk, "geoms", [shrunk]):
+        if not isinstance(part, shapely.Polygon) or part.is_empty or part.area < min_area:
+            continue
+        holes = []
+        for ring in part.interiors:
+            hole = shapely.Polygon(ring)
+            if hole.area < min_area or part.exterior.distance(ring) < gap:
+                continue
+            if any(shapely.Polygon(h).distance(hole) < gap for h in holes):
+                continue
+            holes.append(ring)
+        out.append(shapely.Polygon(part.exterior, holes))
+    return out
+
+
+class OutlineBuilder:
+    """Builds the outline faces of one VB-Rep (output frame ``fmap``, millimetres).
+
+    tol: simplification tolerance (mm); tol_area_rel: it is halved until simplification moves a piece's area
+    by at most this fraction;
+    min_piece_rel: pieces and holes smaller than this fraction of the face's mesh area are dropped;
+    precision: OCCT face/vertex precision (mm); rings of one face are kept ``gap_factor`` precisions apart.
+    """
+
+    def __init__(self, vbrep: VBRep, fmap: FrameMap, tol: float, tol_area_rel: float, min_piece_rel: float,
+                 precision: float, gap_factor: float = 20.0) -> None:
+        self.vb = vbrep
+        self.fmap = fmap
+        self.tol = tol
+        self.tol_area_rel = tol_area_rel
+        self.min_piece_rel = min_piece_rel
+        self.precision = precision
+        self.gap = gap_factor * precision
+        self.bb = BRep_Builder()
+
+    def _candidates(self, f: VFace) -> list[tuple[int, np.ndarray]]:
+        """The edges an outline segment may be named after: the face's own, else (a face without edges) every
+        edge of the VB-Rep, so that no edge of the file goes untyped."""
+        own = [e for e in self.vb.edges if f.id in e.faces] or list(self.vb.edges)
+        return [(e.id, self.fmap.points(np.asarray(e.polyline, float).reshape(-1, 3))) for e in own]
+
+    def build(self, f: VFace, s: AnalyticSurface) -> list[OutlinePiece]:
+        """The outline faces of ``f`` on surface ``s`` (empty when none can be built)."""
+        pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
+        tris = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
+        total = mesh_area(pts, tris)
+        if total <= 0:
+            return []
+        # A first pass at the cap finds the pieces; each is then simplified within its own area budget.
+        polys, scale = outline_polygons(s, pts, tris, 0.0, self.min_piece_rel * total)
+        cands = self._candidates(f)
+        out = []
+        for poly in polys:
+            simple = _simplify_keeping_area(poly, self.tol, self.tol_area_rel)
+            for part in _separate_rings(simple, self.gap, self.min_piece_rel * total):
+                piece = self._face(s, part, scale, cands)
+                if piece is not None:
+                    out.append(piece)
+        return out
+
+    def _ring_edges(self, s: AnalyticSurface, ring: np.ndarray, ccw: bool, cands: list[tuple[int, np.ndarray]],
+                    ) -> tuple[TopoDS_Wire, list[tuple[TopoDS_Edge, int]]] | None:
+        uv = np.asarray(ring, float)[:-1]  # shapely rings repeat the first point
+        area2 = np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1])
+        if (area2 > 0) != ccw:
+            uv = uv[::-1]
+        if len(uv) < 3:
+            return None
+        xyz = s.evaluate(uv)
+        mids = s.evaluate((uv + np.roll(uv, -1, axis=0)) / 2)
+        names = _nearest_edges(mids, cands)
+        verts = []
+        for q in xyz:
+            vx = TopoDS_Vertex()
+            self.bb.MakeVertex(vx, gp_Pnt(*map(float, q)), self.precision)
+            verts.append(vx)
+        w = TopoDS_Wire()
+        self.bb.MakeWire(w)
+        edges = []
+        for i in range(len(uv)):
+            j = (i + 1) % len(uv)
+            seg = GCE2d_MakeSegment(gp_Pnt2d(*uv[i]), gp_Pnt2d(*uv[j])).Value()
+            mk = BRepBuilderAPI_MakeEdge(seg, s.geom, verts[i], verts[j], seg.FirstParameter(), seg.LastParameter())
+            if not mk.IsDone():
+                return None
+            edge = mk.Edge()
+            BRepLib.BuildCurves3d_s(edge)
+            self.bb.Add(w, edge)
+            edges.append((edge, int(names[i])))
+        w.Closed(True)
+        return w, edges
+
+    def _face(self, s: AnalyticSurface, poly: shapely.Polygon, scale: np.ndarray,
+              cands: list[tuple[int, np.ndarray]]) -> OutlinePiece | None:
+        rings = [(np.asarray(poly.exterior.coords) / scale, True)]
+        rings += [(np.asarray(r.coords) / scale, False) for r in poly.interiors]
+        face = TopoDS_Face()
+        self.bb.MakeFace(face, s.geom, self.precision)
+        piece = OutlinePiece(face)
+        try:
+            for ring, outer in rings:
+                made = self._ring_edges(s, ring, outer, cands)
+                if made is None:
+                    if outer:
+                        return None
+                    continue
+                self.bb.Add(face, made[0])
+                piece.edges.extend(made[1])
+        except Exception:  # noqa: BLE001 - any OCCT construction failure: this piece is not built
+            return None
+        if not BRepCheck_Analyzer(face).IsValid():
+            return None
+        return piece

@@ -1,0 +1,192 @@
+"""What the user got: a written STEP read back through OCCT and compared with the reconstruction it came from.
+
+`check_written` reads the file (`exporters.xcaf.read_xcaf_step`), measures every face's area per VB-Rep face id
+(all pieces of an outline-bounded face together), counts the edges without a type, and compares the file's
+bounding box with the reconstruction's (the VB-Rep meshes in the file's frame). It also returns the file as a
+drawable VB-Rep (`drawn`): its faces tessellated and its edges sampled, mapped back into the camera frame, so the
+result figure shows what was written, not the VB-Rep it came from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve
+from OCP.BRepMesh import BRepMesh_IncrementalMesh
+from OCP.TopAbs import TopAbs_REVERSED
+from OCP.TopLoc import TopLoc_Location
+from OCP.TopoDS import TopoDS
+
+from exporters.brep import bounding_box, face_area
+from exporters.brep_outline import mesh_area
+from exporters.frames import FrameMap
+from exporters.step import _parse_edge, _parse_face, quiet_occt
+from exporters.xcaf import read_xcaf_step
+from v2c.vbrep.model import VBRep, VEdge, VFace
+
+
+@dataclass(frozen=True)
+class ReadbackConfig:
+    """area_tol_rel: a face counts as written whole when its area in the file is within this fraction of its
+    VB-Rep mesh area; box_tol_rel: the file's bounding box counts as the reconstruction's when each extent is
+    within this fraction of the reconstruction's largest extent; deflection_rel: tessellation deflection of the
+    drawn faces, as a fraction of the part size; edge_samples: points per drawn edge."""
+
+    area_tol_rel: float = 0.02
+    box_tol_rel: float = 0.10
+    deflection_rel: float = 0.002
+    edge_samples: int = 24
+
+
+@dataclass(frozen=True)
+class FaceArea:
+    """One VB-Rep face: its mesh area and the area of the faces named after it in the file (mm²)."""
+
+    id: int
+    reconstructed: float
+    written: float
+
+    @property
+    def ratio(self) -> float:
+        """written / reconstructed (1.0 for an empty mesh written empty)."""
+        return self.written / self.reconstructed if self.reconstructed > 0 else float(self.written == 0) or 1.0
+
+
+@dataclass
+class Readback:
+    """The comparison. faces: per VB-Rep face; n_edges / untyped_edges: edges of the file and those whose name
+    carries no edge type; box_written / box_reconstructed: (lo, hi) mm in the file's frame; drawn: the file as
+    a VB-Rep in the camera frame (metres) for figures."""
+
+    path: Path
+    faces: list[FaceArea] = field(default_factory=list)
+    n_edges: int = 0
+    untyped_edges: int = 0
+    box_written: tuple[np.ndarray, np.ndarray] | None = None
+    box_reconstructed: tuple[np.ndarray, np.ndarray] | None = None
+    drawn: VBRep | None = None
+    config: ReadbackConfig = field(default_factory=ReadbackConfig)
+
+    def off_faces(self) -> list[FaceArea]:
+        """Faces whose written area is off their reconstructed area by more than ``area_tol_rel``."""
+        tol = self.config.area_tol_rel
+        return [f for f in self.faces if abs(f.written - f.reconstructed) > tol * f.reconstructed]
+
+    @property
+    def area_share(self) -> float:
+        """Written / reconstructed area over all faces."""
+        total = sum(f.reconstructed for f in self.faces)
+        return sum(min(f.written, f.reconstructed) for f in self.faces) / total if total > 0 else 1.0
+
+    @property
+    def box_ok(self) -> bool:
+        """Whether the file's bounding box matches the reconstruction's within ``box_tol_rel``."""
+        if self.box_written is None or self.box_reconstructed is None:
+            return self.box_written is None and self.box_reconstructed is None
+        ext_w = self.box_written[1] - self.box_written[0]
+        ext_r = self.box_reconstructed[1] - self.box_reconstructed[0]
+        return bool(np.all(np.abs(ext_w - ext_r) <= self.config.box_tol_rel * ext_r.max()))
+
+    def box_inside(self, margin_rel: float = 0.05) -> bool:
+        """Whether the file's bounding box lies inside the reconstruction's, padded by ``margin_rel`` of its
+        largest extent on every side: nothing was written far from the part."""
+        if self.box_written is None or self.box_reconstructed is None:
+            return self.box_written is None
+        lo, hi = self.box_reconstructed
+        pad = margin_rel * float((hi - lo).max())
+        return bool(np.all(self.box_written[0] >= lo - pad) and np.all(self.box_written[1] <= hi + pad))
+
+    def summary(self) -> str:
+        """One line: faces written whole, area share, untyped edges, bounding box."""
+        off = self.off_faces()
+        tol = 100 * self.config.area_tol_rel
+        worst = sorted(off, key=lambda f: -abs(f.written - f.reconstructed))[:3]
+        detail = ", ".join(f"f{f.id} {f.written:.0f} of {f.reconstructed:.0f} mm²" for f in worst)
+        return (f"read back: {len(self.faces) - len(off)} of {len(self.faces)} faces within {tol:.0f} % of their "
+                f"reconstructed area ({100 * self.area_share:.1f} % of the area written)"
+                + (f", off: {detail}" if off else "")
+                + f"; {self.untyped_edges} of {self.n_edges} edges untyped; bounding box "
+                + ("matches" if self.box_ok else "differs from") + " the reconstruction's")
+
+
+def _inverse_points(fmap: FrameMap, p: np.ndarray) -> np.ndarray:
+    """(N, 3) output millimetres -> camera-frame metres (the inverse of ``fmap.points``)."""
+    return np.asarray(p, float) @ fmap.rotation / fmap.scale + fmap.origin
+
+
+def _face_mesh(face: TopoDS.Face, deflection: float) -> tuple[np.ndarray, np.ndarray]:
+    BRepMesh_IncrementalMesh(face, deflection, False, 0.3, True)
+    loc = TopLoc_Location()
+    tri = BRep_Tool.Triangulation_s(face, loc)
+    if tri is None:
+        return np.zeros((0, 3)), np.zeros((0, 3), int)
+    trsf = loc.Transformation()
+    pts = np.array([tri.Node(i).Transformed(trsf).Coord() for i in range(1, tri.NbNodes() + 1)])
+    tris = np.array([tri.Triangle(i).Get() for i in range(1, tri.NbTriangles() + 1)], int) - 1
+    if face.Orientation() == TopAbs_REVERSED:
+        tris = tris[:, ::-1]
+    return pts, tris
+
+
+def _edge_points(edge: TopoDS.Edge, n: int) -> np.ndarray:
+    c = BRepAdaptor_Curve(edge)
+    ts = np.linspace(c.FirstParameter(), c.LastParameter(), n)
+    return np.array([c.Value(float(t)).Coord() for t in ts])
+
+
+def check_written(vbrep: VBRep, path: str | Path, fmap: FrameMap, config: ReadbackConfig | None = None,
+                  ) -> Readback:
+    """Read the STEP at ``path`` (written from ``vbrep`` with the frame map ``fmap``) and compare; see the
+    module doc."""
+    cfg = config or ReadbackConfig()
+    path = Path(path)
+    with quiet_occt():
+        rs = read_xcaf_step(path)
+    out = Readback(path=path, config=cfg)
+    size = max(fmap.length(vbrep.scale), 1.0)
+    written: dict[int, float] = {}
+    meshes: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for f in rs.faces:
+        fid = _parse_face(f.name)[0]
+        if fid is None:
+            continue
+        face = TopoDS.Face_s(f.shape)
+        written[fid] = written.get(fid, 0.0) + face_area(face)
+        meshes.setdefault(fid, []).append(_face_mesh(face, cfg.deflection_rel * size))
+    recon_pts = []
+    for f in vbrep.faces:
+        pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
+        if len(pts):
+            recon_pts.append(pts)
+        out.faces.append(FaceArea(f.id, mesh_area(pts, f.mesh_triangles), written.get(f.id, 0.0)))
+    if recon_pts:
+        allp = np.concatenate(recon_pts)
+        out.box_reconstructed = (allp.min(0), allp.max(0))
+    if rs.faces or rs.edges:
+        out.box_written = bounding_box(rs.shape)
+    out.n_edges = len(rs.edges)
+    edges = []
+    for e in rs.edges:
+        _, etype, conf = _parse_edge(e.name)
+        if etype is None:
+            out.untyped_edges += 1
+            continue
+        poly = _inverse_points(fmap, _edge_points(TopoDS.Edge_s(e.shape), cfg.edge_samples))
+        edges.append(VEdge(id=len(edges), type=etype, confidence=conf, faces=(), polyline=poly, v0=-1, v1=-1))
+    faces = []
+    for f in vbrep.faces:
+        parts = meshes.get(f.id, [])
+        verts, tris, base = [], [], 0
+        for p, t in parts:
+            verts.append(_inverse_points(fmap, p))
+            tris.append(t + base)
+            base += len(p)
+        faces.append(VFace(id=f.id, instance=f.instance, primitive=f.primitive, axis_label=f.axis_label, confidence=f.confidence,
+                           loops=[], mesh_vertices=np.concatenate(verts) if verts else np.zeros((0, 3)),
+                           mesh_triangles=np.concatenate(tris) if tris else np.zeros((0, 3), int)))
+    out.drawn = VBRep(faces=faces, edges=edges, vertices=list(vbrep.vertices), frame=vbrep.frame, K=vbrep.K,
+                      image_size=vbrep.image_size, scale=vbrep.scale, meta=dict(vbrep.meta))
+    return out

@@ -1,0 +1,105 @@
+"""The STEP is the reconstruction: faces bounded by their mesh outline keep their full area (holes, pinches and
+separate pieces included), loops that bound far more than the mesh are not trusted, every edge of the file is
+typed, and nothing is written outside the part's box (exporters.brep_outline, exporters.brep, exporters.step,
+exporters.readback). Geometry: the hand-built box corner of v2c.vbrep.examples (face 0: a 100 x 80 mm plane)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exporters import step
+from exporters.brep_outline import mesh_area
+from exporters.readback import check_written
+from v2c.vbrep.examples import box_corner, grid_triangles
+from v2c.vbrep.model import EdgeType, VEdge
+
+N = 21  # grid vertices per side of the test meshes
+
+
+def _grid_face(vb, fid: int, keep) -> None:
+    """Replace face ``fid``'s mesh by an N x N vertex grid over the same quad, keeping the cells (i, j) for
+    which ``keep(i, j)`` holds (i along the first quad side, j along the second)."""
+    v = np.asarray(vb.faces[fid].mesh_vertices).reshape(8, 8, 3)  # the example's 8 x 8 bilinear grid
+    p00, p10, p01, p11 = v[0, 0], v[0, -1], v[-1, 0], v[-1, -1]
+    s, t = np.meshgrid(np.linspace(0, 1, N), np.linspace(0, 1, N), indexing="xy")
+    s, t = s.ravel()[:, None], t.ravel()[:, None]
+    verts = (1 - s) * (1 - t) * p00 + s * (1 - t) * p10 + s * t * p11 + (1 - s) * t * p01
+    tris = grid_triangles(N, N)
+    cell = np.concatenate([np.arange((N - 1) ** 2)] * 2)  # both triangles of cell k = j * (N - 1) + i
+    ok = np.array([keep(k % (N - 1), k // (N - 1)) for k in cell])
+    vb.faces[fid].mesh_vertices = verts
+    vb.faces[fid].mesh_triangles = tris[ok]
+
+
+def _written_area(rb, fid: int):
+    (f,) = [f for f in rb.faces if f.id == fid]
+    return f
+
+
+def test_outline_keeps_holes_pinches_and_pieces(tmp_path: Path) -> None:
+    """A face whose loops cannot bound it and whose mesh has an inner hole, a hole touching the outer ring at a
+    single point (OCCT rejects touching wires) and a separate strip is written from its outline: every piece,
+    at the mesh's area within 1 %, every piece a valid face named after the face, every edge typed."""
+
+    def keep(i: int, j: int) -> bool:
+        if 8 <= i <= 11 and 8 <= j <= 11:
+            return False  # inner hole
+        if (i, j) in ((0, 0), (1, 1)):
+            return False  # a notch at the corner and a hole meeting it at one grid vertex
+        return i != 15  # a gap: cells i > 15 form a separate strip
+
+    vb = box_corner()
+    _grid_face(vb, 0, keep)
+    vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]  # edge 4 missing: the loop does not close
+    path = tmp_path / "outline.step"
+    report = step.write(vb, path, frame="camera")
+    assert report.fallback_faces == [0] and not report.invalid_faces
+    back = step.read_typed(path)
+    pieces = [f for f in back.faces if f.id == 0]
+    assert len(pieces) == 2 and all(f.name == "plane:X:f0" and f.surface == "plane" for f in pieces)
+    rb = check_written(vb, path, report.frame_map)
+    a0 = _written_area(rb, 0)
+    expected = mesh_area(np.asarray(vb.faces[0].mesh_vertices) * 1000, vb.faces[0].mesh_triangles)
+    assert a0.reconstructed == pytest.approx(expected, rel=1e-9)
+    assert a0.written == pytest.approx(expected, rel=0.01)
+    assert rb.untyped_edges == 0
+    for g in back.edges:
+        (e,) = [e for e in vb.edges if e.id == g.id]
+        assert g.type is EdgeType(e.type) and g.layer_type is g.type and g.color_type is g.type
+
+
+def test_wild_loops_are_not_trusted(tmp_path: Path) -> None:
+    """Loops that bound twice the reconstructed area (here: the mesh covers only half the quad the loops close)
+    are replaced by the mesh outline, so the file holds the reconstruction, not the loops' guess."""
+    vb = box_corner()
+    _grid_face(vb, 0, lambda i, j: j < (N - 1) // 2)
+    path = tmp_path / "wild.step"
+    report = step.write(vb, path, frame="camera")
+    assert report.fallback_faces == [0]
+    assert any("loops bound" in w for w in report.warnings)
+    rb = check_written(vb, path, report.frame_map)
+    a0 = _written_area(rb, 0)
+    assert a0.written == pytest.approx(a0.reconstructed, rel=0.01)
+    # the other faces keep their loops (exact edges): intersection edges 2 (faces 1, 2) is shared by both
+    assert sorted(report.face_edges) == [0, 1, 2] and report.face_edges[0] == set()
+    assert 2 in report.face_edges[1] and 2 in report.face_edges[2]
+
+
+def test_nothing_written_outside_the_part_box(tmp_path: Path) -> None:
+    """A free edge far from the part (a 629 mm circle beside a 100 mm box, as on a real frame) is not
+    written: the file's bounding box stays the part's."""
+    vb = box_corner()
+    far = np.array([1.2, -0.8, 2.5])
+    circle = far + 0.629 * np.stack([np.cos(np.linspace(0, 6, 40)), np.sin(np.linspace(0, 6, 40)),
+                                     np.zeros(40)], 1)
+    vb.edges.append(VEdge(len(vb.edges), EdgeType.INTERSECTION, 0.0, (), circle, 0, 1, None))
+    path = tmp_path / "far.step"
+    report = step.write(vb, path, frame="camera")
+    assert report.dropped_edges == [len(vb.edges) - 1]
+    assert len(vb.edges) - 1 not in report.free_edges
+    rb = check_written(vb, path, report.frame_map)
+    assert rb.box_inside(0.05) and rb.box_ok and rb.untyped_edges == 0
+    assert not step.read_typed(path).edge(len(vb.edges) - 1)
