@@ -71,6 +71,7 @@ from build123d import (
     extrude,
     revolve,
 )
+from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
 from OCP.BRepCheck import BRepCheck_Analyzer
 from OCP.BRepClass3d import BRepClass3d_SolidClassifier
@@ -116,7 +117,7 @@ _BASE = (_C, _C, _MIN)
 class FeatureConfig:
     """How features are drawn and checked (lengths in millimetres)."""
 
-    n_features: tuple[int, int] = (3, 7)  # random features tried per part (inclusive), after a family's fixed ones
+    n_features: tuple[int, int] = (4, 8)  # random features tried per part (inclusive), after a family's fixed ones
     max_blends: int = 2  # fillet and chamfer operations per part (each 10-100 ms, the slowest operations)
     max_part_tries: int = 4  # stocks drawn before giving up (a stock that is not a valid solid is re-drawn)
     site_tries: int = 30  # random points tried when looking for a face point with a clear disc around it
@@ -273,7 +274,9 @@ def _planar_faces(shape: TopoDS_Shape, min_nz: float) -> list[tuple]:
             continue
         pln = surf.Plane()
         n = _vec(pln.Axis().Direction())
-        if face.Orientation() == TopAbs_REVERSED:
+        # Outward normal: X x Y of the plane's frame (minus the axis for a left-handed frame, as on the end faces
+        # of a revolved solid), flipped for a reversed face.
+        if (face.Orientation() == TopAbs_REVERSED) != (not pln.Position().Direct()):
             n = -n
         if n[2] < min_nz:
             continue
@@ -349,7 +352,9 @@ def cylinder_sites(shape: TopoDS_Shape, outer_only: bool = True) -> list[CylSite
         if surf.GetType() != GeomAbs_Cylinder:
             continue
         cyl = surf.Cylinder()
-        outer = face.Orientation() != TopAbs_REVERSED
+        # Material inside the cylinder when the outward normal points away from the axis: the surface normal
+        # does for a right-handed frame, and the face's orientation may flip it.
+        outer = (face.Orientation() != TopAbs_REVERSED) == cyl.Position().Direct()
         if outer_only and not outer:
             continue
         umin, umax, vmin, vmax = BRepTools.UVBounds_s(face)
@@ -376,7 +381,8 @@ def disc_sites(shape: TopoDS_Shape, min_nz: float = -0.5) -> list[DiscSite]:
         while exp.More():
             wires += 1
             exp.Next()
-        edges = [e for e in _edges(face)]
+        # A revolved disc also holds a seam and a degenerate edge at the axis: only real boundary edges count.
+        edges = [e for e in _edges(face) if not BRep_Tool.Degenerated_s(e) and not BRep_Tool.IsClosed_s(e, face)]
         if wires != 1 or len(edges) != 1:
             continue
         curve = BRepAdaptor_Curve(edges[0])
@@ -384,9 +390,9 @@ def disc_sites(shape: TopoDS_Shape, min_nz: float = -0.5) -> list[DiscSite]:
             continue
         circ = curve.Circle()
         centre, radius = _vec(circ.Location()), float(circ.Radius())
-        # An end of a cylinder, not the floor of a hole: just outside the rim, just below the disc, is air.
+        # An end of a cylinder, not the floor of a hole: just outside the rim, just above the disc, is air.
         radial = _vec(circ.XAxis().Direction())
-        probe = centre + radius * (1 + 1e-3) * radial - n * min(1e-2, 1e-3 * radius)
+        probe = centre + radius * (1 + 1e-3) * radial + n * min(1e-2, 1e-3 * radius)
         classifier = BRepClass3d_SolidClassifier(shape, gp_Pnt(*probe), 1e-7)
         if classifier.State() == TopAbs_IN:
             continue
@@ -465,16 +471,24 @@ def f_blind_hole(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> Featu
     r = _hole_radius(w, rng, cfg)
     drill_point = bool(rng.random() < 0.5)
     tip = r / math.tan(math.radians(59.0)) if drill_point else 0.0
-    site = find_site(w, rng, r, cfg)
-    if site is None:
-        return None
-    depth = _u(rng, 0.3, 0.75) * (site.depth - cfg.wall_mm) - tip
+    frac = _u(rng, 0.3, 0.75)
+    frame, room, on = None, 0.0, "plane"
+    if rng.random() < 0.3:  # a radial hole in a cylinder (a set-screw hole)
+        rs = _radial_site(w, rng, r, cfg)
+        if rs is not None:
+            frame, room, on = rs[0], rs[1], "cylinder"
+    if frame is None:
+        site = find_site(w, rng, r, cfg)
+        if site is None:
+            return None
+        frame, room = site.location(), site.depth
+    depth = frac * (room - cfg.wall_mm) - tip
     if depth < cfg.min_size_mm:
         return None
     tool = _cyl(r, -depth, cfg.overshoot_mm)
     if drill_point:
         tool = tool + _cone(0.0, r, -depth - tip, -depth)
-    return w.solid - site.location() * tool, {"radius": r, "depth": depth, "drill_point": drill_point}
+    return w.solid - frame * tool, {"radius": r, "depth": depth, "drill_point": drill_point, "on": on}
 
 
 def f_counterbore(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
@@ -578,10 +592,10 @@ def f_groove(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureRe
     if not cands:
         return None
     c = cands[int(rng.integers(len(cands)))]
-    width = _u(rng, 0.08, 0.25) * w.size
-    depth = _u(rng, 0.1, 0.3) * c.radius
     v0, v1 = c.v_range
-    if v1 - v0 < width + 2 * cfg.wall_mm or depth < 0.5 * cfg.min_size_mm:
+    width = min(_u(rng, 0.15, 0.4) * (v1 - v0), 0.2 * w.size)
+    depth = _u(rng, 0.1, 0.3) * c.radius
+    if v1 - v0 < width + 2 * cfg.wall_mm or min(width, depth) < 0.5 * cfg.min_size_mm:
         return None
     v = _u(rng, v0 + cfg.wall_mm + 0.5 * width, v1 - cfg.wall_mm - 0.5 * width)
     loc = Location(Plane(origin=tuple(c.centre + v * c.axis), x_dir=tuple(c.xdir), z_dir=tuple(c.axis)))
@@ -738,7 +752,7 @@ def f_linear_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> F
 def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
     cyls = [c for c in cylinder_sites(w.shape) if c.full and c.radius > 4 * cfg.wall_mm
             and c.v_range[1] - c.v_range[0] > 2 * cfg.wall_mm]
-    if cyls and rng.random() < 0.4:  # flutes around a cylinder (knurl-like when many)
+    if cyls and rng.random() < w.data.get("flute_share", 0.4):  # flutes around a cylinder (knurl-like when many)
         c = cyls[int(rng.integers(len(cyls)))]
         n = int(rng.integers(6, 19))
         rf = min(_u(rng, 0.3, 0.8) * math.pi * c.radius / n, 0.3 * c.radius)
@@ -1133,12 +1147,14 @@ def _fam_knob(rng: np.random.Generator, cfg: FeatureConfig) -> tuple[Work, list[
            np.array([rt, top]), np.array([0.0, top])]
     solid, arcs = _revolve_profile(pts, _NoAxisRounding(rng, len(pts)), 0.4, 0.2)
     info = {"stock": "knob", "base_radius": rb, "top_radius": rt, "height": top, "arcs": arcs}
-    kinds = ["circular_pattern", "dome" if rng.random() < 0.6 else "ball_end"]
+    # The top first (it needs the full top disc), then a groove (it needs a full cylinder), then the flutes.
+    kinds = ["dome" if rng.random() < 0.6 else "ball_end"]
     if rng.random() < 0.5:
         kinds.append("groove")
+    kinds.append("circular_pattern")
     kinds += _draw_kinds(rng, {"through_hole": 1, "blind_hole": 1.5, "chamfer": 1, "fillet": 1, "groove": 1,
                                "circular_pattern": 0.5}, replace(cfg, n_features=(1, 3)))
-    return Work(solid, "feat_knob", 2 * rb, info), kinds
+    return Work(solid, "feat_knob", 2 * rb, info, data={"flute_share": 0.8}), kinds
 
 
 def _fam_block(rng: np.random.Generator, cfg: FeatureConfig) -> tuple[Work, list[str]]:
@@ -1207,6 +1223,51 @@ def make_feature_part(family: str, rng: np.random.Generator, cfg: FeatureConfig 
     if w.lying:  # on its side: the stock axis (Z) becomes horizontal; a polygon's flat (-Y) faces down
         shape = (Rot(90, 0, 0) * w.solid).wrapped
     shape, box = rest_on_ground(shape)
+    problem = shape_problem(shape, cfg)
+    if problem is not None:  # every step was checked; this guards the final turn and move
+        raise RuntimeError(f"{family} part invalid after its rest pose: {problem}")
     info = {**w.info, "features": list(w.features), "feature_params": w.params, "skipped": list(w.skipped),
             "lying": w.lying}
     return RestPart(shape, family, box, info)
+
+
+# ---- validity and speed ------------------------------------------------------------------------------------------
+
+
+def measure(n: int, seed: int, families: tuple[str, ...] = FEATURE_FAMILIES,
+            cfg: FeatureConfig = FeatureConfig()) -> dict:
+    """Build `n` parts in this process (family i % len(families), generator [seed, i]) and report the valid share
+    (built, one BRepCheck-valid solid of analytic faces in its rest pose), parts per CPU second and per wall
+    second, and the feature kinds applied."""
+    import time
+    from collections import Counter
+
+    valid, kinds, per_family = 0, Counter(), Counter()
+    n_features = []
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    for i in range(n):
+        family = families[i % len(families)]
+        try:
+            part = make_feature_part(family, np.random.default_rng([seed, i]), cfg)
+        except RuntimeError:
+            continue
+        valid += 1
+        per_family[family] += 1
+        kinds.update(part.info["features"])
+        n_features.append(len(part.info["features"]))
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    return {"parts": n, "valid": valid, "valid_share": valid / n, "parts_per_cpu_s": n / cpu,
+            "parts_per_wall_s": n / wall, "mean_features": float(np.mean(n_features)) if n_features else 0.0,
+            "kinds": dict(sorted(kinds.items())), "valid_per_family": dict(per_family)}
+
+
+if __name__ == "__main__":
+    import argparse
+    import json
+
+    ap = argparse.ArgumentParser(description="Build feature-based parts in one process: valid share and speed.")
+    ap.add_argument("--n", type=int, default=200, help="parts to build")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--families", default=",".join(FEATURE_FAMILIES), help="comma-separated feat_* families")
+    args = ap.parse_args()
+    print(json.dumps(measure(args.n, args.seed, tuple(args.families.split(","))), indent=1))
