@@ -712,26 +712,28 @@ def f_ball_end(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> Feature
     return _cap(w, rng, cfg, ball=True)
 
 
-def _pattern_member(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> tuple[str, float, Callable]:
-    """One member feature of a pattern: (kind, clearance radius mm, builder(material depth mm) -> local tool)."""
+def _pattern_member(w: Work, rng: np.random.Generator, cfg: FeatureConfig
+                    ) -> tuple[str, float, float, Callable[[float], Solid]]:
+    """One member feature of a pattern: (kind, clearance radius mm, radius of its cylinder faces mm,
+    builder(material depth mm) -> the member's tool in the site's local frame)."""
     kind = str(rng.choice(["through_hole", "blind_hole", "boss", "slot"]))
     r = max(cfg.min_size_mm, _u(rng, 0.02, 0.05) * w.size)
     if kind == "through_hole":
-        return kind, r, lambda depth: _hole_tool(w, r, cfg)
+        return kind, r, r, lambda depth: _hole_tool(w, r, cfg)
     if kind == "blind_hole":
         frac = _u(rng, 0.3, 0.7)
-        return kind, r, lambda depth: _cyl(r, -frac * (depth - cfg.wall_mm), cfg.overshoot_mm)
+        return kind, r, r, lambda depth: _cyl(r, -frac * (depth - cfg.wall_mm), cfg.overshoot_mm)
     if kind == "boss":
         h = _u(rng, 0.05, 0.2) * w.size
-        return kind, r * 1.5, lambda depth: _cyl(1.5 * r, 0.0, h)
-    length = 4 * r
+        return kind, 1.5 * r, 1.5 * r, lambda depth: _cyl(1.5 * r, 0.0, h)
+    length, width = 4 * r, 1.6 * r  # a short slot along the local X axis
     frac = _u(rng, 0.3, 0.7)
-    return kind, 2 * r, lambda depth: Pos(0, 0, -frac * (depth - cfg.wall_mm)) * extrude(
-        SlotOverall(length, 2 * r * 0.8), frac * (depth - cfg.wall_mm) + cfg.overshoot_mm)
+    return kind, 2 * r, 0.5 * width, lambda depth: Pos(0, 0, -frac * (depth - cfg.wall_mm)) * extrude(
+        SlotOverall(length, width), frac * (depth - cfg.wall_mm) + cfg.overshoot_mm)
 
 
 def f_linear_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
-    kind, rc, build = _pattern_member(w, rng, cfg)
+    kind, rc, radius, build = _pattern_member(w, rng, cfg)
     n = int(rng.integers(2, 6))
     pitch = rc * 2 * _u(rng, 1.3, 2.5)
     half = 0.5 * (n - 1) * pitch
@@ -746,7 +748,7 @@ def f_linear_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> F
     frame = site.location(angle)
     tools = [frame * (Pos(-half + i * pitch, 0, 0) * build(depth)) for i in range(n)]
     new = w.solid + tools if kind == "boss" else w.solid - tools
-    return new, {"of": kind, "count": n, "pitch": pitch, "member_radius": rc}
+    return new, {"of": kind, "count": n, "pitch": pitch, "member_radius": radius}
 
 
 def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
@@ -765,7 +767,7 @@ def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) ->
             tools.append(loc * (Pos(c.radius * math.cos(a), c.radius * math.sin(a), v0 - o)
                                 * Cylinder(rf, v1 - v0 + 2 * o, align=_BASE)))
         return w.solid - tools, {"of": "flute", "count": n, "member_radius": rf, "circle_radius": c.radius}
-    kind, rc, build = _pattern_member(w, rng, cfg)
+    kind, rc, radius, build = _pattern_member(w, rng, cfg)
     n = int(rng.integers(3, 9))
     rb = max(rc / math.sin(math.pi / n) * _u(rng, 1.2, 2.0), 2 * rc)
     site = find_site(w, rng, rb + rc, cfg)
@@ -781,7 +783,7 @@ def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) ->
     tools = [frame * (Pos(rb * math.cos(phase + 2 * math.pi * i / n), rb * math.sin(phase + 2 * math.pi * i / n), 0)
                       * Rot(0, 0, math.degrees(phase + 2 * math.pi * i / n)) * build(depth)) for i in range(n)]
     new = w.solid + tools if kind == "boss" else w.solid - tools
-    return new, {"of": kind, "count": n, "circle_radius": rb, "member_radius": rc}
+    return new, {"of": kind, "count": n, "circle_radius": rb, "member_radius": radius}
 
 
 def f_union(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
