@@ -1240,11 +1240,11 @@ def measure(n: int, seed: int, families: tuple[str, ...] = FEATURE_FAMILIES,
             cfg: FeatureConfig = FeatureConfig()) -> dict:
     """Build `n` parts in this process (family i % len(families), generator [seed, i]) and report the valid share
     (built, one BRepCheck-valid solid of analytic faces in its rest pose), parts per CPU second and per wall
-    second, and the feature kinds applied."""
+    second, the feature kinds applied and why the skipped features were skipped."""
     import time
     from collections import Counter
 
-    valid, kinds, per_family = 0, Counter(), Counter()
+    valid, kinds, per_family, skipped = 0, Counter(), Counter(), Counter()
     n_features = []
     cpu0, wall0 = time.process_time(), time.perf_counter()
     for i in range(n):
@@ -1257,10 +1257,13 @@ def measure(n: int, seed: int, families: tuple[str, ...] = FEATURE_FAMILIES,
         per_family[family] += 1
         kinds.update(part.info["features"])
         n_features.append(len(part.info["features"]))
+        # Why features were skipped, by cause ("no room", "OCCT failed", "BRepCheck: invalid", "non-analytic", ...).
+        skipped.update(reason.split(": ", 1)[1].split(" (")[0] for reason in part.info["skipped"])
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
     return {"parts": n, "valid": valid, "valid_share": valid / n, "parts_per_cpu_s": n / cpu,
             "parts_per_wall_s": n / wall, "mean_features": float(np.mean(n_features)) if n_features else 0.0,
-            "kinds": dict(sorted(kinds.items())), "valid_per_family": dict(per_family)}
+            "kinds": dict(sorted(kinds.items())), "valid_per_family": dict(per_family),
+            "features_applied": int(sum(kinds.values())), "features_skipped": dict(skipped.most_common())}
 
 
 if __name__ == "__main__":
