@@ -882,9 +882,9 @@ def apply_feature(w: Work, kind: str, rng: np.random.Generator, cfg: FeatureConf
 
 
 def _round_corners(pts: list[np.ndarray], rng: np.random.Generator, p_round: float, p_chamfer: float,
-                   size_frac: tuple[float, float] = (0.1, 0.35)) -> list[tuple]:
+                   size_frac: tuple[float, float] = (0.1, 0.35), sharp: tuple[int, ...] = ()) -> list[tuple]:
     """Closed 2-D outline -> segments: ("line", a, b) or ("arc", a, mid, b); some corners rounded by a tangent arc
-    or cut by a chamfer of a drawn size (fraction of the shorter adjacent side)."""
+    or cut by a chamfer of a drawn size (fraction of the shorter adjacent side). Corners in `sharp` stay sharp."""
     n = len(pts)
     ins: list[np.ndarray] = []  # point where the outline enters corner i
     outs: list[np.ndarray] = []  # point where it leaves corner i
@@ -897,12 +897,13 @@ def _round_corners(pts: list[np.ndarray], rng: np.random.Generator, p_round: flo
         turn = math.acos(float(np.clip(a @ b, -1, 1)))  # exterior angle
         roll = rng.random()
         frac = _u(rng, *size_frac)
-        if turn < math.radians(10) or roll >= p_round + p_chamfer:
+        if i in sharp or turn < math.radians(10) or roll >= p_round + p_chamfer:
             ins.append(p)
             outs.append(p)
             arcs.append(None)
             continue
-        t = frac * 0.5 * min(la, lb)  # tangent length: at most a third-ish of each side, so corners never overlap
+        # Tangent length: frac (< 0.5) of half the shorter side, so the two blends of one side never overlap.
+        t = frac * 0.5 * min(la, lb)
         t1, t2 = p - a * t, p + b * t
         ins.append(t1)
         outs.append(t2)
@@ -969,9 +970,8 @@ def _outline(rng: np.random.Generator, L: float, W: float) -> tuple[str, list[np
         pts = [(0, 0), (L, 0), (L, W), (c1, W), (c1, a * W), (c0, a * W), (c0, W), (0, W)]
     else:
         n = int(rng.integers(5, 9))
-        ang = np.sort(rng.uniform(0, 2 * math.pi, n))
-        ang = np.linspace(0, 2 * math.pi, n, endpoint=False) + 0.3 * (ang - np.linspace(0, 2 * math.pi, n,
-                                                                                           endpoint=False)) / n
+        # Star-shaped (so simple): evenly spread directions jittered by up to 30 % of their spacing.
+        ang = (np.arange(n) + rng.uniform(-0.3, 0.3, n)) * 2 * math.pi / n
         rad = rng.uniform(0.6, 1.0, n)
         pts = [(0.5 * L * r * math.cos(t), 0.5 * W * r * math.sin(t)) for r, t in zip(rad, ang, strict=True)]
     arr = [np.array(p, float) for p in pts]
@@ -1007,7 +1007,7 @@ def _revolve_profile(pts: list[np.ndarray], rng: np.random.Generator, p_round: f
                      ) -> tuple[Solid, int]:
     """Revolve a closed (r, z) outline whose first and last points lie on the axis (r = 0) about Z."""
     # Corners on the axis are kept sharp (a blend there would leave the axis); the rest may be rounded.
-    segs = _round_corners(pts, rng, p_round, p_chamfer, size_frac=(0.1, 0.4))
+    segs = _round_corners(pts, rng, p_round, p_chamfer, size_frac=(0.1, 0.4), sharp=(0, len(pts) - 1))
     fixed = []
     for s in segs:  # snap end points on the axis to exactly r = 0 (a revolved edge near the axis is degenerate)
         fixed.append(tuple(np.where(np.abs(x) < 1e-9, 0.0, x) if isinstance(x, np.ndarray) else x for x in s))
@@ -1041,25 +1041,8 @@ def stock_turned(rng: np.random.Generator, n_steps: int, r_range: tuple[float, f
         if abs(a[0] * b[1] - a[1] * b[0]) > 1e-9 * (np.linalg.norm(a) * np.linalg.norm(b) + 1e-12):
             keep.append(pts[i])
     keep.append(pts[-1])
-    # Corners on the axis stay sharp: rounding applies to inner points only, so split the call.
-    solid, arcs = _revolve_profile(keep, _NoAxisRounding(rng, len(keep)), 0.3, 0.25)
+    solid, arcs = _revolve_profile(keep, rng, 0.3, 0.25)
     return solid, {"stock": "turned", "sections": n_steps, "radii": radii.tolist(), "height": z, "arcs": arcs}
-
-
-class _NoAxisRounding:
-    """Generator proxy for `_round_corners` on a profile: corners 0 and n-1 (on the axis) draw "no blend"."""
-
-    def __init__(self, rng: np.random.Generator, n: int):
-        self.rng, self.n, self.calls = rng, n, 0
-
-    def random(self) -> float:
-        k = self.calls
-        self.calls += 1
-        value = float(self.rng.random())
-        return 1.0 if k in (0, self.n - 1) else value
-
-    def uniform(self, lo: float, hi: float) -> float:
-        return float(self.rng.uniform(lo, hi))
 
 
 def stock_pillow_block(rng: np.random.Generator) -> tuple[Solid, dict, dict]:
@@ -1147,7 +1130,7 @@ def _fam_knob(rng: np.random.Generator, cfg: FeatureConfig) -> tuple[Work, list[
     top = float(hb + 0.3 * ht + ht)
     pts = [np.array([0.0, 0.0]), np.array([rb, 0.0]), np.array([rb, hb]), np.array([rt, hb + 0.3 * ht]),
            np.array([rt, top]), np.array([0.0, top])]
-    solid, arcs = _revolve_profile(pts, _NoAxisRounding(rng, len(pts)), 0.4, 0.2)
+    solid, arcs = _revolve_profile(pts, rng, 0.4, 0.2)
     info = {"stock": "knob", "base_radius": rb, "top_radius": rt, "height": top, "arcs": arcs}
     # The top first (it needs the full top disc), then a groove (it needs a full cylinder), then the flutes.
     kinds = ["dome" if rng.random() < 0.6 else "ball_end"]
