@@ -273,6 +273,12 @@ def test_family_lists():
     assert not set(TRAIN_FAMILIES) & set(LEAVE_OUT_FAMILIES)
     assert set(TRAIN_FAMILIES) | set(LEAVE_OUT_FAMILIES) == set(PROCEDURAL_FAMILIES) | set(FEATURE_FAMILIES)
     assert not set(FAMILY_GROUPS["features"]) & set(LEAVE_OUT_FAMILIES)
+    # Today's default mix is unchanged: the six procedural families, in their order.
+    from v2c.commands.synth import PROCEDURAL
+    from v2c.synth.dataset import SynthConfig
+    from v2c.synth.parts import FAMILIES
+
+    assert SynthConfig().families == PROCEDURAL == PROCEDURAL_FAMILIES == tuple(FAMILIES)
 
 
 def test_training_recipe_refuses_leave_out_families(tmp_path):
