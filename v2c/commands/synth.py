@@ -6,7 +6,10 @@ from pathlib import Path
 
 import click
 
-PROCEDURAL = ("block", "shaft", "flange", "knob", "turned", "bracket")
+from v2c.synth.families import FAMILY_GROUPS, FEATURE_FAMILIES, PROCEDURAL_FAMILIES
+
+PROCEDURAL = PROCEDURAL_FAMILIES  # today's default mix
+KNOWN_FAMILIES = (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES, "cad")
 NOISE_PROFILES = ("sensor", "paper", "none")
 
 
@@ -23,12 +26,14 @@ def _parse_size(ctx: click.Context, param: click.Parameter, value: str) -> tuple
 def _parse_families(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, ...] | None:
     if value is None:
         return None
-    names = tuple(dict.fromkeys(v.strip() for v in value.split(",") if v.strip()))
-    unknown = [v for v in names if v not in (*PROCEDURAL, "cad")]
-    if unknown or not names:
+    given = [v.strip() for v in value.split(",") if v.strip()]
+    unknown = [v for v in given if v not in KNOWN_FAMILIES and v not in FAMILY_GROUPS]
+    if unknown or not given:
         raise click.BadParameter(f"unknown family {', '.join(unknown) or '(none)'}; choose from "
-                                 f"{', '.join((*PROCEDURAL, 'cad'))}", ctx=ctx, param=param)
-    return names
+                                 f"{', '.join(KNOWN_FAMILIES)} or a group {', '.join(FAMILY_GROUPS)}",
+                                 ctx=ctx, param=param)
+    # Groups expand in place; a family named twice is drawn once (order kept: it fixes which family a draw picks).
+    return tuple(dict.fromkeys(f for v in given for f in FAMILY_GROUPS.get(v, (v,))))
 
 
 @click.command("synth")
@@ -42,8 +47,10 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
 @click.option("--cad", type=click.Path(exists=True, path_type=Path), default=None,
               help="Directory of STEP files (or one STEP file) added as the part family 'cad'.")
 @click.option("--families", default=None, callback=_parse_families,
-              help=f"Comma-separated part families to draw from: {', '.join((*PROCEDURAL, 'cad'))} "
-                   "[default: all procedural ones, plus cad with --cad].")
+              help=f"Comma-separated part families to draw from: {', '.join(KNOWN_FAMILIES)}, or groups: "
+                   "procedural (the six above), features (the feature-based training families), train (all "
+                   "training families), leave-out (never for training: feat_hex, feat_knob, feat_block) "
+                   "[default: the procedural ones, plus cad with --cad].")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Worker processes.")
 @click.option("--start", type=click.IntRange(min=0), default=0, show_default=True,
               help="Index of the first scan (extends a set: scans start..start+n-1).")

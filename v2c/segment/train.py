@@ -24,6 +24,7 @@ from v2c.labels import IGNORE, NUM_CLASSES
 from v2c.segment.data import CachedScans, build_cache, dequantise, find_scans
 from v2c.segment.net import NetConfig, UNet, bf16_supported, load_weights, save_weights
 from v2c.segment.train_config import TrainConfig
+from v2c.synth.families import FAMILY_GROUPS, LEAVE_OUT_FAMILIES
 
 #: The shipped training set: (width, height, noise profile, scans, `v2c synth` seed), generated into
 #: DATA/<width>x<height>_<noise>_s<seed>/. Validation uses seed 9000 and later, never these.
@@ -44,14 +45,19 @@ STAGE4_RECIPE: tuple[tuple, ...] = (
     (640, 480, "sensor", 500, 108, 0.5),
 )
 STAGE5_RECIPE: tuple[tuple, ...] = (*STAGE4_RECIPE, (640, 480, "sensor", 1000, 111, 0.3))
-RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RECIPE}
+#: STAGE5_RECIPE plus the feature-based training families (synth/features.py): a row's optional 7th element names
+#: the part families it draws from (default: the six procedural ones); never a leave-out family.
+FEATURES_RECIPE: tuple[tuple, ...] = (*STAGE5_RECIPE, (640, 480, "sensor", 1500, 121, 0.3, FAMILY_GROUPS["features"]))
+RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RECIPE, "features": FEATURES_RECIPE}
 
 
 def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
                            recipe: tuple = TRAINING_RECIPE) -> list[Path]:
     """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
 
-    Equivalent to one `v2c synth` run per recipe row.
+    Equivalent to one `v2c synth` run per recipe row. A row is (width, height, noise, scans, seed[, print share
+    [, families]]); rows naming families go to DATA/<width>x<height>_<noise>[_print]_<tag>_s<seed>/ (tag: the
+    family group's name, or the families joined by '+'). A leave-out family (families.LEAVE_OUT_FAMILIES) is refused.
     """
     from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
     from v2c.synth.scene import SceneConfig
@@ -59,14 +65,24 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
     done: list[Path] = []
     for w, h, noise, n, seed, *extra in recipe:
         share = float(extra[0]) if extra else 0.0
-        sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}_s{seed}"
+        families = tuple(extra[1]) if len(extra) > 1 else None
+        tag = ""
+        if families is not None:
+            left_out = [f for f in families if f in LEAVE_OUT_FAMILIES]
+            if left_out:
+                raise ValueError(f"recipe row {w}x{h} seed {seed}: {', '.join(left_out)} is a leave-out family "
+                                 "(families.LEAVE_OUT_FAMILIES), never used for training")
+            named = [k for k, v in FAMILY_GROUPS.items() if v == families]
+            tag = "_" + (named[0] if named else "+".join(families))
+        sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}{tag}_s{seed}"
         n = max(1, round(n * scale))
         have = 0  # resume: scans are pure functions of (seed, index) and meta.json is written last
         while have < n and (sub / scan_name(have) / "gt" / "meta.json").is_file():
             have += 1
         done += [sub / scan_name(i) for i in range(have)]
         if have < n:
-            cfg = SynthConfig(width=w, height=h, noise=noise, scene=SceneConfig(print_share=share))
+            cfg = SynthConfig(width=w, height=h, noise=noise, scene=SceneConfig(print_share=share),
+                              **({"families": families} if families is not None else {}))
             done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have)
     return done
 

@@ -24,9 +24,17 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=40, help="timed scans")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--noise", default="sensor")
+    ap.add_argument("--families", default=None,
+                    help="comma-separated families or groups as `v2c synth --families` (default: its default mix)")
     args = ap.parse_args()
     w, h = (int(x) for x in args.size.split("x"))
-    cfg = SynthConfig(width=w, height=h, noise=args.noise)
+    extra = {}
+    if args.families:
+        from v2c.synth.families import FAMILY_GROUPS
+
+        names = [f.strip() for f in args.families.split(",") if f.strip()]
+        extra["families"] = tuple(dict.fromkeys(f for v in names for f in FAMILY_GROUPS.get(v, (v,))))
+    cfg = SynthConfig(width=w, height=h, noise=args.noise, **extra)
     silence_occt()
     with tempfile.TemporaryDirectory() as tmp:
         generate_scan(Path(tmp), args.seed, 10**6, cfg)  # warm-up: lazy imports, caches

@@ -22,6 +22,7 @@ import numpy as np
 from v2c.labels import IGNORE, axis_class, label_of
 from v2c.synth import noise as noise_mod
 from v2c.synth import occ, parts
+from v2c.synth.families import FEATURE_FAMILIES
 from v2c.synth.render import ANALYTIC, RenderConfig, render
 from v2c.synth.scene import SceneConfig, sample_scene
 
@@ -36,7 +37,8 @@ class SynthConfig:
     width: int = 640
     height: int = 480
     noise: str = "sensor"
-    families: tuple[str, ...] = tuple(parts.FAMILIES)  # drawn uniformly; "cad" draws one of `cad_files`
+    families: tuple[str, ...] = tuple(parts.FAMILIES)  # drawn uniformly; "cad" draws one of `cad_files`; the
+    # feature-based families (families.FEATURE_FAMILIES) go to features.py
     cad_files: tuple[str, ...] = ()  # STEP files (paths) of the family "cad"
     linear_deflection_rel: float = 0.002  # tessellation chord error / part size
     angular_deflection_rad: float = 0.5
@@ -56,6 +58,10 @@ def _pick_part(rng: np.random.Generator, cfg: SynthConfig) -> parts.RestPart:
         if not cfg.cad_files:
             raise ValueError("family 'cad' needs STEP files (--cad DIR)")
         return parts.load_cad(Path(cfg.cad_files[int(rng.integers(len(cfg.cad_files)))]))
+    if family in FEATURE_FAMILIES:
+        from v2c.synth import features  # imported here: runs of the procedural families never need it
+
+        return features.make_feature_part(family, rng)
     return parts.make_procedural(family, rng)
 
 

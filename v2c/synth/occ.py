@@ -194,7 +194,9 @@ def face_primitive(face, to_m: float) -> dict:
     if kind == GeomAbs_Plane:
         pln = surf.Plane()
         normal = np.array(_xyz(pln.Axis().Direction()))
-        if face.Orientation() == TopAbs_REVERSED:
+        # The surface normal is X x Y of the plane's frame: minus the axis when that frame is left-handed (a
+        # revolved solid's end faces have such frames); the face's orientation flips it once more.
+        if (face.Orientation() == TopAbs_REVERSED) != (not pln.Position().Direct()):
             normal = -normal
         return {"type": "plane", "params": {"origin": _scaled(pln.Location(), to_m), "normal": normal.tolist()}}
     if kind == GeomAbs_Cylinder:
