@@ -1,5 +1,6 @@
 """`v2c bench`: every metric of BENCHMARK.md per ablation on synthetic scans, as a table like the paper's Table 1
-(docs/bench.md); ``--real DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``:
+(docs/bench.md); ``--suite unseen`` / ``corpus-val``: parts nothing
+is tuned on (`v2c.bench.suite`); ``--real DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``:
 the segmenters alone (their instances against the ground-truth faces, docs/segmentation.md)."""
 
 from __future__ import annotations
@@ -96,7 +97,9 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
             family_scans: int, quiet: bool) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
-    as a Markdown table next to the paper's numbers (docs/bench.md)."""
+    as a Markdown table next to the paper's numbers (docs/bench.md). ``--suite unseen`` measures parts nothing
+    is tuned on instead (the CAD corpus test split and the leave-out generator families), per source and size
+    band; ``--suite corpus-val`` the corpus validation split."""
     from v2c.bench import run
 
     if real_dir is not None:
