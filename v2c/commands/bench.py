@@ -1,7 +1,7 @@
 """`v2c bench`: every metric of BENCHMARK.md per ablation on synthetic scans, as a table like the paper's Table 1
-(docs/bench.md); ``--suite unseen`` / ``corpus-val``: parts nothing
-is tuned on (`v2c.bench.suite`); ``--real DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``:
-the segmenters alone (their instances against the ground-truth faces, docs/segmentation.md)."""
+(docs/bench.md); ``--suite unseen`` / ``corpus-val``: parts nothing is tuned on (`v2c.bench.suite`); ``--real
+DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``: the segmenters alone (their
+instances against the ground-truth faces, docs/segmentation.md)."""
 
 from __future__ import annotations
 
