@@ -253,6 +253,8 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
                         split["step"] = time.perf_counter() - t
                         row["step_faces"] = report.n_faces
                         row["step_warnings"] = len(report.warnings)
+                        # faces bounded by their mesh outline instead of their VB-Rep edges (issue 16)
+                        row["step_fallback_faces"] = len(report.fallback_faces)
                     split["to_step"] = t_load + t_seg + pipeline_rest + split.get("step", 0.0)
                     # CPU seconds of the same work: what a free core would take (the machine may be shared)
                     split["to_step_cpu"] = c_load + c_seg + time.process_time() - c
@@ -354,38 +356,10 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True,
     """Prepare the scans, evaluate each in a process pool, summarise. Returns the JSON-able result: ``config``,
     ``scans`` (folders), ``columns``, ``summary`` {"seg/ablation": {...}}, ``rows`` (per scan and column),
     ``paper``, ``process_start_s``, ``wall_s``."""
-    from tqdm import tqdm
-
     t0 = time.perf_counter()
     dirs = prepare_scans(cfg, progress)
     weights = str(cfg.weights) if cfg.weights else None
-    tasks = [(str(d), tuple(cfg.segmentations), tuple(cfg.ablations), cfg.metrics, cfg.step,
-              str(cfg.figure_dir) if cfg.figure_dir else None, weights) for d in dirs]
-    rows: list[dict[str, Any]] = []
-    bar = tqdm(total=len(tasks), unit="scan", desc="bench", disable=not progress)
-    if cfg.jobs <= 1:
-        _worker_init(cfg.segmentations, weights)
-        for task in tasks:
-            rows += _worker(task)
-            bar.update()
-    else:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-        from concurrent.futures.process import BrokenProcessPool
-
-        ctx = mp.get_context("spawn")  # a clean interpreter per worker: no forked torch / OCCT state
-        with ProcessPoolExecutor(max_workers=cfg.jobs, mp_context=ctx, initializer=_worker_init,
-                                 initargs=(tuple(cfg.segmentations), weights)) as pool:
-            futures = {pool.submit(_worker, task): task for task in tasks}
-            for fut in as_completed(futures):
-                try:
-                    rows += fut.result()
-                except (BrokenProcessPool, OSError) as exc:  # a worker died (e.g. a crash inside OCCT)
-                    rows += _failed_rows(futures[fut], _error_text(exc))
-                bar.update()
-    bar.close()
-    order = {str(d): i for i, d in enumerate(dirs)}
-    rows.sort(key=lambda r: order.get(r["path"], 0))
+    rows = evaluate_dirs(cfg, dirs, progress)
     grid = None
     if cfg.figure_dir is not None:
         grid = figure_grid([r["figure"] for r in rows if r.get("figure")][:12], Path(cfg.figure_dir) / "grid.png")
@@ -399,6 +373,49 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True,
     return _jsonable({"config": conf, "scans": [str(d) for d in dirs], "columns": [f"{s}/{a}" for s, a in cols],
                       "summary": summary, "paper": PAPER, "process_start_s": start,
                       "wall_s": time.perf_counter() - t0, "figure_grid": grid, "rows": rows})
+
+
+def evaluate_dirs(cfg: BenchConfig, dirs: Sequence[Path], progress: bool = True,
+                  figure_dirs: Sequence[Path | None] | None = None, desc: str = "bench") -> list[dict[str, Any]]:
+    """`evaluate_scan` of every scan folder in a process pool of ``cfg.jobs`` workers (one thread each); the rows
+    in the order of ``dirs``. A scan that raises anywhere (even while loading, or a worker that dies) gives
+    failed rows naming the error: it never stops the run. ``figure_dirs``: the figure folder per scan (default:
+    ``cfg.figure_dir`` for all)."""
+    from tqdm import tqdm
+
+    weights = str(cfg.weights) if cfg.weights else None
+    if figure_dirs is None:
+        figure_dirs = [cfg.figure_dir] * len(dirs)
+    tasks = [(str(d), tuple(cfg.segmentations), tuple(cfg.ablations), cfg.metrics, cfg.step,
+              str(f) if f else None, weights) for d, f in zip(dirs, figure_dirs, strict=True)]
+    rows: list[dict[str, Any]] = []
+    bar = tqdm(total=len(tasks), unit="scan", desc=desc, disable=not progress)
+    if cfg.jobs <= 1:
+        _worker_init(cfg.segmentations, weights)
+        for task in tasks:
+            try:
+                rows += _worker(task)
+            except Exception as exc:  # noqa: BLE001 - e.g. a scan that does not load: a result, not a crash
+                rows += _failed_rows(task, _error_text(exc))
+            bar.update()
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        ctx = mp.get_context("spawn")  # a clean interpreter per worker: no forked torch / OCCT state
+        with ProcessPoolExecutor(max_workers=cfg.jobs, mp_context=ctx, initializer=_worker_init,
+                                 initargs=(tuple(cfg.segmentations), weights)) as pool:
+            futures = {pool.submit(_worker, task): task for task in tasks}
+            for fut in as_completed(futures):
+                try:
+                    rows += fut.result()
+                except Exception as exc:  # noqa: BLE001 - a worker died (a crash inside OCCT) or the scan raised
+                    rows += _failed_rows(futures[fut], _error_text(exc))
+                bar.update()
+    bar.close()
+    order = {str(d): i for i, d in enumerate(dirs)}
+    rows.sort(key=lambda r: order.get(r["path"], 0))
+    return rows
 
 
 def _failed_rows(task: tuple, error: str) -> list[dict[str, Any]]:

@@ -1,6 +1,7 @@
 """`v2c bench`: every metric of BENCHMARK.md per ablation on synthetic scans, as a table like the paper's Table 1
-(docs/bench.md); ``--real DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``:
-the segmenters alone (their instances against the ground-truth faces, docs/segmentation.md)."""
+(docs/bench.md); ``--suite unseen`` / ``corpus-val``: parts nothing is tuned on (`v2c.bench.suite`); ``--real
+DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``: the segmenters alone (their
+instances against the ground-truth faces, docs/segmentation.md)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,9 @@ import click
 
 
 def _csv(allowed: tuple[str, ...]):
-    def parse(ctx: click.Context, param: click.Parameter, value: str) -> tuple[str, ...]:
+    def parse(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, ...] | None:
+        if value is None:  # an option whose default depends on another (e.g. --ablation on --suite)
+            return None
         items = tuple(dict.fromkeys(v.strip() for v in value.split(",") if v.strip()))
         bad = [v for v in items if v not in allowed]
         if bad or not items:
@@ -40,10 +43,10 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option("--segmentation", default="learned", show_default=True,
               callback=_csv(("learned", "geometric", "oracle")),
               help="Segmentation method(s), comma-separated: learned, geometric, oracle.")
-@click.option("--ablation", default="full,no-axis,no-int,fit-only", show_default=True,
-              callback=_csv(("full", "no-axis", "no-int", "fit-only", "gt")),
+@click.option("--ablation", default=None, callback=_csv(("full", "no-axis", "no-int", "fit-only", "gt")),
               help="Ablations, comma-separated; 'gt' adds the ideal VB-Rep built from the ground truth "
-                   "(the metrics' floor).")
+                   "(the metrics' floor).  [default: full,no-axis,no-int,fit-only; full with --suite unseen or "
+                   "corpus-val]")
 @click.option("--cad", "cad_dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
               help="Render the STEP files of this folder as scans instead of the procedural part families.")
 @click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WxH (pixels).")
@@ -70,15 +73,33 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option("--segmentation-only", "seg_only", is_flag=True,
               help="Instead: score the segmentation alone (its instances matched to the gt faces: precision, "
                    "recall, type / axis accuracy, mean IoU, seconds per scan) on the same scans.")
+@click.option("--suite", default="family", show_default=True, type=click.Choice(["family", "unseen", "corpus-val"]),
+              help="family: the generator families (or --cad DIR), as always; unseen: the corpus test split and "
+                   "the leave-out generator families, which nothing is tuned on; corpus-val: the corpus "
+                   "validation split, the only one to tune on (docs/bench.md).")
+@click.option("--views", default=2, show_default=True, type=click.IntRange(1),
+              help="--suite unseen / corpus-val: rendered views per corpus part.")
+@click.option("--corpus", "corpus_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="--suite unseen / corpus-val: the CAD corpus folder (default ../shared/data/cad_corpus).")
+@click.option("--parts", default=None,
+              help="--suite unseen / corpus-val: only these corpus files of the split, comma-separated.")
+@click.option("--unseen-families", default=None,
+              help="--suite unseen: leave-out generator families, comma-separated, or 'none' (default: "
+                   "LEAVE_OUT_FAMILIES of v2c.synth.features when it exists).")
+@click.option("--family-scans", default=14, show_default=True, type=click.IntRange(1),
+              help="--suite unseen: scans per leave-out family.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
             cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
-            out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool,
-            quiet: bool) -> None:
+            out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool, suite: str,
+            views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
+            family_scans: int, quiet: bool) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
-    as a Markdown table next to the paper's numbers (docs/bench.md)."""
+    as a Markdown table next to the paper's numbers (docs/bench.md). ``--suite unseen`` measures parts nothing
+    is tuned on instead (the CAD corpus test split and the leave-out generator families), per source and size
+    band; ``--suite corpus-val`` the corpus validation split."""
     from v2c.bench import run
 
     if real_dir is not None:
@@ -89,6 +110,15 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
         _write_json(json_out, report)
         return
     order = ("full", "no-axis", "no-int", "fit-only", "gt")
+    if ablation is None:
+        ablation = ("full", "no-axis", "no-int", "fit-only") if suite == "family" else ("full",)
+    if suite != "family":
+        _suite(suite, seed=seed, noise=noise, segmentation=segmentation,
+               ablation=tuple(a for a in order if a in ablation), cad_dir=cad_dir, size=size, json_out=json_out,
+               jobs=jobs, scans_dir=scans_dir, cache_dir=cache_dir, no_step=no_step, figure_dir=figure_dir,
+               weights=weights, seg_only=seg_only, views=views, corpus_dir=corpus_dir, parts=parts,
+               unseen_families=unseen_families, family_scans=family_scans, quiet=quiet)
+        return
     cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
                           ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
                           scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
@@ -104,6 +134,34 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     click.echo(what)
     click.echo(run.format_table(result))
     click.echo(run.format_notes(result))
+    _write_json(json_out, result)
+
+
+def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
+           cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
+           cache_dir: Path | None, no_step: bool, figure_dir: Path | None, weights: Path | None, seg_only: bool,
+           views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
+           family_scans: int, quiet: bool) -> None:
+    """``--suite unseen`` / ``corpus-val``: `v2c.bench.suite.run_and_report`."""
+    from v2c.bench import run
+    from v2c.bench import suite as S
+
+    for flag, given in (("--cad", cad_dir), ("--scans", scans_dir), ("--segmentation-only", seg_only)):
+        if given:
+            raise click.UsageError(f"{flag} belongs to --suite family, not --suite {suite}")
+    fams = None
+    if unseen_families is not None:
+        fams = () if unseen_families.strip().lower() == "none" else \
+            tuple(dict.fromkeys(f.strip() for f in unseen_families.split(",") if f.strip()))
+    names = tuple(dict.fromkeys(p.strip() for p in parts.split(",") if p.strip())) if parts else None
+    bench = run.BenchConfig(seed=seed, noise=noise, size=size, segmentations=segmentation, ablations=ablation,
+                            jobs=jobs, cache_dir=cache_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
+    cfg = S.SuiteConfig(suite=suite, bench=bench, corpus_dir=corpus_dir, views=views, parts=names, families=fams,
+                        family_scans=family_scans)
+    try:
+        result = S.run_and_report(cfg, progress=not quiet, echo=click.echo)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
     _write_json(json_out, result)
 
 

@@ -1,0 +1,138 @@
+"""`v2c bench --suite unseen` (v2c.bench.suite): the corpus split and its size bands, the leave-out families hook,
+the scan cache, and the two counts (faces bounded by their mesh outline in the STEP, failures) on known cases.
+
+The end-to-end case renders two corpus test parts of known face counts (kcl washer: 4 faces, band < 30; charm
+gear: 51 faces, band 30-100) at 320 x 240, one view each, oracle segmentation, and checks every group of the
+table against the per-scan rows and against an independent STEP export; then breaks one cached scan and checks
+that its failure is counted and named in its own band while the other part is still measured, nothing re-rendered.
+"""
+
+from __future__ import annotations
+
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import SHARED_DATA
+
+from v2c.bench import run as R
+from v2c.bench import suite as S
+
+WASHER, GEAR = "kcl__washer.step", "charm__gear1.step"  # test split: 4 and 51 faces
+
+
+@pytest.fixture(scope="module")
+def corpus() -> Path:
+    folder = SHARED_DATA / "cad_corpus"
+    if not folder.is_dir():
+        pytest.skip(f"CAD corpus not found at {folder} (../shared/data/cad_corpus next to the repository)")
+    return folder
+
+
+def test_bands_split_at_30_and_100_faces() -> None:
+    assert [S.band_of(n) for n in (4, 29, 30, 100, 101, 500)] == ["<30", "<30", "30-100", "30-100", ">100", ">100"]
+    assert S.band_labels() == ("<30", "30-100", ">100")
+    assert S.band_of(10, S.BandConfig(small_below=5, large_above=8)) == ">8"
+
+
+def test_committed_split_test_parts_by_band() -> None:
+    test = [p for p in S.read_split() if p.split == "test"]
+    assert len(test) == 28 and len([p for p in S.read_split() if p.split == "val"]) == 15
+    bands = [S.band_of(p.n_faces) for p in test]
+    assert (bands.count("<30"), bands.count("30-100"), bands.count(">100")) == (13, 7, 8)
+    assert {p.file: p.n_faces for p in test}[WASHER] == 4 and {p.file: p.n_faces for p in test}[GEAR] == 51
+
+
+def test_leave_out_families_come_from_the_feature_module(monkeypatch, tmp_path: Path) -> None:
+    cfg = S.SuiteConfig(suite="unseen", parts=(), family_scans=3,
+                        bench=R.BenchConfig(ablations=("full",), cache_dir=tmp_path))
+    monkeypatch.setattr(S, "UNSEEN_FAMILIES_SOURCE", ("v2c_no_such_module", "LEAVE_OUT_FAMILIES"))
+    scans, notes = S.plan_scans(cfg)
+    assert scans == [] and len(notes) == 1 and "skipped" in notes[0] and "v2c_no_such_module" in notes[0]
+    fake = types.ModuleType("v2c_fake_features")
+    fake.LEAVE_OUT_FAMILIES = ("knob", "no-such-family")
+    monkeypatch.setitem(sys.modules, "v2c_fake_features", fake)
+    monkeypatch.setattr(S, "UNSEEN_FAMILIES_SOURCE", ("v2c_fake_features", "LEAVE_OUT_FAMILIES"))
+    scans, notes = S.plan_scans(cfg)
+    assert [(s.source, s.name, s.view) for s in scans] == [("family", "knob", i) for i in range(3)]
+    assert len(notes) == 1 and "no-such-family" in notes[0]
+    assert len({s.seed for s in scans}) == 1 and scans[0].seed == S.derived_seed(0, "family:knob")
+    # the option overrides the constant; the validation suite never adds leave-out families
+    assert S.plan_scans(S.SuiteConfig(suite="unseen", parts=(), families=(), bench=cfg.bench)) == ([], [])
+    assert S.plan_scans(S.SuiteConfig(suite="corpus-val", parts=(), bench=cfg.bench))[0] == []
+
+
+def test_suite_refuses_unknown_parts_and_family_options(corpus: Path, tmp_path: Path) -> None:
+    cfg = S.SuiteConfig(parts=("not_a_part.step",), corpus_dir=corpus, bench=R.BenchConfig(cache_dir=tmp_path))
+    with pytest.raises(ValueError, match="not_a_part.step not in the test split"):
+        S.plan_scans(cfg)
+    from v2c.commands.bench import command
+
+    res = CliRunner().invoke(command, ["--suite", "unseen", "--cad", str(tmp_path)])
+    assert res.exit_code == 2 and "--cad belongs to --suite family" in res.output
+
+
+def _row(result: dict, part: str) -> dict:
+    (row,) = [r for r in result["rows"] if r["part"] == part]
+    return row
+
+
+def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
+    bench = R.BenchConfig(noise="sensor", size=(320, 240), segmentations=("oracle",), ablations=("full",), jobs=1,
+                          cache_dir=tmp_path / "cache")
+    cfg = S.SuiteConfig(suite="unseen", bench=bench, corpus_dir=corpus, views=1, parts=(WASHER, GEAR), families=())
+    res = S.run_suite(cfg, progress=False)
+    assert res["groups"] == ["corpus test", "corpus test <30", "corpus test 30-100", "corpus test >100"]
+    summ = res["summary"]["oracle/full"]
+    washer, gear = _row(res, WASHER), _row(res, GEAR)
+    assert (washer["band"], washer["n_faces"], gear["band"], gear["n_faces"]) == ("<30", 4, "30-100", 51)
+    assert washer["ok"] and gear["ok"], (washer.get("error"), gear.get("error"))
+    # per band: exactly that part's scan; the whole split: both; the empty band says so
+    assert [summ[g]["scans"] for g in res["groups"]] == [2, 1, 1, 0]
+    assert [summ[g]["parts"] for g in res["groups"]] == [2, 1, 1, 0]
+    for key in ("precision", "recall", "chamfer", "alignment", "type_accuracy", "axis_accuracy"):
+        assert summ["corpus test <30"][key] == pytest.approx(washer[key])
+        assert summ["corpus test 30-100"][key] == pytest.approx(gear[key])
+        assert summ["corpus test"][key] == pytest.approx(np.mean([washer[key], gear[key]]))
+    # the washer (a ring: two planes, two cylinders) with the oracle segmentation: every seen face found
+    assert washer["precision"] == washer["recall"] == washer["type_accuracy"] == 1.0
+    # the mesh-outline count is the STEP writer's own, recomputed here outside the bench
+    from exporters.step import write
+    from v2c.pipeline import reconstruct
+    from v2c.scan import load_scan
+    from v2c.segment import segment
+
+    for row in (washer, gear):
+        scan = load_scan(row["path"])
+        rep = write(reconstruct(scan, segmentation=segment(scan, "oracle")), tmp_path / "x.step", frame="camera")
+        assert row["step_fallback_faces"] == len(rep.fallback_faces) and row["step_faces"] == rep.n_faces
+    assert summ["corpus test"]["fallback_faces"] == washer["step_fallback_faces"] + gear["step_fallback_faces"]
+    assert summ["corpus test"]["step_faces"] == washer["step_faces"] + gear["step_faces"]
+    assert summ["corpus test 30-100"]["fallback_faces"] == gear["step_fallback_faces"]
+    assert all(summ[g]["failed"] == 0 and summ[g]["failures"] == [] for g in res["groups"])
+    table = S.format_suite_tables(res)
+    assert "| metric | corpus test | corpus test <30 | corpus test 30-100 | corpus test >100 |" in table
+    assert (f"| STEP faces bounded by their mesh outline / STEP faces | {summ['corpus test']['fallback_faces']} / "
+            f"{summ['corpus test']['step_faces']} | {washer['step_fallback_faces']} / {washer['step_faces']} | "
+            f"{gear['step_fallback_faces']} / {gear['step_faces']} | 0 / 0 |") in table
+    assert "| failures (scans that raised) | 0 | 0 | 0 | 0 |" in table
+    assert "| scans (parts) | 2 (2) | 1 (1) | 1 (1) | 0 (0) |" in table
+
+    # A scan that raises (its depth image gone) is a counted, named failure of its band; the run goes on, and
+    # the cache renders nothing again.
+    gear_color = Path(gear["path"]) / "color.png"
+    stamp = gear_color.stat().st_mtime_ns
+    (Path(washer["path"]) / "depth.png").unlink()
+    res2 = S.run_suite(cfg, progress=False)
+    assert gear_color.stat().st_mtime_ns == stamp
+    summ2 = res2["summary"]["oracle/full"]
+    assert [summ2[g]["failed"] for g in res2["groups"]] == [1, 1, 0, 0]
+    (fail,) = summ2["corpus test <30"]["failures"]
+    assert fail["scan"] == f"{WASHER}/v0" and "depth.png" in fail["error"]
+    assert summ2["corpus test 30-100"]["precision"] == pytest.approx(gear["precision"])
+    assert summ2["corpus test"]["precision"] == pytest.approx(gear["precision"] / 2)  # a failure counts 0
+    assert "| failures (scans that raised) | 1 | 1 | 0 | 0 |" in S.format_suite_tables(res2)
+    assert f"{WASHER}/v0 (scan_00000): " in S.format_suite_notes(res2)
