@@ -47,7 +47,7 @@ SUITES_WITH_FAMILIES = ("unseen",)
 SPLIT_FILE = Path(__file__).with_name("splits") / "cad_corpus.csv"
 #: Where the leave-out family names come from: (module, constant). The feature generator (branch ``gen``) defines
 #: them; until it is merged the suite runs without that source and says so.
-UNSEEN_FAMILIES_SOURCE = ("v2c.synth.features", "LEAVE_OUT_FAMILIES")
+UNSEEN_FAMILIES_SOURCE = ("v2c.synth.families", "LEAVE_OUT_FAMILIES")
 SUITE_GENERATOR = "v2c.bench.suite/1"  # bump when the way suite scans are drawn changes (invalidates the cache)
 
 CORPUS = "corpus"
@@ -174,10 +174,10 @@ def unseen_families() -> tuple[tuple[str, ...], str | None]:
 
 
 def known_families() -> set[str]:
-    """Family names the scan generator can draw (`v2c.synth.parts.FAMILIES`)."""
-    from v2c.synth import parts
+    """Family names the scan generator can draw (`v2c.synth.families`: procedural and feature-based)."""
+    from v2c.synth.families import FEATURE_FAMILIES, PROCEDURAL_FAMILIES
 
-    return set(parts.FAMILIES)
+    return set(PROCEDURAL_FAMILIES) | set(FEATURE_FAMILIES)
 
 
 def derived_seed(seed: int, key: str) -> int:
