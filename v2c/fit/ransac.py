@@ -371,7 +371,9 @@ def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: F
     cos_min = float(np.cos(np.deg2rad(config.normal_angle_deg)))
     sub = rng.choice(len(x), size=min(len(x), config.ransac_points), replace=False)
     xs, ns = x[sub], n[sub]
-    hyps = hypotheses(ptype, xs, ns, scale, config, rng)
+    # degenerate hypotheses (a zero normal where the normal estimate had no neighbours, NaN from a division) are
+    # dropped where they arise, before they are scored or refined
+    hyps = [h for h in hypotheses(ptype, xs, ns, scale, config, rng) if h.is_finite(axis_tol=0.5)]
     if not hyps:
         return None
     # two-stage scoring: every hypothesis on a small subset, the most promising on the whole subset
@@ -397,7 +399,10 @@ def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: F
         pts = x[inl]
         if len(pts) > config.refine_points:
             pts = pts[rng.choice(len(pts), size=config.refine_points, replace=False)]
-        best = refine_primitive(best, pts, scale, config)
+        refined = refine_primitive(best, pts, scale, config)
+        if not refined.is_finite(axis_tol=0.5):
+            break  # a refinement that degenerates keeps the hypothesis it started from
+        best = refined
     inl = inlier_mask(best, x, n, eps, cos_min)
     return RansacFit(best, inl, float(np.count_nonzero(inl)) / max(len(x), 1))
 

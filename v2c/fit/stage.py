@@ -4,6 +4,7 @@ fit -> two rounds of intersection refinement), following the paper's "Geometry O
 from __future__ import annotations
 
 import contextlib
+import logging
 from dataclasses import dataclass, field, replace
 from time import perf_counter, process_time
 from typing import TYPE_CHECKING
@@ -25,6 +26,8 @@ from v2c.segment.types import Segmentation
 
 if TYPE_CHECKING:
     from v2c.scan import Scan
+
+log = logging.getLogger(__name__)
 
 
 def _label_of(seg: Segmentation, i: int, config: FitConfig) -> tuple[str | None, int | None | str]:
@@ -151,9 +154,15 @@ def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale:
 def _joint_terms(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[int, int | None],
                  frame: np.ndarray, use_frame: bool, config: FitConfig) -> tuple[list[int], list[Term]]:
     """Step 2 set-up: one Term per fitted instance (subsampled inliers; frame axis or free axis)."""
-    order = sorted(fits.prims)
+    order = []
     terms: list[Term] = []
-    for i in order:
+    for i in sorted(fits.prims):
+        if not fits.prims[i].is_finite() or not np.all(np.isfinite(ipts[i].points)):
+            # a degenerate fit (zero-length normal, NaN) would poison the joint solve for every face: drop it
+            log.warning("instance %d: its %s fit is degenerate (%r); the face is dropped", i,
+                        fits.prims[i].type, fits.prims[i])
+            continue
+        order.append(i)
         x = ipts[i].points[fits.inliers[i]]
         rng = np.random.default_rng([config.seed, i, 1])
         if len(x) > config.align_points:
@@ -177,7 +186,8 @@ def _keep_plausible(new: list[Primitive], old: list[Primitive], terms: list[Term
     aligned."""
     out = []
     for p, q, tm in zip(new, old, terms, strict=True):
-        if plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2) and cone_ok(p, tm.points, scale, config):
+        if (p.is_finite() and plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2)
+                and cone_ok(p, tm.points, scale, config)):
             out.append(p)
         elif tm.axis_index is not None and tm.axis_index >= 0:
             out.append(q.from_local(np.zeros(q.local_size), tm.axis_sign * frame[tm.axis_index]))

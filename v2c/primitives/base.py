@@ -109,6 +109,14 @@ class Primitive(ABC):
             self.__dict__["_local_basis"] = b
         return b
 
+    def is_finite(self, axis_tol: float = 1e-6) -> bool:
+        """True when every parameter is finite and the axis (if any) is a unit vector within ``axis_tol``: a
+        degenerate fit (a plane normal of zero length from collinear points, NaN from a division) is not."""
+        if not all(np.all(np.isfinite(np.asarray(v, float))) for v in self.params().values()):
+            return False
+        a = self.axis_vector
+        return a is None or abs(float(np.linalg.norm(a)) - 1.0) <= axis_tol
+
     # -- serialisation -----------------------------------------------------------------------------------------
     @abstractmethod
     def params(self) -> dict[str, Any]:
