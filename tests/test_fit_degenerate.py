@@ -43,7 +43,7 @@ def test_scan_with_a_degenerate_fit_reconstructs_the_rest(monkeypatch: pytest.Mo
     """One instance whose fit degenerates (a plane with a zero normal after RANSAC) is dropped with a
     warning naming it; the other faces are reconstructed (before: 'Residuals are not finite in the initial
     point', exit 1, no output)."""
-    import v2c.fit.stage as stage
+    from v2c.fit import stage
     from v2c.pipeline import reconstruct
 
     full = reconstruct(SAMPLES / "bracket_planes_cylinders", "oracle")
@@ -52,7 +52,7 @@ def test_scan_with_a_degenerate_fit_reconstructs_the_rest(monkeypatch: pytest.Mo
 
     def broken(prims, *args, **kwargs):
         frame, axis_idx, fixed = real(prims, *args, **kwargs)
-        i = sorted(prims)[0]
+        i = min(prims)
         victim["id"] = i
         prims[i] = Plane(prims[i].origin, np.zeros(3))  # as a fit from zero normals made it
         fixed.pop(i, None)
