@@ -157,6 +157,17 @@ class EdgeBuilder:
             if fa not in self.surfaces or fb not in self.surfaces:
                 continue
             poly = subsample(self.fmap.points(e.polyline), self.cfg.branch_samples)
+            if getattr(e, "tangent", False):
+                # a tangent junction: the surfaces barely cross, so GeomAPI_IntSS finds no curve or a wandering
+                # one; the VB-Rep's line of contact is used when it lies within branch_tol of both surfaces
+                c = curve_from_dict(e.curve, self.fmap)
+                if c is not None:
+                    t, d = project_on_curve(c, poly)
+                    on = curve_points(c, t)
+                    off = max(float(distance_to_surface(self.surfaces[f], on).max()) for f in (fa, fb))
+                    if np.all(np.isfinite(d)) and d.max() <= self.branch_tol and off <= self.branch_tol:
+                        self.curves[e.id] = c
+                        continue
             try:
                 cands = intersection_curves(self.surfaces[fa], self.surfaces[fb], self.cfg.intss_tol)
             except Exception as exc:  # noqa: BLE001 - OCCT raises Standard_Failure subclasses

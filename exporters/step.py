@@ -74,14 +74,16 @@ _SURFACE_NAMES = {
     GeomAbs_BSplineSurface: "bspline",
 }
 
-_EDGE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)$")
+_EDGE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)(?P<tangent>:tangent)?$")
 _FACE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<axis>[XYZU-]):f(?P<id>\d+)$")
 
 
 # ------------------------------------------------------------------------------------------------ naming
 def edge_name(edge: VEdge) -> str:
-    """``"<type>:<confidence>:e<id>"``, confidence with two decimals."""
-    return f"{EdgeType(edge.type).value}:{float(edge.confidence):.2f}:e{int(edge.id)}"
+    """``"<type>:<confidence>:e<id>"``, confidence with two decimals; ``":tangent"`` appended for an
+    intersection edge where its faces meet tangentially (G1)."""
+    tail = ":tangent" if getattr(edge, "tangent", False) else ""
+    return f"{EdgeType(edge.type).value}:{float(edge.confidence):.2f}:e{int(edge.id)}{tail}"
 
 
 def edge_layer(edge_type: EdgeType | str) -> str:
@@ -286,7 +288,8 @@ class TypedFace:
 class TypedEdge:
     """An edge read back with its type three ways: from its name, its layer and its colour (sRGB).
 
-    n_faces: how many faces of the file use it (2 for an intersection edge shared by its faces).
+    n_faces: how many faces of the file use it (2 for an intersection edge shared by its faces). tangent: the name
+    says its faces meet tangentially (G1).
     """
 
     name: str | None
@@ -298,6 +301,7 @@ class TypedEdge:
     color: RGB | None
     color_type: EdgeType | None
     n_faces: int
+    tangent: bool = False
 
 
 @dataclass
@@ -364,7 +368,7 @@ def read_typed(path: str | Path) -> TypedStep:
         layer = next((lay for lay in e.layers if lay.startswith("edge_")), e.layers[0] if e.layers else None)
         layer_type = _edge_type(layer[len("edge_"):]) if layer and layer.startswith("edge_") else None
         out.edges.append(TypedEdge(e.name, eid, etype, conf, layer, layer_type, e.color,
-                                   _type_of_color(e.color), n))
+                                   _type_of_color(e.color), n, (e.name or "").endswith(":tangent")))
     return out
 
 

@@ -27,7 +27,7 @@ from fixtures_design.occ import M_PER_MM, edge_curve, face_mesh, face_primitive
 from v2c.labels import axis_class
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
 
-_EDGE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)$")
+_EDGE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)(?::tangent)?$")
 
 
 def _edge_type(name: str | None, layers: tuple[str, ...]) -> tuple[EdgeType, float] | None:

@@ -47,6 +47,12 @@ class VBRepConfig:
     #                           mesh outline on 23 scans but 91.7 % instead of 92.7 % edge-type accuracy, and
     #                           retype_gap 0 (any miss) 6 points less
     retype_conf: float = 0.5  # factor: confidence multiplier of such a retyped edge
+    # --- tangent (G1) junctions: fillets, blends, a dome on a cylinder
+    tangent_deg: float = 8.0  # degrees: an intersection run whose two surfaces' normals lie within this of each
+    #                           other (median over its lifted samples) is a tangent junction: its samples go to
+    #                           the surfaces' line of contact (`lift.contact_points`), not onto an intersection
+    #                           solve that wanders where the surfaces barely cross, and it is marked tangent
+    tangent_iters: int = 30  # alternating-projection steps of the contact points
 
     # --- topology (topology.py)
     snap_iters: int = 20  # Gauss-Newton iterations putting vertices and polylines onto their surfaces

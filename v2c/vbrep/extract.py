@@ -35,11 +35,15 @@ from v2c.vbrep.classify import KIND_INT, FaceGeom, classify_samples
 from v2c.vbrep.confidence import edge_confidence, face_confidence
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.lift import (
+    contact_points,
     intersection_curve,
+    normals_angle_deg,
+    points_on_curve,
     project_to_intersection,
     sd_func,
     solve_vertex,
     surfaces_meet,
+    tangent_curve,
     visibility_residual,
 )
 from v2c.vbrep.mesh import face_mesh
@@ -410,9 +414,19 @@ def _edge_protos(ctx: ExtractContext, gi: int, gedge: Any) -> list[ProtoEdge]:
         uvr = uv[sl]
         common = {"uv": uvr, "key0": key0, "key1": key1, "graph_edge": gi}
         retyped = False
+        tangent = False
         if code == _C_INT:
             fa, fb = ctx.faces[a], ctx.faces[b]
             x0 = np.where(np.isfinite(st.p_int[sl]), st.p_int[sl], 0.5 * (st.p_a[sl] + st.p_b[sl]))
+            ang = normals_angle_deg(fa.prim, fb.prim, x0)
+            tangent = bool(np.isfinite(ang).any() and np.nanmedian(ang) <= cfg.tangent_deg)
+        if tangent:
+            # a tangent junction: the line where the surfaces touch (or come closest)
+            curve = tangent_curve(fa.prim, fb.prim, x0, cfg.parallel_deg)
+            on = points_on_curve(curve, x0)
+            pts = on if on is not None else contact_points(fa.prim, fb.prim, x0, cfg.tangent_iters)[0]
+            ctx.stats["tangent_edges"] = ctx.stats.get("tangent_edges", 0) + 1
+        elif code == _C_INT:
             pts = project_to_intersection(fa.prim, fb.prim, x0, cfg.curve_iters, ctx.K, cfg.int_band_px + 1.0)
             tol = max(cfg.meet_tol * ctx.scale, cfg.meet_min_m)
             met, on_curve = surfaces_meet(fa.prim, fb.prim, x0, tol, cfg.snap_iters)
@@ -431,7 +445,8 @@ def _edge_protos(ctx: ExtractContext, gi: int, gedge: Any) -> list[ProtoEdge]:
                 code = _C_A_SIL if not zb < za else _C_B_SIL
                 ctx.stats["retyped_intersections"] = ctx.stats.get("retyped_intersections", 0) + 1
         if code == _C_INT:
-            curve = intersection_curve(fa.prim, fb.prim, pts, cfg.perpendicular_deg, cfg.parallel_deg)
+            if not tangent:
+                curve = intersection_curve(fa.prim, fb.prim, pts, cfg.perpendicular_deg, cfg.parallel_deg)
             errs = [e for e in (_depth_err(za_fit[sl], za_obs[sl]), _depth_err(zb_fit[sl], zb_obs[sl]))
                     if np.isfinite(e)]
             derr = float(np.mean(errs)) if errs else np.nan
@@ -642,8 +657,10 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
                                jump=s.get("jump", np.inf), vis_share=s.get("vis_share", 0.0),
                                agreement=s.get("agreement", 1.0), gap_thr=ctx.gap_thr, scale=scale, cfg=cfg)
         conf *= s.get("factor", 1.0)
+        curve = dict(p.curve) if p.type is EdgeType.INTERSECTION and p.curve is not None else None
+        tangent = bool(curve.pop("tangent", False)) if curve is not None else False
         edges.append(VEdge(k, p.type, round(conf, 4), tuple(fid[f] for f in p.faces), p.pts, p.v0, p.v1,
-                           p.curve if p.type is EdgeType.INTERSECTION else None))
+                           curve, tangent=tangent))
     vverts = [VVertex(k, v.kind, v.position, v.pixel) for k, v in enumerate(vertices)]
     loops = build_loops(protos, fid, ctx.K)
     bounds = None  # the part's box: what its observed points span, padded

@@ -146,3 +146,101 @@ def intersection_curve(pa: Primitive, pb: Primitive, polyline: np.ndarray, perpe
                     radius = float(np.median(rho))
                 return {"kind": "circle", "center": center, "axis": a.copy(), "radius": float(radius)}
     return {"kind": "intersection"}
+
+
+def normals_angle_deg(pa: Primitive, pb: Primitive, x: np.ndarray) -> np.ndarray:
+    """(N,) angle in degrees between the two surfaces' normal lines at the points nearest ``x`` (N, 3) on each
+    (0: the surfaces are tangent there; sign-free, so a concave blend counts as a convex one)."""
+    x = np.asarray(x, float).reshape(-1, 3)
+    c = np.abs(np.einsum("ij,ij->i", pa.normal(x), pb.normal(x)))
+    return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))
+
+
+def contact_points(pa: Primitive, pb: Primitive, x0: np.ndarray, iters: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Points of contact of two (nearly) tangent surfaces near ``x0`` (N, 3), camera frame, metres: the midpoint of
+    each point's closest points on both, iterated (alternating projection, which converges to where the surfaces
+    touch, or to the middle of their closest approach where a small gap or overlap is left). Intersection solves
+    wander along the normal there: the surfaces barely cross. Returns the points and the gap between the two
+    surfaces at each (metres)."""
+    x = np.asarray(x0, float).reshape(-1, 3).copy()
+    if len(x) == 0:
+        return x, np.zeros(0)
+    for _ in range(iters):
+        qa, qb = pa.closest_point(x), pb.closest_point(x)
+        x = 0.5 * (qa + qb)
+    gap = np.linalg.norm(pa.closest_point(x) - pb.closest_point(x), axis=1)
+    bad = ~np.all(np.isfinite(x), axis=1)
+    x[bad] = np.asarray(x0, float).reshape(-1, 3)[bad]
+    gap[bad] = np.inf
+    return x, gap
+
+
+def _circle_about(o: np.ndarray, d: np.ndarray, h: float, radius: float) -> dict:
+    return {"kind": "circle", "center": o + h * d, "axis": d.copy(), "radius": float(radius)}
+
+
+def tangent_curve(pa: Primitive, pb: Primitive, pts: np.ndarray, parallel_deg: float = 1.0) -> dict:
+    """Analytic line of contact of a tangent (G1) junction, from the two surfaces' parameters (camera frame,
+    metres); ``pts`` (K, 3), samples along the junction, only orient it and pick the branch. Where the two fitted
+    surfaces do not touch exactly, the curve lies between them.
+
+    - plane and cylinder with its axis parallel to the plane (a fillet): the line under the axis, on the plane;
+    - plane normal to the axis of a torus (a rounded edge of a disc): the torus' major circle, on the plane;
+    - sphere on the axis of a cylinder (a dome): the circle about the axis at the sphere's centre, radius the
+      mean of both radii; torus and cylinder on one axis (a shoulder fillet): the circle at the torus' centre;
+    - anything else: ``{"kind": "intersection"}`` (the polyline samples the contact, `contact_points`).
+
+    Every curve dict carries ``"tangent": True``."""
+    pts = np.asarray(pts, float).reshape(-1, 3)
+    sin_par = np.sin(np.deg2rad(parallel_deg))
+    order = {"plane": 0, "cylinder": 1, "cone": 2, "sphere": 3, "torus": 4}
+    if order.get(pa.type, 9) > order.get(pb.type, 9):
+        pa, pb = pb, pa
+    ta, tb = pa.type, pb.type
+    out: dict = {"kind": "intersection"}
+
+    def on_axis(c: np.ndarray, o: np.ndarray, d: np.ndarray) -> bool:
+        off = (c - o) - ((c - o) @ d) * d
+        return float(np.linalg.norm(off)) <= sin_par * max(float(np.linalg.norm(c - o)), 1e-9) + 1e-6
+
+    if ta == "plane" and tb == "cylinder" and len(pts):
+        n, a = pa.axis_vector, pb.axis_vector
+        if abs(n @ a) <= sin_par:
+            o = np.asarray(pb.origin, float)
+            dist = float(n @ (o - pa.origin))
+            side = np.sign(dist) or 1.0
+            # halfway between the plane and the cylinder's nearest line (they touch when |dist| = radius)
+            foot = o - side * 0.5 * (abs(dist) + pb.radius) * n
+            d = a if len(pts) < 2 or a @ (pts[-1] - pts[0]) >= 0 else -a
+            foot = foot + ((pts[0] - foot) @ d) * d
+            out = {"kind": "line", "origin": foot, "direction": d.copy()}
+    elif ta == "plane" and tb == "torus":
+        n, a, c = pa.axis_vector, pb.axis_vector, np.asarray(pb.origin, float)
+        if np.linalg.norm(np.cross(n, a)) <= sin_par:
+            h = float(a @ (pa.origin - c))
+            out = _circle_about(c, a, h, pb.radius)
+    elif ta == "cylinder" and tb == "sphere":
+        o, a, c = np.asarray(pa.origin, float), pa.axis_vector, np.asarray(pb.origin, float)
+        if on_axis(c, o, a):
+            out = _circle_about(o, a, float((c - o) @ a), 0.5 * (pa.radius + pb.radius))
+    elif ta == "cylinder" and tb == "torus":
+        o, a, c = np.asarray(pa.origin, float), pa.axis_vector, np.asarray(pb.origin, float)
+        if np.linalg.norm(np.cross(a, pb.axis_vector)) <= sin_par and on_axis(c, o, a):
+            out = _circle_about(o, a, float((c - o) @ a), pa.radius)
+    out["tangent"] = True
+    return out
+
+
+def points_on_curve(curve: dict, x: np.ndarray) -> np.ndarray | None:
+    """(N, 3) points projected onto an analytic line or circle dict (camera frame, metres); None for another
+    kind."""
+    x = np.asarray(x, float).reshape(-1, 3)
+    if curve.get("kind") == "line":
+        o, d = np.asarray(curve["origin"], float), np.asarray(curve["direction"], float)
+        return o + np.outer((x - o) @ d, d)
+    if curve.get("kind") == "circle":
+        c, a, r = np.asarray(curve["center"], float), np.asarray(curve["axis"], float), float(curve["radius"])
+        v = (x - c) - np.outer((x - c) @ a, a)
+        nv = np.linalg.norm(v, axis=1, keepdims=True)
+        return c + r * v / np.where(nv > 0, nv, 1.0)
+    return None

@@ -166,6 +166,8 @@ class VEdge:
       ``{"kind": "circle", "center": (3,), "axis": (3,), "radius": float}`` |
       ``{"kind": "intersection"}`` (general intersection of the two faces' surfaces; the polyline samples it);
       None for other edge types.
+    tangent: an intersection edge where its two faces meet tangentially (G1: a fillet, a blend, a dome on a
+      cylinder); its polyline runs along their line of contact.
     confidence: [0, 1], see docs/vbrep.md.
     """
 
@@ -177,6 +179,7 @@ class VEdge:
     v0: int
     v1: int
     curve: dict | None = None
+    tangent: bool = False
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, VEdge):
@@ -190,6 +193,7 @@ class VEdge:
             and self.v0 == other.v0
             and self.v1 == other.v1
             and _deep_eq(self.curve, other.curve)
+            and bool(self.tangent) == bool(other.tangent)
         )
 
     def to_dict(self) -> dict:
@@ -202,6 +206,7 @@ class VEdge:
             "v0": int(self.v0),
             "v1": int(self.v1),
             "curve": _jsonable(self.curve),
+            "tangent": bool(self.tangent),
         }
 
     @classmethod
@@ -220,6 +225,7 @@ class VEdge:
             v0=int(d["v0"]),
             v1=int(d["v1"]),
             curve=curve,
+            tangent=bool(d.get("tangent", False)),
         )
 
 

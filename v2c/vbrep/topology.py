@@ -21,7 +21,7 @@ import numpy as np
 
 from v2c.primitives import from_dict
 from v2c.primitives.base import Primitive
-from v2c.vbrep.lift import project_to_intersection
+from v2c.vbrep.lift import contact_points, points_on_curve, project_to_intersection
 from v2c.vbrep.model import EdgeType, VBRep
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, image_length
 from v2c.vbrep.raycast import project
@@ -119,7 +119,13 @@ def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: d
     for p in protos:
         inner = p.pts[1:-1]
         if len(inner):
-            if p.type is EdgeType.INTERSECTION and len(p.faces) == 2:
+            if p.type is EdgeType.INTERSECTION and len(p.faces) == 2 and (p.curve or {}).get("tangent"):
+                # a tangent junction stays on the surfaces' line of contact (an intersection solve wanders)
+                x = points_on_curve(p.curve, inner)
+                if x is None:
+                    x, _ = contact_points(prims[p.faces[0]], prims[p.faces[1]], inner, iters)
+                inner = np.where(np.all(np.isfinite(x), 1)[:, None], x, inner)
+            elif p.type is EdgeType.INTERSECTION and len(p.faces) == 2:
                 pa, pb = prims[p.faces[0]], prims[p.faces[1]]
                 x = project_to_intersection(pa, pb, inner, iters)
                 res = np.maximum(np.abs(pa.signed_distance(x)), np.abs(pb.signed_distance(x)))
