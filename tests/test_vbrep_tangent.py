@@ -37,7 +37,9 @@ def test_tangent_curve_of_exact_blends() -> None:
 
 
 def _scan(tmp: Path, name: str):
-    from build123d import Axis, Box, Cylinder as BCyl, Pos, Sphere as BSph, export_step, fillet
+    from build123d import Axis, Box, Pos, export_step, fillet
+    from build123d import Cylinder as BCyl
+    from build123d import Sphere as BSph
 
     from v2c.synth.dataset import SynthConfig, generate_scan
 
