@@ -141,7 +141,13 @@ def part_box(vbrep: VBRep, fmap: FrameMap, margin_rel: float) -> tuple[np.ndarra
 
 
 def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None) -> bool:
+    """Whether a shape lies inside ``box`` (lo, hi), mm: the cheap, loose bounding box first (it contains the
+    exact one), the exact one only when the loose one reaches outside."""
     if box is None:
+        return True
+    loose = Bnd_Box()
+    BRepBndLib.Add_s(shape, loose, False)
+    if np.all(np.array(loose.CornerMin().Coord()) >= box[0]) and np.all(np.array(loose.CornerMax().Coord()) <= box[1]):
         return True
     lo, hi = bounding_box(shape)
     return bool(np.all(lo >= box[0]) and np.all(hi <= box[1]))
