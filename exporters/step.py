@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from OCP.BRepAdaptor import BRepAdaptor_Surface
+from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
 from OCP.BRepCheck import BRepCheck_Analyzer
 from OCP.GeomAbs import (
     GeomAbs_BSplineSurface,
@@ -43,9 +43,10 @@ from OCP.Message import Message, Message_Gravity
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE
 from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS, TopoDS_Shape
-from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape
+from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
 from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, face_area, translate_built
+from exporters.brep_faces import edges_of
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
 from v2c.labels import PrimitiveType
@@ -177,7 +178,28 @@ def _attributes(vbrep: VBRep, built: BuiltBRep) -> list[SubShapeAttrs]:
         for shape, eid in pairs:
             if eid in by_id:
                 subs.append(edge_attrs(shape, by_id[eid]))
+    # Edges OCCT added itself (the seam ShapeFix puts on a face that closes around a cylinder): named after the
+    # nearest VB-Rep edge of their face, so that no edge of the file goes untyped.
+    named = TopTools_IndexedMapOfShape()
+    for sub in subs:
+        named.Add(sub.shape)
+    for f in vbrep.faces:
+        for face in built.face_parts.get(f.id, [built.faces[f.id]] if f.id in built.faces else []):
+            own = [e for e in vbrep.edges if f.id in e.faces] or list(vbrep.edges)
+            for edge in edges_of(face):
+                if named.Contains(edge) or not own or built.fmap is None:
+                    continue
+                mid = _edge_midpoint(edge)
+                near = min(own, key=lambda e: float(np.min(np.linalg.norm(
+                    built.fmap.points(np.asarray(e.polyline, float).reshape(-1, 3)) - mid, axis=1))))
+                subs.append(edge_attrs(edge, near))
+                named.Add(edge)
     return subs
+
+
+def _edge_midpoint(edge: TopoDS_Shape) -> np.ndarray:
+    c = BRepAdaptor_Curve(TopoDS.Edge_s(edge))
+    return np.array(c.Value(0.5 * (c.FirstParameter() + c.LastParameter())).Coord())
 
 
 def write(
