@@ -83,6 +83,7 @@ class BrepConfig:
     roundtrip_tol_rel: float = 0.02  # a face whose area read back from the file moves more: rewritten (outline)
     outline_tol_area_rel: float = 0.005  # outline simplification moves a piece's area by at most this fraction
     outline_min_piece_rel: float = 0.002  # outline pieces and holes under this share of the face's area: dropped
+    outline_max_stretch: float = 4.0  # mesh triangles this much larger in (u, v) than in space: not outline
 
 
 @dataclass
@@ -172,7 +173,7 @@ def build_brep(vbrep: VBRep, fmap: FrameMap, config: BrepConfig | None = None,
     eb = EdgeBuilder(vbrep, fmap, cfg).run()
     fb = FaceBuilder(eb)
     ob = OutlineBuilder(vbrep, fmap, eb.fit_tol, cfg.outline_tol_area_rel, cfg.outline_min_piece_rel,
-                        cfg.fix_precision)
+                        cfg.fix_precision, max_stretch=cfg.outline_max_stretch)
     out = BuiltBRep(shape=TopoDS_Compound(), fmap=fmap, box=part_box(vbrep, fmap, cfg.box_margin_rel))
     faces: dict[int, TopoDS_Face] = {}
     face_edges: dict[int, set[int]] = {}

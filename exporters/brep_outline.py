@@ -93,7 +93,8 @@ def _union_from_boundary(uv: np.ndarray, tris: np.ndarray, area: float, rel_tol:
 
 
 def outline_polygons(
-    s: AnalyticSurface, points: np.ndarray, triangles: np.ndarray, tol: float, min_area: float
+    s: AnalyticSurface, points: np.ndarray, triangles: np.ndarray, tol: float, min_area: float,
+    max_stretch: float = 4.0,
 ) -> tuple[list[shapely.Polygon], np.ndarray]:
     """The union of a mesh's triangles in the surface's scaled (u, v) (millimetres), simplified within ``tol``
     mm, as polygons (pieces and holes under ``min_area`` mm² dropped); and the (u, v) -> scaled factors (2,).
@@ -109,7 +110,11 @@ def outline_polygons(
         (tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1])
         - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0])
     )
-    keep = area > 1e-12
+    # a triangle much larger in (u, v) than in space straddles the seam of a periodic parameter or two sheets
+    # of the surface (a torus patch lifted onto both sides of its tube): it is no part of the face's outline
+    t3 = np.asarray(points, float)[np.asarray(triangles, int).reshape(-1, 3)]
+    area3d = 0.5 * np.linalg.norm(np.cross(t3[:, 1] - t3[:, 0], t3[:, 2] - t3[:, 0]), axis=1)
+    keep = (area > 1e-12) & (area <= max_stretch * area3d + 1e-9)
     if not keep.any():
         return [], scale
     tris = np.asarray(triangles, int).reshape(-1, 3)[keep]
@@ -191,11 +196,12 @@ class OutlineBuilder:
     tol: simplification tolerance (mm); tol_area_rel: it is halved until simplification moves a piece's area
     by at most this fraction;
     min_piece_rel: pieces and holes smaller than this fraction of the face's mesh area are dropped;
-    precision: OCCT face/vertex precision (mm); rings of one face are kept ``gap_factor`` precisions apart.
+    precision: OCCT face/vertex precision (mm); rings of one face are kept ``gap_factor`` precisions apart;
+    max_stretch: see `outline_polygons`.
     """
 
     def __init__(self, vbrep: VBRep, fmap: FrameMap, tol: float, tol_area_rel: float, min_piece_rel: float,
-                 precision: float, gap_factor: float = 20.0) -> None:
+                 precision: float, gap_factor: float = 20.0, max_stretch: float = 4.0) -> None:
         self.vb = vbrep
         self.fmap = fmap
         self.tol = tol
@@ -203,6 +209,7 @@ class OutlineBuilder:
         self.min_piece_rel = min_piece_rel
         self.precision = precision
         self.gap = gap_factor * precision
+        self.max_stretch = max_stretch
         self.bb = BRep_Builder()
 
     def _candidates(self, f: VFace) -> list[tuple[int, np.ndarray]]:
@@ -219,7 +226,7 @@ class OutlineBuilder:
         if total <= 0:
             return []
         # A first pass at the cap finds the pieces; each is then simplified within its own area budget.
-        polys, scale = outline_polygons(s, pts, tris, 0.0, self.min_piece_rel * total)
+        polys, scale = outline_polygons(s, pts, tris, 0.0, self.min_piece_rel * total, self.max_stretch)
         cands = self._candidates(f)
         out = []
         for poly in polys:

@@ -212,9 +212,11 @@ def _legend(width: int) -> np.ndarray:
 
 
 def result_figure(scan: Any, instances: np.ndarray, vbrep: VBRep, path: str | Path | None = None,
-                  panel: int = 420) -> np.ndarray:
+                  panel: int = 420, source: str = "VB-Rep") -> np.ndarray:
     """The 2 x 2 result figure (RGB uint8): input image, segmentation, VB-Rep from the camera and from a turned
     view, with a legend. scan: anything with ``color`` (H, W, 3) RGB; instances: (H, W) int instance map.
+    source: what the lower panels show, in their titles ("VB-Rep", or "STEP" when ``vbrep`` is the written file
+    read back, `exporters.readback`).
     Written as PNG to ``path`` when given."""
     color = np.asarray(scan.color)
     mask = np.asarray(instances) > 0
@@ -229,7 +231,7 @@ def result_figure(scan: Any, instances: np.ndarray, vbrep: VBRep, path: str | Pa
     R, t = turned_view(vbrep)
     p4 = render_vbrep(vbrep, size, R, t)
     top = np.concatenate([_title(p1, "input"), _title(p2, "segmentation")], 1)
-    bottom = np.concatenate([_title(p3, "VB-Rep (camera view)"), _title(p4, "VB-Rep (turned view)")], 1)
+    bottom = np.concatenate([_title(p3, f"{source} (camera view)"), _title(p4, f"{source} (turned view)")], 1)
     fig = np.concatenate([top, bottom, _legend(top.shape[1])], 0)
     if path is not None:
         path = Path(path)

@@ -124,7 +124,10 @@ def scan_to_step(
         result.vbrep_json = vbrep.save(json_path)
         try:
             # drawn from the file as read back: the figure shows what the user got
-            result_figure(scan, seg.instances, readback.drawn or vbrep, png_path)
+            if readback.drawn is not None:
+                result_figure(scan, seg.instances, readback.drawn, png_path, source="STEP as written")
+            else:
+                result_figure(scan, seg.instances, vbrep, png_path)
             result.figure = png_path
         except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
             result.warnings.append(f"figure not written ({type(exc).__name__}: {exc})")
