@@ -48,8 +48,8 @@ class AppearanceConfig:
 
     dark_share: float = 0.25  # share of parts with a dark material (albedo 0.01-0.08)
     shiny_share: float = 0.35  # share of parts with a shiny metal (strong, tight highlights)
-    art_share: float = 0.8  # share of parts that carry printed art
-    art_face_prob: float = 0.6  # chance that a face of an art-carrying part gets art
+    art_share: float = 0.85  # share of parts that carry printed art
+    art_face_prob: float = 0.75  # chance that a face of an art-carrying part gets art
     art_min_face_px: int = 120  # faces smaller than this (pixels) get none
     art_items: tuple[int, int] = (1, 4)  # art items per face (inclusive)
     world_print_share: float = 0.2  # share of parts printed in world coordinates (render.print_texture) instead
