@@ -57,10 +57,14 @@ class AppearanceConfig:
     clutter_size_rel: tuple[float, float] = (0.3, 1.3)  # clutter object size / part size
     clutter_gap_rel: tuple[float, float] = (0.05, 1.5)  # gap between the part's and the object's circles / size
     clutter_tries: int = 40  # placements tried per object (one that could hide the part is refused)
+    clutter_kinds: tuple[float, float, float] = (0.5, 0.35, 0.15)  # chances of a box, a cylinder, a sphere
+    clutter_print_prob: float = 0.3  # chance that a clutter object is printed (render.print_texture)
     ambient: tuple[float, float] = (0.02, 0.35)
     key_intensity: tuple[float, float] = (0.4, 2.0)
+    key_elevation_deg: tuple[float, float] = (15.0, 85.0)  # key light above the ground plane
     fill_intensity: tuple[float, float] = (0.0, 0.8)
     rim_prob: float = 0.4  # chance of a third, shadowless light from behind
+    rim_intensity: tuple[float, float] = (0.3, 1.2)
     light_tint_sigma: float = 0.12  # per-channel spread of the lights' colour
     exposure: tuple[float, float] = (0.6, 1.6)  # gain on the linear image (over 1 clips highlights)
     printed_ground_share: float = 0.3  # grounds printed like a poster or a cutting mat
@@ -208,7 +212,7 @@ def sample_appearance(rng: np.random.Generator, scene: Scene, bbox_lo_mm: np.nda
         look = _sample_print(rng, size, material.albedo)
     rot = scene.world_to_cam[:, :3]
     tint = lambda: np.clip(1.0 + rng.normal(0, cfg.light_tint_sigma, 3), 0.5, 1.5)
-    key_el, key_az = np.deg2rad(rng.uniform(15, 85)), rng.uniform(0, 2 * np.pi)
+    key_el, key_az = np.deg2rad(rng.uniform(*cfg.key_elevation_deg)), rng.uniform(0, 2 * np.pi)
     key_dir = np.array([np.cos(key_el) * np.cos(key_az), np.cos(key_el) * np.sin(key_az), np.sin(key_el)])
     lights = [Light(rot @ key_dir, tint() * rng.uniform(*cfg.key_intensity), True)]
     fill_dir = rng.normal(size=3)
@@ -217,7 +221,7 @@ def sample_appearance(rng: np.random.Generator, scene: Scene, bbox_lo_mm: np.nda
                         False))
     if rng.random() < cfg.rim_prob:  # from behind the part, seen from the camera
         back = -rot[2] + np.array([0.0, 0.0, rng.uniform(0.2, 1.0)])
-        lights.append(Light(rot @ (back / np.linalg.norm(back)), tint() * rng.uniform(0.3, 1.2), False))
+        lights.append(Light(rot @ (back / np.linalg.norm(back)), tint() * rng.uniform(*cfg.rim_intensity), False))
     ambient = tint() * rng.uniform(*cfg.ambient)
 
     kind = str(rng.choice(["concrete", "wood", "tiles", "plain", "printed"],
@@ -259,7 +263,7 @@ def _place_clutter(rng: np.random.Generator, scene: Scene, corners: np.ndarray,
     for _ in range(int(rng.integers(cfg.clutter[0], cfg.clutter[1] + 1))):
         for _try in range(cfg.clutter_tries):
             s = size * rng.uniform(*cfg.clutter_size_rel)
-            kind = str(rng.choice(["box", "cylinder", "sphere"], p=[0.5, 0.35, 0.15]))
+            kind = str(rng.choice(["box", "cylinder", "sphere"], p=list(cfg.clutter_kinds)))
             if kind == "box":
                 dims = np.array([rng.uniform(0.2, 0.5), rng.uniform(0.2, 0.5), rng.uniform(0.15, 0.5)]) * s
                 foot = float(np.hypot(dims[0], dims[1]))
@@ -285,7 +289,7 @@ def _place_clutter(rng: np.random.Generator, scene: Scene, corners: np.ndarray,
             overlaps = (cu + rpx > plo[0]) and (cu - rpx < phi[0]) and (cv + rpx > plo[1]) and (cv - rpx < phi[1])
             if overlaps and cz - rad < z_far:
                 continue
-            if rng.random() < 0.3:
+            if rng.random() < cfg.clutter_print_prob:
                 obj.print_look = _sample_print(rng, s, obj.material.albedo)
             out.append(obj)
             break
