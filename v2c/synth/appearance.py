@@ -308,9 +308,17 @@ def intersect_clutter(objs: list[Clutter], eye: np.ndarray, dirs_world: np.ndarr
     nrm = np.zeros((n, 3))
     which = np.full(n, -1, np.int64)
     for k, obj in enumerate(objs):
-        t, nn = _hit_one(obj, eye, dirs_world)
-        better = t < t_best
-        t_best[better], nrm[better], which[better] = t[better], nn[better], k
+        # Only rays that cross the object's bounding sphere (an object covers a small part of the image).
+        c, r = obj.bounding_sphere
+        oc = c - eye
+        along = dirs_world @ oc
+        cand = np.flatnonzero((along > 0) & (oc @ oc - along * along < r * r))
+        if not len(cand):
+            continue
+        t, nn = _hit_one(obj, eye, dirs_world[cand])
+        better = t < t_best[cand]
+        sel = cand[better]
+        t_best[sel], nrm[sel], which[sel] = t[better], nn[better], k
     return t_best, nrm, which
 
 
