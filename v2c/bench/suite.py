@@ -99,6 +99,7 @@ class SuiteConfig:
     families: tuple[str, ...] | None = None  # leave-out families; None: unseen_families()
     family_scans: int = 14  # scans per leave-out family
     bands: BandConfig = field(default_factory=BandConfig)
+    appearance: str = "plain"  # "random": appearance and framing randomization (v2c.synth.appearance)
 
     @property
     def corpus_split(self) -> str | None:
@@ -193,8 +194,13 @@ def suite_cache_dir(cfg: SuiteConfig) -> Path:
     b = cfg.bench
     key = {"generator": GENERATOR, "suite": SUITE_GENERATOR, "noise": b.noise, "size": list(b.size),
            "seed": b.seed}
+    look = ""
+    if cfg.appearance != "plain":  # plain keeps the digest (and cache) it had before appearances existed
+        key["appearance"] = cfg.appearance
+        look = f"_{cfg.appearance}"
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
-    return (b.cache_dir or R.default_cache_dir()) / f"suite_{b.noise}_{b.size[0]}x{b.size[1]}_s{b.seed}_{digest}"
+    return (b.cache_dir or R.default_cache_dir()) / \
+        f"suite_{b.noise}_{b.size[0]}x{b.size[1]}_s{b.seed}{look}_{digest}"
 
 
 @dataclass
@@ -223,7 +229,8 @@ def plan_scans(cfg: SuiteConfig) -> tuple[list[SuiteScan], list[str]]:
 
     b = cfg.bench
     root = suite_cache_dir(cfg)
-    base = SynthConfig(width=b.size[0], height=b.size[1], noise=b.noise)
+    base = SynthConfig(width=b.size[0], height=b.size[1], noise=b.noise,
+                       **({"appearance": cfg.appearance, "framing": "extent"} if cfg.appearance != "plain" else {}))
     folder = Path(cfg.corpus_dir or default_corpus_dir())
     scans: list[SuiteScan] = []
     notes: list[str] = []
@@ -496,7 +503,8 @@ def run_and_report(cfg: SuiteConfig, progress: bool = True,
     n_fam = len(result["scans"]) - n_corpus
     echo(f"suite {cfg.suite}: {n_corpus} scans of {len({s['name'] for s in result['scans'] if s['source'] == CORPUS})}"
          f" corpus {cfg.corpus_split} parts ({cfg.views} views each), {n_fam} leave-out family scans; {b.noise} "
-         f"noise, {b.size[0]}x{b.size[1]}, seed {b.seed}, segmentation {','.join(b.segmentations)}")
+         f"noise, {b.size[0]}x{b.size[1]}, seed {b.seed}, appearance {cfg.appearance}, segmentation "
+         f"{','.join(b.segmentations)}")
     echo(format_suite_tables(result))
     echo(format_suite_notes(result))
     return result

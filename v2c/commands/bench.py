@@ -82,19 +82,23 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option("--corpus", "corpus_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="--suite unseen / corpus-val: the CAD corpus folder (default ../shared/data/cad_corpus).")
 @click.option("--parts", default=None,
-              help="--suite unseen / corpus-val: only these corpus files of the split, comma-separated.")
+              help="--suite unseen / corpus-val: only these corpus files of the split, comma-separated, or 'none' "
+                   "(no corpus scans: only the leave-out families).")
 @click.option("--unseen-families", default=None,
               help="--suite unseen: leave-out generator families, comma-separated, or 'none' (default: "
                    "LEAVE_OUT_FAMILIES of v2c.synth.features when it exists).")
 @click.option("--family-scans", default=14, show_default=True, type=click.IntRange(1),
               help="--suite unseen: scans per leave-out family.")
+@click.option("--appearance", default="plain", show_default=True, type=click.Choice(["plain", "random"]),
+              help="--suite unseen / corpus-val: random renders the scans with appearance and framing "
+                   "randomization (v2c synth --appearance random; cached apart from plain).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
             cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
             out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool, suite: str,
             views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
-            family_scans: int, quiet: bool) -> None:
+            family_scans: int, appearance: str, quiet: bool) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md). ``--suite unseen`` measures parts nothing
@@ -117,8 +121,11 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
                ablation=tuple(a for a in order if a in ablation), cad_dir=cad_dir, size=size, json_out=json_out,
                jobs=jobs, scans_dir=scans_dir, cache_dir=cache_dir, no_step=no_step, figure_dir=figure_dir,
                weights=weights, seg_only=seg_only, views=views, corpus_dir=corpus_dir, parts=parts,
-               unseen_families=unseen_families, family_scans=family_scans, quiet=quiet)
+               unseen_families=unseen_families, family_scans=family_scans, appearance=appearance, quiet=quiet)
         return
+    if appearance != "plain":
+        raise click.UsageError("--appearance belongs to --suite unseen / corpus-val (for the family suite: "
+                               "v2c synth --appearance random, then --scans DIR)")
     cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
                           ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
                           scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
@@ -141,7 +148,7 @@ def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], 
            cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
            cache_dir: Path | None, no_step: bool, figure_dir: Path | None, weights: Path | None, seg_only: bool,
            views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
-           family_scans: int, quiet: bool) -> None:
+           family_scans: int, appearance: str, quiet: bool) -> None:
     """``--suite unseen`` / ``corpus-val``: `v2c.bench.suite.run_and_report`."""
     from v2c.bench import run
     from v2c.bench import suite as S
@@ -153,11 +160,14 @@ def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], 
     if unseen_families is not None:
         fams = () if unseen_families.strip().lower() == "none" else \
             tuple(dict.fromkeys(f.strip() for f in unseen_families.split(",") if f.strip()))
-    names = tuple(dict.fromkeys(p.strip() for p in parts.split(",") if p.strip())) if parts else None
+    names = None
+    if parts:
+        names = () if parts.strip().lower() == "none" else \
+            tuple(dict.fromkeys(p.strip() for p in parts.split(",") if p.strip()))
     bench = run.BenchConfig(seed=seed, noise=noise, size=size, segmentations=segmentation, ablations=ablation,
                             jobs=jobs, cache_dir=cache_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
     cfg = S.SuiteConfig(suite=suite, bench=bench, corpus_dir=corpus_dir, views=views, parts=names, families=fams,
-                        family_scans=family_scans)
+                        family_scans=family_scans, appearance=appearance)
     try:
         result = S.run_and_report(cfg, progress=not quiet, echo=click.echo)
     except ValueError as e:

@@ -60,10 +60,17 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
               help="Also write a PNG with color | depth | labels of the first (up to 4) scans.")
 @click.option("--print-share", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
               help="Share of scans whose part carries a printed (packaging-like) texture.")
+@click.option("--appearance", type=click.Choice(["plain", "random"]), default="plain", show_default=True,
+              help="random: random, dark and shiny materials, printed art inside faces, clutter beside the part, "
+                   "textured backgrounds, lights and exposure (docs/synth.md); labels and part depth unchanged.")
+@click.option("--framing", type=click.Choice(["fill", "extent"]), default=None,
+              help="fill: the bounding sphere fills 0.3-0.7 of the image (as before); extent: the part's extent is "
+                   "30-70 % of the smaller image side (SCAN_FORMAT.md).  [default: extent with --appearance "
+                   "random, else fill]")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
             families: tuple[str, ...] | None, jobs: int, start: int, png_compression: int, preview: Path | None,
-            print_share: float, quiet: bool) -> None:
+            print_share: float, appearance: str, framing: str | None, quiet: bool) -> None:
     """Render N synthetic scans of random CAD parts into OUT/scan_XXXXX (color, depth, camera, mask, gt/)."""
     from v2c.synth.dataset import SynthConfig, generate_dataset
     from v2c.synth.parts import list_cad_files
@@ -80,7 +87,8 @@ def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad
     if "cad" in families and not cad_files:
         raise click.ClickException("family 'cad' needs --cad DIR")
     cfg = SynthConfig(width=size[0], height=size[1], noise=noise, families=families, cad_files=cad_files,
-                      png_compression=png_compression, scene=SceneConfig(print_share=print_share))
+                      png_compression=png_compression, scene=SceneConfig(print_share=print_share),
+                      appearance=appearance, framing=framing or ("extent" if appearance == "random" else "fill"))
     folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start)
     if preview is not None:
         from v2c.synth.preview import write_preview

@@ -12,7 +12,7 @@ from v2c.segment.train_config import TrainConfig
 @click.command("train")
 @click.option("--data", "data_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Folder holding `v2c synth` scans (searched recursively for scans with gt/).")
-@click.option("--recipe", type=click.Choice(["base", "stage4", "stage5", "features"]), default=None,
+@click.option("--recipe", type=click.Choice(["base", "stage4", "stage5", "features", "appearance"]), default=None,
               help="First generate this training set's missing scans under DATA (MODEL_CARD.md: base = stages "
                    "1-3, stage4, stage5 = stages 5-7; features = stage5 plus 1500 scans of the feature-based "
                    "training families); resumable, 2 processes.")

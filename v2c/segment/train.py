@@ -48,7 +48,13 @@ STAGE5_RECIPE: tuple[tuple, ...] = (*STAGE4_RECIPE, (640, 480, "sensor", 1000, 1
 #: STAGE5_RECIPE plus the feature-based training families (synth/features.py): a row's optional 7th element names
 #: the part families it draws from (default: the six procedural ones); never a leave-out family.
 FEATURES_RECIPE: tuple[tuple, ...] = (*STAGE5_RECIPE, (640, 480, "sensor", 1500, 121, 0.3, FAMILY_GROUPS["features"]))
-RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RECIPE, "features": FEATURES_RECIPE}
+#: FEATURES_RECIPE plus 1500 scans with appearance and framing randomization (synth/appearance.py: random, dark
+#: and shiny materials, printed art inside faces, clutter, backgrounds, lights; part extent 30-70 % of the image):
+#: a row's optional 8th element is the appearance ("plain" | "random"; random also frames by extent).
+APPEARANCE_RECIPE: tuple[tuple, ...] = (*FEATURES_RECIPE,
+                                        (640, 480, "sensor", 1500, 131, 0.0, FAMILY_GROUPS["train"], "random"))
+RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RECIPE, "features": FEATURES_RECIPE,
+           "appearance": APPEARANCE_RECIPE}
 
 
 def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
@@ -56,8 +62,10 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
     """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
 
     Equivalent to one `v2c synth` run per recipe row. A row is (width, height, noise, scans, seed[, print share
-    [, families]]); rows naming families go to DATA/<width>x<height>_<noise>[_print]_<tag>_s<seed>/ (tag: the
-    family group's name, or the families joined by '+'). A leave-out family (families.LEAVE_OUT_FAMILIES) is refused.
+    [, families[, appearance]]]); rows naming families go to DATA/<width>x<height>_<noise>[_print]_<tag>[_look]_s<seed>/
+    (tag: the family group's name, or the families joined by '+'; _look: appearance "random", which also frames
+    the part by its extent, like `v2c synth --appearance random`). A leave-out family
+    (families.LEAVE_OUT_FAMILIES) is refused.
     """
     from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
     from v2c.synth.scene import SceneConfig
@@ -65,7 +73,8 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
     done: list[Path] = []
     for w, h, noise, n, seed, *extra in recipe:
         share = float(extra[0]) if extra else 0.0
-        families = tuple(extra[1]) if len(extra) > 1 else None
+        families = tuple(extra[1]) if len(extra) > 1 and extra[1] is not None else None
+        look = str(extra[2]) if len(extra) > 2 else "plain"
         tag = ""
         if families is not None:
             left_out = [f for f in families if f in LEAVE_OUT_FAMILIES]
@@ -74,7 +83,7 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
                                  "(families.LEAVE_OUT_FAMILIES), never used for training")
             named = [k for k, v in FAMILY_GROUPS.items() if v == families]
             tag = "_" + (named[0] if named else "+".join(families))
-        sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}{tag}_s{seed}"
+        sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}{tag}{'_look' if look != 'plain' else ''}_s{seed}"
         n = max(1, round(n * scale))
         have = 0  # resume: scans are pure functions of (seed, index) and meta.json is written last
         while have < n and (sub / scan_name(have) / "gt" / "meta.json").is_file():
@@ -82,7 +91,8 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
         done += [sub / scan_name(i) for i in range(have)]
         if have < n:
             cfg = SynthConfig(width=w, height=h, noise=noise, scene=SceneConfig(print_share=share),
-                              **({"families": families} if families is not None else {}))
+                              **({"families": families} if families is not None else {}),
+                              **({"appearance": look, "framing": "extent"} if look != "plain" else {}))
             done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have)
     return done
 

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from v2c.labels import IGNORE, axis_class, label_of
+from v2c.synth import appearance as appearance_mod
 from v2c.synth import noise as noise_mod
 from v2c.synth import occ, parts
 from v2c.synth.families import FEATURE_FAMILIES
@@ -45,6 +46,12 @@ class SynthConfig:
     png_compression: int = 1  # cv2 PNG level 0-9 (fixed, so files are reproducible)
     scene: SceneConfig = field(default_factory=SceneConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
+    appearance: str = "plain"  # "plain": today's look; "random": appearance.py (materials, printed art inside
+    # faces, clutter, backgrounds, lights; colour and clutter depth only, from its own generator)
+    framing: str = "fill"  # "fill": the bounding sphere fills 0.3-0.7 of the image (today); "extent": the
+    # part's silhouette extent is 30-70 % of the smaller image side (SCAN_FORMAT.md), camera moved to match
+    appearance_cfg: appearance_mod.AppearanceConfig = field(default_factory=appearance_mod.AppearanceConfig)
+    framing_cfg: appearance_mod.FramingConfig = field(default_factory=appearance_mod.FramingConfig)
 
 
 def scan_name(index: int) -> str:
@@ -99,6 +106,25 @@ def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = Synth
     rest = _pick_part(rng, cfg)
     lo, hi = rest.bbox
     scene = sample_scene(rng, lo, hi, cfg.width, cfg.height, cfg.scene)
+    extra_meta: dict = {}
+    if cfg.framing not in appearance_mod.FRAMINGS:
+        raise ValueError(f"unknown framing {cfg.framing!r} (choose from {', '.join(appearance_mod.FRAMINGS)})")
+    if cfg.appearance not in appearance_mod.APPEARANCES:
+        raise ValueError(f"unknown appearance {cfg.appearance!r} (choose from "
+                         f"{', '.join(appearance_mod.APPEARANCES)})")
+    if cfg.framing == "extent":  # own generators: the main stream (part, noise) stays that of the plain scan
+        size_mm = float(np.max(np.asarray(hi) - np.asarray(lo)))
+        coarse = occ.tessellate(rest.shape, occ.faces_of(rest.shape), cfg.framing_cfg.mesh_deflection_rel * size_mm,
+                                cfg.angular_deflection_rad)
+        scene, info = appearance_mod.frame_scene(
+            scene, coarse.vertices, np.random.default_rng([seed, index, appearance_mod.FRAMING_STREAM]),
+            cfg.framing_cfg)
+        extra_meta["framing"] = {"mode": "extent", **info}
+    look = None
+    if cfg.appearance == "random":
+        scene, look = appearance_mod.sample_appearance(
+            np.random.default_rng([seed, index, appearance_mod.APPEARANCE_STREAM]), scene, lo, hi,
+            cfg.appearance_cfg)
     rot, trans = scene.world_to_cam[:, :3], scene.world_to_cam[:, 3]
     rest_to_cam_mm = 1000.0 * np.hstack([rot @ scene.rest_to_world[:, :3],
                                          (rot @ scene.rest_to_world[:, 3] + trans)[:, None]])
@@ -115,7 +141,9 @@ def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = Synth
     deflection_mm = cfg.linear_deflection_rel * scene.part_size_m * 1000.0
     mesh = occ.tessellate(shape, faces, deflection_mm, cfg.angular_deflection_rad)
     ren = render(scene, mesh.vertices * 1e-3, mesh.triangles, mesh.face_of_triangle, primitives,
-                 deflection_mm * 1e-3, cfg.render)
+                 deflection_mm * 1e-3, cfg.render, look)
+    if look is not None:
+        extra_meta["appearance"] = {"mode": "random", **look.info}
 
     lut = np.zeros(len(primitives) + 1, np.uint8)
     lut[1:] = [p["label"] for p in primitives]
@@ -148,6 +176,7 @@ def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = Synth
         "mesh_deflection_m": deflection_mm * 1e-3,
         "dropped_pixels": ren.dropped,
         "units": "camera frame (OpenCV), metres; part.step in millimetres",
+        **extra_meta,  # only with appearance / framing other than the defaults (default files unchanged)
     }
     _write_json(gt / "meta.json", _plain(meta))
     return folder

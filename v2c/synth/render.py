@@ -9,6 +9,7 @@ Blinn-Phong in linear RGB with one shadow-casting key light, written out as sRGB
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -18,6 +19,9 @@ from pyfastnoiselite.pyfastnoiselite import CellularReturnType, FastNoiseLite, F
 
 from v2c.synth.intersect import intersect_primitive, rows_dot
 from v2c.synth.scene import GroundLook, PrintLook, Scene
+
+if TYPE_CHECKING:
+    from v2c.synth.appearance import Appearance
 
 ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
 GROUND_SHININESS = 8.0  # Blinn-Phong exponent of the ground
@@ -69,12 +73,15 @@ def _embree_scene(vertices: np.ndarray, triangles: np.ndarray) -> rtcore_scene.E
 
 
 def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_triangle: np.ndarray,
-           primitives: list[dict], deflection_m: float, cfg: RenderConfig = RenderConfig()) -> Render:
+           primitives: list[dict], deflection_m: float, cfg: RenderConfig = RenderConfig(),
+           appearance: Appearance | None = None) -> Render:
     """Render the part mesh (camera frame, metres) with exact depth on its primitives.
 
     `primitives[i]` is face i's primitives.json entry ("type", "params"); `deflection_m` is the mesh's linear
     deflection, which bounds how far an analytic hit may be from the mesh hit. Full-image arrays are kept 1-D
-    and float32 where precision allows: numpy here is bound by memory traffic.
+    and float32 where precision allows: numpy here is bound by memory traffic. `appearance` (appearance.py) adds
+    printed art inside the faces (albedo only), clutter objects (background: face 0, their own depth), a
+    photo-like backdrop and an exposure gain; None renders exactly as before it existed.
     """
     h, w = scene.height, scene.width
     n = h * w
@@ -123,11 +130,30 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
     with np.errstate(divide="ignore", invalid="ignore"):
         t_ground = (up @ trans) / d_up
     ground_mask = (prim < 0) & (t_ground > 0) & np.isfinite(t_ground)
+    clutter_px = np.zeros(0, np.int64)
+    if appearance is not None and appearance.clutter:
+        from v2c.synth.appearance import intersect_clutter
+
+        # Clutter only where the part is not (it is placed so as not to hide the part; this keeps the part's
+        # face ids and depth those of the plain scan even where a placement bound was loose).
+        free = np.flatnonzero(prim < 0)
+        eye = -rot.T @ trans
+        t_c, n_c, which = intersect_clutter(appearance.clutter, eye, dirs32[free].astype(np.float64) @ rot)
+        t_g = np.where(ground_mask[free], t_ground[free], np.inf)
+        near = np.isfinite(t_c) & (t_c < t_g)
+        clutter_px, t_c, n_c, which = free[near], t_c[near], n_c[near], which[near]
+        ground_mask[clutter_px] = False
     ground = np.flatnonzero(ground_mask)
     z_ground = t_ground[ground] * dirs32[ground, 2]
     in_range = ground[z_ground <= cfg.max_range_m]
     depth[in_range] = z_ground[z_ground <= cfg.max_range_m]
     cos_inc[ground] = np.abs(d_up[ground])
+    if len(clutter_px):
+        z_c = t_c * dirs32[clutter_px, 2]
+        keep = z_c <= cfg.max_range_m
+        depth[clutter_px[keep]] = z_c[keep]
+        n_cam = n_c @ rot.T  # world -> camera
+        cos_inc[clutter_px] = np.abs(np.einsum("ij,ij->i", n_cam, dirs32[clutter_px]))
 
     centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
     sphere = (centre, float(np.linalg.norm(vertices - centre, axis=1).max()))
@@ -140,17 +166,41 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
     if scene.print_look is not None:  # printed part: albedo from the world position of each hit
         world_p = (d * t[:, None] - trans) @ rot
         albedo_p = print_texture(scene.print_look, world_p).astype(np.float32)
+    if appearance is not None and appearance.art:
+        from v2c.synth.appearance import draw_art
+
+        art, on, kinds = draw_art(appearance, faces.reshape(h, w))
+        appearance.info["art_kinds"] = sorted(set(kinds))
+        appearance.info["art_px"] = int(on.sum())
+        sel = on.reshape(-1)[hit]
+        albedo_p = np.array(np.broadcast_to(albedo_p, (len(hit), 3)), np.float32)
+        albedo_p[sel] = art.reshape(-1, 3)[hit[sel]]
+    for k, obj in enumerate(appearance.clutter if appearance is not None else []):
+        sel = np.flatnonzero(which == k) if len(clutter_px) else np.zeros(0, np.int64)
+        if not len(sel):
+            continue
+        px = clutter_px[sel]
+        alb = obj.material.albedo
+        if obj.print_look is not None:
+            alb = print_texture(obj.print_look, eye + (dirs32[px].astype(np.float64) @ rot) * t_c[sel, None])
+        color[px] = _shade(scene, ebr, dirs32[px], t_c[sel], n_cam[sel].astype(np.float32), alb,
+                           obj.material.specular, obj.material.shininess, sphere, deflection_m, cfg)
     color[hit] = _shade(scene, ebr, d.astype(np.float32), t, nrm, albedo_p, scene.material.specular,
                         scene.material.shininess, sphere, deflection_m, cfg)
     # Backdrop: a vertical gradient where rays miss everything; far ground fades into it.
     far_mask = prim < 0
     far_mask[in_range] = False
+    far_mask[clutter_px] = False
     far = np.flatnonzero(far_mask)
     if len(far):
         s = np.clip(0.5 + 1.5 * d_up[far], 0.0, 1.0)[:, None]
         back = (scene.backdrop[1] * (1 - s) + scene.backdrop[0] * s).astype(np.float32)
+        if appearance is not None and appearance.backdrop_image is not None:
+            back = appearance.backdrop_image.reshape(-1, 3)[far]
         fade = ground_mask[far][:, None]
         color[far] = np.where(fade, np.float32(0.5) * (color[far] + back), back)
+    if appearance is not None:
+        color *= np.float32(appearance.exposure)
     return Render(faces.reshape(h, w), depth.reshape(h, w), cos_inc.reshape(h, w), color.reshape(h, w, 3),
                   int(missed.sum()))
 
@@ -226,6 +276,8 @@ def ground_albedo(scene: Scene, cfg: RenderConfig) -> np.ndarray:
 
 def ground_texture(look: GroundLook, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Procedural albedo (n, 3) of the ground at world coordinates (x, y) in metres."""
+    if look.kind == "printed" and look.print_look is not None:  # a poster or cutting mat (appearance.py)
+        return print_texture(look.print_look, np.stack([x, y, np.zeros_like(x)], axis=1))
     c, s = np.cos(look.angle), np.sin(look.angle)
     u = (c * x + s * y) / look.scale_m
     v = (-s * x + c * y) / look.scale_m

@@ -61,6 +61,7 @@ class GroundLook:
     angle: float  # texture orientation (radians)
     seed: int
     specular: float
+    print_look: PrintLook | None = None  # kind "printed": a print (render.print_texture) on the ground
 
 
 @dataclass
