@@ -48,6 +48,7 @@ from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape
 from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, translate_built
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
+from v2c.errors import V2cError
 from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
@@ -95,7 +96,7 @@ def face_name(face: VFace) -> str:
 
 
 # ------------------------------------------------------------------------------------------------ writing
-class StepExportError(RuntimeError):
+class StepExportError(V2cError, RuntimeError):
     """The VB-Rep cannot be written as a useful STEP (no face could be built); the message says why."""
 
 

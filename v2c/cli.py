@@ -1,19 +1,41 @@
-"""The `v2c` command. Each sub-command lives in its own module under `v2c.commands` and exposes `command`."""
+"""The `v2c` command. Each sub-command lives in its own module under `v2c.commands` and exposes `command`.
+
+Errors, Ctrl-C and logging follow `v2c.cli_support`: ``error: <message>`` and exit 1 for bad input,
+``interrupted`` and exit 130 for Ctrl-C, never a traceback.
+"""
 
 from __future__ import annotations
 
 import importlib
 import pkgutil
+from typing import Any
 
 import click
 
+from v2c import __version__
 from v2c import commands as _commands
+from v2c.cli_support import configure_logging, run_with_error_policy
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="v2c")
-def main() -> None:
+class V2cGroup(click.Group):
+    """A click group that applies v2c's error policy (`v2c.cli_support.run_with_error_policy`)."""
+
+    def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
+             standalone_mode: bool = True, **extra: Any) -> Any:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        code = run_with_error_policy(
+            lambda: super(V2cGroup, self).main(args, prog_name, complete_var, standalone_mode=False, **extra))
+        raise SystemExit(code)
+
+
+@click.group(cls=V2cGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "-V", "--version", prog_name="v2c")
+@click.option("-v", "--verbose", count=True, help="More messages on stderr (-v: progress, -vv: debug).")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
+def main(verbose: int, quiet: bool) -> None:
     """v2c: CAD geometry (VB-Rep, STEP) from a single RGB-D scan of a mechanical part."""
+    configure_logging(verbose, quiet)
 
 
 for _info in sorted(pkgutil.iter_modules(_commands.__path__), key=lambda m: m.name):

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from v2c.cli_support import max_pixels_option
+
 
 def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
     from v2c.scan import ScanError, parse_roi
@@ -36,6 +38,7 @@ def _short_params(d: dict) -> str:
 
 
 @click.command("fit")
+@max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(path_type=str))
 @click.option("--segmentation", "method", default="oracle", show_default=True,
               type=click.Choice(["oracle", "learned", "geometric"]), help="Where the surface instances come from.")

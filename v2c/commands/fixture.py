@@ -6,8 +6,11 @@ from pathlib import Path
 
 import click
 
+from v2c.cli_support import max_pixels_option
+
 
 @click.command("fixture")
+@max_pixels_option
 @click.argument("scan", type=click.Path(path_type=Path))
 @click.option("--kind", type=click.Choice(["corner", "pin", "cradle", "nest"]), required=True,
               help="corner: L block on a convex edge; pin: locating pin in a hole; cradle: U block under a "

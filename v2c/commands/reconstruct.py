@@ -7,8 +7,11 @@ from pathlib import Path
 
 import click
 
+from v2c.cli_support import max_pixels_option
+
 
 @click.command("reconstruct")
+@max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(path_type=Path))
 @click.option("--segmentation", "method", default="oracle", show_default=True,
               type=click.Choice(["oracle", "learned", "geometric"]), help="Where the surface instances come from.")
@@ -34,6 +37,9 @@ def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no
         raise click.ClickException(str(e)) from None
     except (ValueError, FileNotFoundError) as e:  # oracle without gt/, learned without weights
         raise click.ClickException(f"{scan_dir}: {e}") from None
+    if not vbrep.faces:  # a VB-Rep without faces is no reconstruction: say so and write nothing
+        raise click.ClickException(f"{scan_dir}: no face could be reconstructed ({len(seg.labels) - 1} surface "
+                                   f"instances segmented); nothing written")
     out = out_dir or scan_dir
     out.mkdir(parents=True, exist_ok=True)
     json_path = vbrep.save(out / "reconstruction.vbrep.json")

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from v2c.cli_support import max_pixels_option
+
 
 def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
     from v2c.scan import ScanError, parse_roi
@@ -26,6 +28,7 @@ def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
 
 
 @click.command("to-step")
+@max_pixels_option
 @click.argument("scans", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--output", "out", type=click.Path(path_type=Path), default=None,
               help="STEP file (one scan) or folder (several scans: <scan name>.step each). "
@@ -47,7 +50,8 @@ def command(scans: tuple[Path, ...], out: Path | None, frame: str, segmentation:
     from tqdm import tqdm
 
     from v2c.api import expand_scans, scan_to_step
-    from v2c.scan import ScanError
+    from v2c.cli_support import was_interrupted
+    from v2c.errors import V2cError
 
     paths = expand_scans(list(scans))
     batch = len(paths) > 1
@@ -66,8 +70,10 @@ def command(scans: tuple[Path, ...], out: Path | None, frame: str, segmentation:
         try:
             res = scan_to_step(scan, _output_for(scan, out, batch), frame=frame, segmentation=segmentation,
                                extras=not no_extras, roi=roi)
-        except Exception as exc:  # noqa: BLE001 - one failing scan must not stop the rest
-            msg = str(exc) if isinstance(exc, ScanError) else f"{scan}: {type(exc).__name__}: {exc}"
+        except Exception as exc:  # one failing scan must not stop the rest
+            if was_interrupted():  # Ctrl-C inside a C extension can surface as another exception
+                raise KeyboardInterrupt from exc
+            msg = str(exc) if isinstance(exc, V2cError) else f"{scan}: internal error ({type(exc).__name__}: {exc})"
             failed.append((scan, msg))
             if batch:
                 tqdm.write(f"error: {msg}")
