@@ -125,8 +125,8 @@ def check_pixels(path: Path, width: int, height: int, limits: ScanLimits) -> Non
         raise ScanError(f"{path}: image of {width}x{height} pixels is empty")
     if n > limits.max_pixels:
         raise ScanError(
-            f"{path}: image of {width}x{height} = {n / 1e6:.1f} megapixels exceeds the limit of "
-            f"{limits.max_pixels / 1e6:.1f} megapixels (runtime and memory grow with it); downscale the scan or "
+            f"{path}: image of {width}x{height} = {n:,} pixels exceeds the limit of {limits.max_pixels:,} pixels "
+            f"({limits.max_pixels / 1e6:.1f} megapixels; runtime and memory grow with it): downscale the scan or "
             f"pass --max-pixels {n}"
         )
 
@@ -240,7 +240,7 @@ def read_json(path: Path, limits: ScanLimits | None = None) -> Any:
         if size > limits.max_json_bytes:
             raise ScanError(f"{path}: JSON file of {size} bytes (expected at most {limits.max_json_bytes})")
         try:
-            text = fp.read().decode("utf-8")
+            text = fp.read().decode("utf-8-sig")  # a byte-order mark some Windows editors write is fine
         except UnicodeDecodeError as e:
             raise ScanError(f"{path}: not UTF-8 text (byte {e.start})") from None
         except OSError as e:
@@ -281,7 +281,7 @@ def check_depth_values(depth: np.ndarray, path: Path, limits: ScanLimits, unit: 
     notes: list[str] = []
     if n_out:
         vals = depth[out]
-        what = (f"{n_out} of {n} readings ({100.0 * n_out / n:.1f} %) lie outside {limits.min_depth_m:g} .. "
+        what = (f"{n_out} of {n} readings ({100.0 * n_out / n:.3g} %) lie outside {limits.min_depth_m:g} .. "
                 f"{limits.max_depth_m:g} m (range {_fmt(float(vals.min()))} .. {_fmt(float(vals.max()))} m, "
                 f"{unit})")
         if n_out > limits.max_out_of_range_share * n:
@@ -298,7 +298,7 @@ def check_depth_surface(depth: np.ndarray, valid: np.ndarray, K: np.ndarray, pat
     spread wider than a part. depth: (H, W) float32 metres; valid: (H, W) bool; K: (3, 3) pixels."""
     n = int(valid.sum())
     if n < limits.min_valid_pixels:
-        raise ScanError(f"{path}: only {n} pixels with depth{where}; at least {limits.min_valid_pixels} are "
+        raise ScanError(f"{path}: only {n} pixel{'' if n == 1 else 's'} with depth{where}; at least {limits.min_valid_pixels} are "
                         "needed to make one face")
     d = np.where(valid, depth, 0.0).astype(np.float64)
     steps = []
