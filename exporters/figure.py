@@ -232,9 +232,10 @@ def result_figure(scan: Any, instances: np.ndarray, vbrep: VBRep, path: str | Pa
     bottom = np.concatenate([_title(p3, "VB-Rep (camera view)"), _title(p4, "VB-Rep (turned view)")], 1)
     fig = np.concatenate([top, bottom, _legend(top.shape[1])], 0)
     if path is not None:
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.png")
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(fig, cv2.COLOR_RGB2BGR)):
-            raise OSError(f"{path}: could not write the figure")
-        tmp.replace(path)
+        from v2c.io_safe import write_bytes_atomic
+
+        ok, png = cv2.imencode(".png", cv2.cvtColor(fig, cv2.COLOR_RGB2BGR))
+        if not ok:
+            raise OSError(f"{path}: could not encode the figure as PNG")
+        write_bytes_atomic(Path(path), png.tobytes())  # exclusive temporary in the folder, renamed into place
     return fig

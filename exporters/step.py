@@ -18,7 +18,6 @@ frame.
 
 from __future__ import annotations
 
-import os
 import re
 import time
 from collections.abc import Iterator
@@ -49,6 +48,7 @@ from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, tran
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
 from v2c.errors import V2cError
+from v2c.io_safe import atomic_write
 from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
@@ -190,14 +190,8 @@ def write(
     warnings = list(built.warnings) + [f"face {fid}: fails BRepCheck" for fid in invalid]
     if not shape_valid and not invalid:
         warnings.append("the assembled shape fails BRepCheck")
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix or '.step'}")
-    try:
-        with quiet_occt():
-            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_write(path) as tmp, quiet_occt():  # exclusive temporary in the folder, renamed into place
+        write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
     return StepReport(
         path=path,
         frame=frame,

@@ -117,17 +117,17 @@ def write_xcaf_step(
     ct = XCAFDoc_DocumentTool.ColorTool_s(main)
     lt = XCAFDoc_DocumentTool.LayerTool_s(main)
     root = st.AddShape(shape, False)
-    TDataStd_Name.Set_s(root, TCollection_ExtendedString(product))
+    TDataStd_Name.Set_s(root, TCollection_ExtendedString(product, True))  # True: the str arrives as UTF-8 bytes
     for sub in subshapes:
         label = st.AddSubShape(root, sub.shape)
         if label.IsNull():
             raise XcafError(f"sub-shape {sub.name!r} is not part of the shape")
-        TDataStd_Name.Set_s(label, TCollection_ExtendedString(sub.name))
+        TDataStd_Name.Set_s(label, TCollection_ExtendedString(sub.name, True))
         if sub.color is not None:
             kind = XCAFDoc_ColorCurv if sub.shape.ShapeType() == TopAbs_EDGE else XCAFDoc_ColorSurf
             ct.SetColor(label, _color(sub.color), kind)
         if sub.layer is not None:
-            lt.SetLayer(label, TCollection_ExtendedString(sub.layer))
+            lt.SetLayer(label, TCollection_ExtendedString(sub.layer, True))
 
     STEPCAFControl_Controller.Init_s()
     writer = STEPCAFControl_Writer()

@@ -9,18 +9,19 @@ Scripting entry points (imported lazily, so `import v2c` stays cheap):
 
 from __future__ import annotations
 
-from importlib import metadata as _metadata
 from typing import Any
 
 __all__ = ["__version__", "load_scan", "reconstruct"]
 
-try:
-    __version__: str = _metadata.version("v2c")
-except _metadata.PackageNotFoundError:  # a source tree on sys.path without an installed distribution
-    __version__ = "0.0.0+unknown"
-
 
 def __getattr__(name: str) -> Any:
+    if name == "__version__":  # the installed distribution's version, looked up on first use
+        from importlib import metadata
+
+        try:
+            return metadata.version("v2c")
+        except metadata.PackageNotFoundError:  # a source tree on sys.path without an installed distribution
+            return "0.0.0+unknown"
     if name == "reconstruct":
         from v2c.pipeline import reconstruct
 

@@ -6,8 +6,9 @@
 
 `scan_to_step` = `v2c.scan.load_scan` -> `v2c.pipeline.reconstruct` -> `exporters.step.write` (millimetres,
 part frame by default), then the extras next to the STEP: ``<stem>.vbrep.json`` (the VB-Rep) and
-``<stem>.png`` (the result figure of `exporters.figure`). Every file is written atomically (temporary file in
-the same folder, then renamed), so an interrupted run never leaves a half-written STEP.
+``<stem>.png`` (the result figure of `exporters.figure`). The files are one `v2c.io_safe.OutputSet`: written to
+exclusive temporaries in the output folder and committed together, so a failed or interrupted run leaves the
+complete previous set (or nothing) and never a new STEP beside an old JSON and figure.
 """
 
 from __future__ import annotations
@@ -92,6 +93,7 @@ def scan_to_step(
     from exporters import step as step_export
     from exporters.figure import result_figure
     from v2c import pipeline
+    from v2c.io_safe import OutputSet
     from v2c.scan import load_scan
 
     scan_dir = Path(scan_dir)
@@ -104,20 +106,28 @@ def scan_to_step(
     vbrep, seg, _ = pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation,
                                          return_stages=True)
     seconds["reconstruct"] = time.perf_counter() - t
-    out.parent.mkdir(parents=True, exist_ok=True)
-    t = time.perf_counter()
-    report = step_export.write(vbrep, out, frame=frame, product=scan_dir.name)
-    seconds["step"] = time.perf_counter() - t
-    result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
-                        seconds=seconds)
-    if extras:
+    with OutputSet() as files:  # committed together on leaving the block; nothing changed on an exception
         t = time.perf_counter()
-        json_path, png_path = extras_paths(out)
-        result.vbrep_json = vbrep.save(json_path)
+        tmp = files.temp(out)
         try:
-            result_figure(scan, seg.instances, vbrep, png_path)  # written atomically by exporters.figure
-            result.figure = png_path
-        except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
-            result.warnings.append(f"figure not written ({type(exc).__name__}: {exc})")
-        seconds["extras"] = time.perf_counter() - t
+            report = step_export.write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem)
+        except step_export.StepExportError as exc:  # name the destination, not our temporary
+            raise step_export.StepExportError(f"{str(exc).replace(str(tmp), str(out))}; nothing written") from None
+        report.path = out
+        seconds["step"] = time.perf_counter() - t
+        result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
+                            seconds=seconds)
+        if extras:
+            t = time.perf_counter()
+            json_path, png_path = extras_paths(out)
+            vbrep.save(files.temp(json_path))
+            result.vbrep_json = json_path
+            try:
+                result_figure(scan, seg.instances, vbrep, files.temp(png_path))
+                result.figure = png_path
+            except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
+                files.forget(png_path)
+                files.remove(png_path)  # an old figure would not belong to the new set
+                result.warnings.append(f"figure not written ({type(exc).__name__}: {exc})")
+            seconds["extras"] = time.perf_counter() - t
     return result

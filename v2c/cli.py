@@ -14,7 +14,7 @@ import click
 
 from v2c import __version__
 from v2c import commands as _commands
-from v2c.cli_support import configure_logging, run_with_error_policy
+from v2c.cli_support import configure_logging, ignore_sigint_from_now_on, run_with_error_policy
 
 
 class V2cGroup(click.Group):
@@ -42,5 +42,16 @@ for _info in sorted(pkgutil.iter_modules(_commands.__path__), key=lambda m: m.na
     _mod = importlib.import_module(f"v2c.commands.{_info.name}")
     main.add_command(_mod.command)
 
+
+
+def run() -> None:
+    """The console entry point (``v2c``, ``python -m v2c``): `main`, then Ctrl-C ignored while the process exits,
+    so a late Ctrl-C cannot turn a finished command's exit status into death by SIGINT."""
+    try:
+        main(prog_name="v2c")
+    finally:
+        ignore_sigint_from_now_on()
+
+
 if __name__ == "__main__":
-    main()
+    run()

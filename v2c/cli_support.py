@@ -53,6 +53,12 @@ def sigint_flag() -> Iterator[None]:
         signal.signal(signal.SIGINT, old)
 
 
+def ignore_sigint_from_now_on() -> None:
+    """Ignore SIGINT for the rest of the process (after the command finished; only from the main thread)."""
+    with contextlib.suppress(ValueError):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def configure_logging(verbose: int, quiet: bool) -> None:
     """Log level of the ``v2c`` loggers on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR with
     -q."""

@@ -72,7 +72,8 @@ def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi,
     for p in data["primitives"]:
         click.echo(f"  #{p['instance']:<3d} {p['type']:<8} axis {p['axis_label'] or '-':<2} "
                    f"inliers {p['inliers']:6d}  rms {1000 * p['rms_m']:.2f} mm  {_short_params(p)}")
+    from v2c.io_safe import write_text_atomic
+
     out = output or Path(scan_dir) / "fit.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(data, indent=1))
+    write_text_atomic(out, json.dumps(data, indent=1))
     click.echo(f"wrote {out}")

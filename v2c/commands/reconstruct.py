@@ -40,14 +40,17 @@ def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no
     if not vbrep.faces:  # a VB-Rep without faces is no reconstruction: say so and write nothing
         raise click.ClickException(f"{scan_dir}: no face could be reconstructed ({len(seg.labels) - 1} surface "
                                    f"instances segmented); nothing written")
+    from v2c.io_safe import OutputSet
+
     out = out_dir or scan_dir
-    out.mkdir(parents=True, exist_ok=True)
-    json_path = vbrep.save(out / "reconstruction.vbrep.json")
+    json_path, png = out / "reconstruction.vbrep.json", out / "reconstruction.png"
+    with OutputSet() as files:  # JSON and figure committed together
+        vbrep.save(files.temp(json_path))
+        if not no_figure:
+            result_figure(scan, seg.instances, vbrep, files.temp(png))
     counts = {t: len(vbrep.edges_of_type(t)) for t in ("intersection", "visibility", "silhouette", "occluded")}
     click.echo(f"{json_path}: {len(vbrep.faces)} faces, {len(vbrep.edges)} edges "
                f"({', '.join(f'{n} {t}' for t, n in counts.items())}), {len(vbrep.vertices)} vertices; "
                f"{vbrep.meta['timings']['total']:.2f} s")
     if not no_figure:
-        png = out / "reconstruction.png"
-        result_figure(scan, seg.instances, vbrep, png)
         click.echo(f"{png}")
