@@ -48,7 +48,7 @@ from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, tran
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
 from v2c.errors import V2cError
-from v2c.io_safe import atomic_write
+from v2c.io_safe import atomic_write, v2c_origin
 from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
@@ -191,7 +191,8 @@ def write(
     if not shape_valid and not invalid:
         warnings.append("the assembled shape fails BRepCheck")
     with atomic_write(path) as tmp, quiet_occt():  # exclusive temporary in the folder, renamed into place
-        write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
+        write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built),
+                        originating_system=v2c_origin())
     return StepReport(
         path=path,
         frame=frame,

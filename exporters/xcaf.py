@@ -17,12 +17,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from OCP.APIHeaderSection import APIHeaderSection_MakeHeader
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.Interface import Interface_Static
 from OCP.Quantity import Quantity_Color, Quantity_TOC_sRGB
 from OCP.STEPCAFControl import STEPCAFControl_Controller, STEPCAFControl_Reader, STEPCAFControl_Writer
 from OCP.STEPControl import STEPControl_AsIs
-from OCP.TCollection import TCollection_ExtendedString
+from OCP.TCollection import TCollection_ExtendedString, TCollection_HAsciiString
 from OCP.TDataStd import TDataStd_Name
 from OCP.TDF import TDF_Label, TDF_LabelSequence
 from OCP.TDocStd import TDocStd_Document
@@ -104,9 +105,12 @@ def _color(rgb: RGB) -> Quantity_Color:
 
 
 def write_xcaf_step(
-    path: str | Path, shape: TopoDS_Shape, product: str, subshapes: list[SubShapeAttrs]
+    path: str | Path, shape: TopoDS_Shape, product: str, subshapes: list[SubShapeAttrs],
+    originating_system: str | None = None,
 ) -> None:
     """Write ``shape`` as one product named ``product`` with the sub-shape attributes to a STEP AP242 file.
+
+    originating_system: written into the header's FILE_NAME (default: OCCT's own text).
 
     Lengths are written as millimetres (the shape must already be in millimetres). Raises XcafError when a
     sub-shape is not part of ``shape`` or the writer fails.
@@ -140,6 +144,9 @@ def write_xcaf_step(
     writer.SetLayerMode(True)
     if not writer.Transfer(doc, STEPControl_AsIs):
         raise XcafError("STEPCAFControl_Writer.Transfer failed")
+    if originating_system:  # FILE_NAME's originating system: how `v2c` knows a file is its own
+        header = APIHeaderSection_MakeHeader(writer.ChangeWriter().Model())
+        header.SetOriginatingSystem(TCollection_HAsciiString(originating_system))
     if writer.Write(str(path)) != IFSelect_RetDone:
         raise XcafError(f"{path}: STEP write failed")
 

@@ -159,7 +159,12 @@ def test_to_step_with_planted_symlinks_writes_only_its_own_files(tiny_gt_scan: P
     planted = [f"{STEM}.vbrep.json.tmp", f"{STEM}.png.tmp.png", f".{STEM}.{os.getpid()}.tmp.step",
                f".{STEM}.tmp.step", *SET]
     _plant(out, victim, planted)
+    before = _files(out)
+    # without --force the symlinks at the outputs are refused (v2c did not write them), before any work
     res = _to_step([str(tiny_gt_scan), "-o", str(out / f"{STEM}.step")])
+    assert res.exit_code == 1 and res.output.startswith(f"error: {out / SET[0]}: exists and is a symlink"), res.output
+    assert _files(out) == before and victim.read_text() == "precious"
+    res = _to_step([str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"), "--force"])
     assert res.exit_code == 0, res.output
     assert victim.read_text() == "precious"
     for n in SET:
@@ -194,7 +199,7 @@ def test_failing_figure_after_the_step_keeps_the_old_set(tiny_gt_scan: Path, tmp
         raise KeyboardInterrupt
 
     monkeypatch.setattr(exporters.figure, "result_figure", interrupted)
-    res = _to_step([str(tiny_gt_scan), "-o", str(out / f"{STEM}.step")])
+    res = _to_step([str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"), "--force"])  # --force: a stand-in old set
     assert res.exit_code == 130 and res.output.strip() == "interrupted", res.output
     assert _files(out) == before
 
@@ -206,7 +211,7 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=str(REPO))
     cmd = [sys.executable, "-m", "v2c", "to-step", str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"),
-           "--segmentation", "oracle"]
+           "--segmentation", "oracle", "--force"]  # --force: the old set is a stand-in, not v2c's
     outcomes = []
     # from 1 s on: earlier, the interpreter may still be starting up, before any v2c code can catch the signal
     for delay in (1.0, 2.5, 4.0, 6.0):

@@ -86,18 +86,22 @@ def scan_to_step(
     extras: bool = True,
     roi: str | tuple[int, int, int, int] | None = None,
     ablation: str = "full",
+    force: bool = False,
 ) -> ScanExport:
     """Reconstruct one scan folder and write its STEP (default ``SCAN/reconstruction.step``) and, unless
     ``extras`` is False, the VB-Rep JSON and figure next to it. Raises `v2c.scan.ScanError` for a bad scan and
-    whatever the pipeline raises; on any error no STEP is written."""
+    whatever the pipeline raises; on any error no STEP is written. force: replace existing files that v2c did
+    not write (otherwise `v2c.errors.OutputError`, checked before the pipeline runs)."""
     from exporters import step as step_export
     from exporters.figure import result_figure
     from v2c import pipeline
-    from v2c.io_safe import OutputSet
+    from v2c.io_safe import OutputSet, check_replaceable
     from v2c.scan import load_scan
 
     scan_dir = Path(scan_dir)
     out = Path(out) if out is not None else scan_dir / DEFAULT_STEP_NAME
+    for dest in (out, *extras_paths(out)) if extras else (out,):  # fail before minutes of work, not after
+        check_replaceable(dest, force)
     seconds: dict[str, float] = {}
     t = time.perf_counter()
     scan = load_scan(scan_dir, roi=roi)
@@ -106,7 +110,7 @@ def scan_to_step(
     vbrep, seg, _ = pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation,
                                          return_stages=True)
     seconds["reconstruct"] = time.perf_counter() - t
-    with OutputSet() as files:  # committed together on leaving the block; nothing changed on an exception
+    with OutputSet(force=force) as files:  # committed together on leaving the block; nothing changed on an exception
         t = time.perf_counter()
         tmp = files.temp(out)
         try:

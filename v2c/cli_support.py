@@ -100,13 +100,23 @@ def run_with_error_policy(invoke: Callable[[], Any]) -> int:
                 click.echo("interrupted", err=True)
                 return EXIT_INTERRUPTED
             log.debug("traceback of the internal error:", exc_info=True)
-            if isinstance(e, OSError) and e.filename:
-                click.echo(f"error: {e.filename}: {e.strerror or type(e).__name__}", err=True)
-            else:
-                click.echo(f"error: internal error of v2c ({type(e).__name__}: {str(e)[:200]}); please report "
-                           "it (-vv shows the traceback)", err=True)
+            click.echo(f"error: {describe_error(e)}", err=True)
             return 1
     return rv if isinstance(rv, int) else 0
+
+
+def describe_error(e: BaseException, where: object = None) -> str:
+    """One line for an exception: a `V2cError`'s own message; a file-system error's file and reason; anything
+    else is a bug of v2c and is called one (``where``: the scan or file it happened on)."""
+    from v2c.errors import V2cError
+
+    if isinstance(e, V2cError):
+        return str(e)
+    if isinstance(e, OSError) and e.filename:
+        return f"{e.filename}: {e.strerror or type(e).__name__}"
+    at = f"{where}: " if where is not None else ""
+    return (f"{at}internal error of v2c ({type(e).__name__}: {str(e)[:200]}); please report it (-vv shows the "
+            "traceback)")
 
 
 def _set_max_pixels(ctx: click.Context, param: click.Parameter, value: int | None) -> None:

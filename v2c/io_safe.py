@@ -13,6 +13,11 @@ Every file v2c writes goes through here (`atomic_write` for one file, `OutputSet
   complete new set. On any failure before the commit the temporaries (and folders this set created) are
   removed and the old files were never touched.
 
+Ownership: `v2c` never replaces a file it did not write unless asked to (``--force``; `OutputSet(force=False)`).
+Its files say who wrote them: a STEP's FILE_NAME names ``v2c`` as the originating system, a figure PNG carries
+the text chunk ``Software: v2c``, a JSON starts with ``"format": "v2c.vbrep"`` or ``"generator": "v2c ..."``
+(`written_by_v2c`).
+
 The one window left is a SIGKILL or power loss between two renames of one set (a few microseconds): no
 single-folder rename sequence can close it.
 """
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import signal
 import tempfile
 import threading
@@ -30,6 +36,48 @@ from types import TracebackType
 from typing import Self
 
 from v2c.errors import OutputError
+
+#: The mark of a v2c output: STEP originating system, PNG "Software" text, JSON "generator" prefix.
+V2C_MARK = "v2c"
+#: How many leading bytes of a file `written_by_v2c` reads (the STEP header, the PNG text chunk, the JSON head).
+_HEAD_BYTES = 4096
+
+
+def v2c_origin() -> str:
+    """The originating-system / generator text of this v2c: ``"v2c <version>"``."""
+    import v2c
+
+    return f"{V2C_MARK} {v2c.__version__}"
+
+
+def written_by_v2c(path: str | Path) -> bool:
+    """True when ``path`` is a regular file carrying v2c's mark (module docstring); False for anything else,
+    symlinks included."""
+    path = Path(path)
+    if path.is_symlink() or not path.is_file():
+        return False
+    try:
+        with open(path, "rb") as fp:
+            head = fp.read(_HEAD_BYTES)
+    except OSError:
+        return False
+    if head.startswith(b"ISO-10303-21"):
+        end = head.find(b"ENDSEC;")
+        return f"'{V2C_MARK} ".encode() in head[: end if end > 0 else None]
+    if head.startswith(b"\x89PNG\r\n\x1a\n"):
+        return b"tEXtSoftware\x00" + V2C_MARK.encode() in head
+    # a JSON whose first key says so: {"format": "v2c.vbrep", ...} or {"generator": "v2c <version> ...", ...}
+    return re.match(rb'\s*\{\s*"(format|generator)"\s*:\s*"' + V2C_MARK.encode() + rb"[. ]", head) is not None
+
+
+def check_replaceable(dest: str | Path, force: bool = False) -> None:
+    """OutputError unless ``dest`` is free, or a file v2c wrote, or ``force`` (never a folder)."""
+    dest = Path(dest)
+    if dest.is_dir() and not dest.is_symlink():
+        raise OutputError(f"{dest}: cannot write the output: a folder of that name is in the way")
+    if os.path.lexists(dest) and not force and not written_by_v2c(dest):
+        what = "a symlink" if dest.is_symlink() else "a file that v2c did not write"
+        raise OutputError(f"{dest}: exists and is {what}; pass --force to replace it (or choose another -o)")
 
 
 def _describe(e: OSError) -> str:
@@ -112,7 +160,10 @@ class OutputSet:
     ``commit`` (called on a clean exit of the block) renames in the order the temporaries were asked for.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, force: bool = True) -> None:
+        """force: replace existing destinations whoever wrote them; False refuses any that v2c did not write
+        (`check_replaceable`)."""
+        self.force = force
         self._pending: list[tuple[Path, Path]] = []  # (temporary, destination)
         self._remove: list[Path] = []
         self._made_dirs: list[Path] = []
@@ -123,6 +174,7 @@ class OutputSet:
         dest = Path(dest)
         if any(d == dest for _, d in self._pending):
             raise ValueError(f"{dest}: asked for twice in one output set")
+        check_replaceable(dest, self.force)
         self._made_dirs += make_dirs(dest.parent)
         tmp = temp_path(dest)
         self._pending.append((tmp, dest))
