@@ -114,3 +114,11 @@ def test_oracle_without_ground_truth_is_one_clear_line(tmp_path: Path) -> None:
         assert res.output.strip() == (f"error: {s}: oracle segmentation needs gt/ (a synthetic scan); use "
                                       "--segmentation learned"), (command, res.output)
     assert sorted(p.name for p in s.iterdir()) == ["camera.json", "color.png", "depth.png"]
+
+
+def test_scan_commands_share_roi_max_pixels_and_force() -> None:
+    for name in ("info", "to-step", "reconstruct", "fit", "fixture"):
+        opts = {o for p in main.commands[name].params for o in p.opts}
+        assert {"--roi", "--max-pixels", "--segmentation" if name != "info" else "--roi"} <= opts, name
+    for name in ("to-step", "reconstruct", "fit"):
+        assert "--force" in {o for p in main.commands[name].params for o in p.opts}, name

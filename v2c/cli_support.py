@@ -119,6 +119,22 @@ def describe_error(e: BaseException, where: object = None) -> str:
             "traceback)")
 
 
+def _parse_roi(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[int, int, int, int] | None:
+    from v2c.scan import ScanError, parse_roi
+
+    try:
+        return parse_roi(value)
+    except ScanError as e:
+        raise click.BadParameter(str(e), ctx=ctx, param=param) from None
+
+
+def roi_option(f: Callable) -> Callable:
+    """``--roi x0,y0,x1,y1``: the region of interest in pixels (x1/y1 exclusive), passed as ``roi``."""
+    return click.option("--roi", callback=_parse_roi, default=None, metavar="x0,y0,x1,y1",
+                        help="Region of interest in pixels (x1, y1 exclusive); restricts the valid pixels. A real "
+                             "frame needs it or a mask.png.")(f)
+
+
 def _set_max_pixels(ctx: click.Context, param: click.Parameter, value: int | None) -> None:
     from v2c.scan_checks import scan_limits
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from v2c.cli_support import max_pixels_option
+from v2c.cli_support import max_pixels_option, roi_option
 
 
 @click.command("fixture")
@@ -29,8 +29,9 @@ from v2c.cli_support import max_pixels_option
                    "Raise it to absorb reconstruction error.")
 @click.option("--part", "part", type=click.Choice(["reconstructed", "true", "none"]), default="reconstructed",
               show_default=True, help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).")
+@roi_option
 def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence: float, segmentation: str,
-            clearance: float | None, part: str) -> None:
+            clearance: float | None, part: str, roi: tuple[int, int, int, int] | None) -> None:
     """Design a fixture for SCAN (a scan folder, a VB-Rep JSON, or a STEP written by `v2c to-step`) and write
     <kind> STEP, STL and assembly STEP. A STEP input keeps its own frame.
 
@@ -50,7 +51,7 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
         params = dataclasses.replace(params, clearance=clearance)
     try:
         res = fixture_for_scan(scan, kind, out, frame=frame, min_confidence=min_confidence,
-                               segmentation=segmentation, part=part, params=params)
+                               segmentation=segmentation, part=part, params=params, roi=roi)
     except (ScanError, NoReferenceError, FileNotFoundError) as exc:
         raise click.ClickException(str(exc)) from None
     except ValueError as exc:

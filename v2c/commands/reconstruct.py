@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from v2c.cli_support import max_pixels_option
+from v2c.cli_support import max_pixels_option, roi_option
 
 
 @click.command("reconstruct")
@@ -22,8 +22,9 @@ from v2c.cli_support import max_pixels_option
               help="Folder for reconstruction.vbrep.json and reconstruction.png (default: SCAN).")
 @click.option("--no-figure", is_flag=True, help="Write only the VB-Rep JSON.")
 @click.option("--force", is_flag=True, help="Replace existing files that v2c did not write.")
+@roi_option
 def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no_figure: bool,
-            force: bool) -> None:
+            force: bool, roi: tuple[int, int, int, int] | None) -> None:
     """Reconstruct the VB-Rep of the scan folder SCAN: write reconstruction.vbrep.json (camera frame, metres)
     and reconstruction.png (input, segmentation, VB-Rep from the camera and from a turned view)."""
     from exporters.figure import result_figure
@@ -32,7 +33,7 @@ def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no
     from v2c.scan import ScanError, load_scan
 
     try:
-        scan = load_scan(scan_dir)
+        scan = load_scan(scan_dir, roi=roi)
     except ScanError as e:
         raise click.ClickException(str(e)) from None
     for dest in ("reconstruction.vbrep.json", "reconstruction.png"):  # before the work, not after
