@@ -122,3 +122,23 @@ def test_scan_commands_share_roi_max_pixels_and_force() -> None:
         assert {"--roi", "--max-pixels", "--segmentation" if name != "info" else "--roi"} <= opts, name
     for name in ("to-step", "reconstruct", "fit"):
         assert "--force" in {o for p in main.commands[name].params for o in p.opts}, name
+
+
+def test_reconstruct_without_a_face_writes_nothing(scan: Path, tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pipeline that ends with no face (issue 20: `reconstruct` wrote a VB-Rep of 0 faces) is an error."""
+    import v2c.pipeline
+    from v2c.segment.oracle import segment_oracle
+    from v2c.vbrep.examples import box_corner
+
+    def no_faces(s, segmentation="learned", ablation="full", return_stages=False, **kw):
+        v = box_corner()
+        v.faces, v.edges, v.vertices = [], [], []
+        return v, segment_oracle(s), None
+
+    monkeypatch.setattr(v2c.pipeline, "reconstruct", no_faces)
+    res = _v2c(["reconstruct", str(scan), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 1, res.output
+    assert res.output.strip() == (f"error: {scan}: no face could be reconstructed (1 surface instances segmented); "
+                                  "nothing written")
+    assert not (tmp_path / "out").exists()

@@ -447,3 +447,28 @@ def test_4000x3000_scan_is_refused_fast_and_small(command: str, tmp_path: Path) 
     assert "--max-pixels 12000000" in lines[0], out
     assert secs < 60.0 and gb < 3.0, (secs, gb)
     assert _snapshot(tmp_path) == before
+
+
+#: Legitimate variants that also run the whole pipeline (`to-step`, oracle segmentation on the tiny scan with gt/).
+TO_STEP_OK = ["plain", "open3d-camera", "depth-npy-float64", "non-ascii-folder", "symlinked-files",
+              "read-only-folder"]
+
+
+@pytest.mark.parametrize("name", TO_STEP_OK)
+def test_to_step_on_legitimate_variants_writes_only_the_output_set(name: str, tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    case = next(c for c in CASES if c[0] == name)
+    folder = write_tiny_scan(tmp_path / "scan", gt=True)
+    if case[1] is not None:
+        new = case[1](folder)
+        folder = new if isinstance(new, Path) else folder
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    out = tmp_path / "out"
+    before = _snapshot(tmp_path)
+    res = _invoke(["to-step", str(folder), "-o", f"{out}/", "--segmentation", "oracle"], cwd, monkeypatch)
+    assert res.exit_code == 0 and "Traceback" not in res.output, res.output
+    stem = folder.name
+    assert sorted(p.name for p in out.iterdir()) == sorted(f"{stem}{s}" for s in (".png", ".step", ".vbrep.json"))
+    after = {k: v for k, v in _snapshot(tmp_path).items() if not k.startswith("out")}
+    assert after == before  # the scan, its symlink targets and the working folder are untouched

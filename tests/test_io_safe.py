@@ -232,3 +232,45 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
             assert new, delay
         outcomes.append(p.returncode)
     assert 130 in outcomes  # at least one signal arrived while it ran
+
+
+def test_sigkill_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tmp_path: Path) -> None:
+    """SIGKILL (no clean-up possible) at several moments: the visible files are the complete old set or the
+    complete new set; hidden temporaries it left are removed by the next run, which completes the new set."""
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    cmd = [sys.executable, "-m", "v2c", "to-step", str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"),
+           "--segmentation", "oracle", "--force"]
+    for delay in (1.5, 3.5, 5.0):
+        before = _old_set(out)
+        p = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(delay)
+        p.kill()
+        p.wait(timeout=60)
+        after = {n: b for n, b in _files(out).items() if not n.startswith(".")}
+        assert sorted(after) == sorted(SET), (delay, sorted(after))
+        assert after == before or all(after[n] != before[n] for n in SET), delay
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120, check=False)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert sorted(_files(out)) == sorted(SET)  # no temporary of a killed run left
+
+
+def test_stale_temporaries_of_dead_processes_are_swept(tmp_path: Path) -> None:
+    from v2c.io_safe import sweep_stale_temporaries
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
+                          check=True)
+    dead_pid = int(dead.stdout)
+    alive_pid = os.getppid()  # the process that started this test: running
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    (tmp_path / f".part.{dead_pid}.abc123.tmp.step").write_text("half a STEP")
+    (tmp_path / f".part.{dead_pid}.link00.tmp.step").symlink_to(victim)
+    (tmp_path / f".part.{alive_pid}.def456.tmp.step").write_text("being written")
+    (tmp_path / f".other.{dead_pid}.abc123.tmp.step").write_text("another file's")
+    (tmp_path / "part.step").write_text("the output")
+    removed = sweep_stale_temporaries(tmp_path / "part.step")
+    assert sorted(p.name for p in removed) == [f".part.{dead_pid}.abc123.tmp.step", f".part.{dead_pid}.link00.tmp.step"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [f".part.{alive_pid}.def456.tmp.step", f".other.{dead_pid}.abc123.tmp.step", "part.step", "victim.txt"])
+    assert victim.read_text() == "precious"

@@ -18,8 +18,10 @@ Its files say who wrote them: a STEP's FILE_NAME names ``v2c`` as the originatin
 the text chunk ``Software: v2c``, a JSON starts with ``"format": "v2c.vbrep"`` or ``"generator": "v2c ..."``
 (`written_by_v2c`).
 
-The one window left is a SIGKILL or power loss between two renames of one set (a few microseconds): no
-single-folder rename sequence can close it.
+A SIGKILL or power loss leaves the old set and possibly hidden temporaries ``.<stem>.<pid>.<random>.tmp<suffix>``;
+the next write of the same file removes those whose process is gone (`sweep_stale_temporaries`). The one window
+left is a SIGKILL between two renames of one set (a few microseconds): no single-folder rename sequence can close
+it.
 """
 
 from __future__ import annotations
@@ -108,14 +110,46 @@ def make_dirs(folder: Path) -> list[Path]:
     return list(reversed(missing))
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def sweep_stale_temporaries(dest: Path) -> list[Path]:
+    """Remove temporaries of ``dest`` left by a v2c process that no longer runs (killed with SIGKILL, power
+    loss): ``.<stem>.<pid>.<random>.tmp<suffix>`` in its folder whose pid is gone. Never follows a symlink (one
+    planted under such a name is removed as a link). Returns what was removed."""
+    dest = Path(dest)
+    pattern = re.compile(rf"^\.{re.escape(dest.stem)}\.(\d+)\.[^/]+\.tmp{re.escape(dest.suffix)}$")
+    removed = []
+    try:
+        entries = list(os.scandir(dest.parent))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m and int(m.group(1)) != os.getpid() and not _pid_alive(int(m.group(1))):
+            with contextlib.suppress(OSError):
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+    return removed
+
+
 def temp_path(dest: Path) -> Path:
     """A new, empty, exclusively created temporary file next to ``dest`` (same folder, same suffix, so writers
-    that choose the format from the name still work). The folder must exist."""
+    that choose the format from the name still work): ``.<stem>.<pid>.<random>.tmp<suffix>``. The folder must
+    exist."""
     dest = Path(dest)
     if dest.is_dir():
         raise OutputError(f"{dest}: cannot write the output: a folder of that name is in the way")
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".tmp{dest.suffix}", dir=dest.parent)
+        fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.{os.getpid()}.", suffix=f".tmp{dest.suffix}",
+                                    dir=dest.parent)
     except OSError as e:
         raise OutputError(f"{dest.parent}: cannot write into the output folder ({_describe(e)})") from None
     os.close(fd)
@@ -176,6 +210,7 @@ class OutputSet:
             raise ValueError(f"{dest}: asked for twice in one output set")
         check_replaceable(dest, self.force)
         self._made_dirs += make_dirs(dest.parent)
+        sweep_stale_temporaries(dest)
         tmp = temp_path(dest)
         self._pending.append((tmp, dest))
         return tmp
