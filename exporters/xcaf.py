@@ -40,13 +40,15 @@ from OCP.XCAFDoc import (
     XCAFDoc_LayerTool,
 )
 
+from v2c.errors import V2cError
+
 #: STEP schema written (AP242 DIS, the OCCT name of AP242).
 SCHEMA = "AP242DIS"
 
 RGB = tuple[float, float, float]
 
 
-class XcafError(RuntimeError):
+class XcafError(V2cError, RuntimeError):
     """The STEP file could not be written or read with its attributes."""
 
 

@@ -472,3 +472,37 @@ def test_to_step_on_legitimate_variants_writes_only_the_output_set(name: str, tm
     assert sorted(p.name for p in out.iterdir()) == sorted(f"{stem}{s}" for s in (".png", ".step", ".vbrep.json"))
     after = {k: v for k, v in _snapshot(tmp_path).items() if not k.startswith("out")}
     assert after == before  # the scan, its symlink targets and the working folder are untouched
+
+
+#: `v2c fixture` also takes a VB-Rep JSON or a STEP: (file name, content, words of the problem).
+FIXTURE_INPUTS = [
+    ("deep.vbrep.json", "[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ("other.json", '{"a": 1}', "format version"),
+    ("broken.json", '{"format": "v2c.vbrep", ', "not a valid VB-Rep JSON"),
+    ("garbage.step", "ISO-10303-21;\nHEADER;\nnonsense", "not a readable STEP file"),
+    ("empty.step", "", "not a readable STEP file"),
+]
+
+
+@pytest.mark.parametrize("name,content,problem", FIXTURE_INPUTS, ids=[c[0] for c in FIXTURE_INPUTS])
+def test_fixture_refuses_bad_inputs(name: str, content: str, problem: str, tmp_path: Path,
+                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    src = tmp_path / name
+    src.write_text(content)
+    before = _snapshot(tmp_path)
+    res = _invoke(["fixture", str(src), "--kind", "corner"], tmp_path, monkeypatch)
+    lines = [ln for ln in res.output.strip().splitlines() if "StepFile" not in ln]  # OCCT's own parser line
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert len(lines) == 1 and lines[0].startswith(f"error: {src}") and problem in lines[0], res.output
+    assert _snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("name", ["camera-nested-100000", "pure-noise-depth", "fx-1e30"])
+def test_fixture_and_reconstruct_refuse_bad_scans(name: str, tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    case = next(c for c in CASES if c[0] == name)
+    folder = _make(case, tmp_path)
+    before = _snapshot(tmp_path)
+    for args in (["fixture", str(folder), "--kind", "corner"], ["reconstruct", str(folder)], ["fit", str(folder)]):
+        _check_refusal(_invoke(args, tmp_path, monkeypatch), case[2])
+    assert _snapshot(tmp_path) == before

@@ -55,7 +55,7 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
     except (ScanError, NoReferenceError, FileNotFoundError) as exc:
         raise click.ClickException(str(exc)) from None
     except ValueError as exc:
-        raise click.ClickException(f"{scan}: {exc}") from None
+        raise click.ClickException(str(exc) if str(scan) in str(exc) else f"{scan}: {exc}") from None
     fx = res.fixture
     ref = fx.reference
     what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f})" if hasattr(
