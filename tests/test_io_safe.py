@@ -274,3 +274,22 @@ def test_stale_temporaries_of_dead_processes_are_swept(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         [f".part.{alive_pid}.def456.tmp.step", f".other.{dead_pid}.abc123.tmp.step", "part.step", "victim.txt"])
     assert victim.read_text() == "precious"
+
+
+def test_unwritable_output_folder_is_one_error_line(tiny_gt_scan: Path, tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A read-only output folder (simulated: the tests may run as root, who can write anyway): mkstemp's
+    PermissionError becomes one line naming the folder, and the old set stays."""
+    import tempfile
+
+    out = tmp_path / "out"
+    before = _old_set(out)
+
+    def denied(*a: object, **k: object) -> None:
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", denied)
+    res = _to_step([str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"), "--force"])
+    assert res.exit_code == 1, res.output
+    assert res.output.strip() == f"error: {out}: cannot write into the output folder (Permission denied)"
+    assert _files(out) == before

@@ -53,7 +53,7 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
               help="Also write a PNG with color | depth | labels of the first (up to 4) scans.")
 @click.option("--print-share", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
               help="Share of scans whose part carries a printed (packaging-like) texture.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
             families: tuple[str, ...] | None, jobs: int, start: int, png_compression: int, preview: Path | None,
             print_share: float, quiet: bool) -> None:
