@@ -229,7 +229,7 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
             assert after == before or new, delay
         else:
             assert p.returncode == 0, text
-            assert new, delay
+            assert new, (delay, text, {n: after[n] == before[n] for n in SET})
         outcomes.append(p.returncode)
     assert 130 in outcomes  # at least one signal arrived while it ran
 

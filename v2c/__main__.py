@@ -4,13 +4,17 @@ Ctrl-C while the command itself is still being imported exits like Ctrl-C later 
 no traceback (`v2c.cli_support` takes over once the command runs).
 """
 
+import os
 import signal
 import sys
 
 
 def _interrupted_early(signum: int, frame: object) -> None:
-    print("interrupted", file=sys.stderr)
-    raise SystemExit(130)
+    # No output is open before the command runs (nor after it finished): exit at once. An exception raised here
+    # could surface inside a C extension's import as a different error.
+    sys.stdout.flush()
+    print("interrupted", file=sys.stderr, flush=True)
+    os._exit(130)
 
 
 signal.signal(signal.SIGINT, _interrupted_early)

@@ -156,12 +156,22 @@ def temp_path(dest: Path) -> Path:
     return Path(name)
 
 
-def _link_aside(dest: Path) -> Path:
-    """A hard link to ``dest``'s current file (the link itself for a symlink) under a fresh name in its folder."""
-    bak = temp_path(dest)
-    bak.unlink()  # the name only; os.link never replaces nor follows whatever might appear there meanwhile
-    os.link(dest, bak, follow_symlinks=False)
-    return bak
+def _link_aside(dest: Path, attempts: int = 5) -> Path | None:
+    """A hard link to ``dest``'s current file (the link itself for a symlink) under a fresh name in its folder;
+    None when there is no such file (or a folder)."""
+    for _ in range(attempts):
+        if not os.path.lexists(dest) or dest.is_dir():
+            return None
+        bak = temp_path(dest)
+        bak.unlink()  # the name only; os.link never replaces nor follows whatever might appear there meanwhile
+        try:
+            os.link(dest, bak, follow_symlinks=False)
+            return bak
+        except FileNotFoundError:
+            # a concurrent writer replaced dest between the lookup and the link (Linux link(2) then fails
+            # with ENOENT on the old inode): look again
+            continue
+    raise OutputError(f"{dest}: cannot set the old file aside: it keeps changing (concurrent writers)")
 
 
 def _unlink_quietly(p: Path) -> None:
@@ -250,9 +260,11 @@ class OutputSet:
         try:
             with _sigint_held():
                 try:
-                    for dest in self.destinations + self._remove:
-                        if os.path.lexists(dest) and not dest.is_dir() and dest not in backups:
-                            backups[dest] = _link_aside(dest)
+                    # one file alone needs no backup: os.replace keeps the old file until the new one is in place
+                    single = len(self._pending) + len(self._remove) == 1
+                    for dest in [] if single else self.destinations + self._remove:
+                        if dest not in backups and (bak := _link_aside(dest)) is not None:
+                            backups[dest] = bak
                     for i, (tmp, dest) in enumerate(self._pending):
                         os.replace(tmp, dest)
                         changed.append(dest)
