@@ -13,6 +13,7 @@ complete previous set (or nothing) and never a new STEP beside an old JSON and f
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,8 @@ if TYPE_CHECKING:
     from exporters.step import StepReport
     from v2c.scan import Scan
     from v2c.vbrep.model import VBRep
+
+log = logging.getLogger(__name__)
 
 #: File name of the STEP written into the scan folder when no output is given.
 DEFAULT_STEP_NAME = "reconstruction.step"
@@ -106,6 +109,8 @@ def scan_to_step(
     t = time.perf_counter()
     scan = load_scan(scan_dir, roi=roi)
     seconds["load"] = time.perf_counter() - t
+    log.info("%s: %d x %d px, %d valid pixels, loaded in %.2f s", scan_dir, scan.width, scan.height,
+             int(scan.valid.sum()), seconds["load"])
     t = time.perf_counter()
     vbrep, seg, _ = pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation,
                                          return_stages=True)
@@ -119,6 +124,7 @@ def scan_to_step(
             raise step_export.StepExportError(f"{str(exc).replace(str(tmp), str(out))}; nothing written") from None
         report.path = out
         seconds["step"] = time.perf_counter() - t
+        log.info("STEP: %d faces, %d edges, %.2f s", report.n_faces, report.n_edges, seconds["step"])
         result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
                             seconds=seconds)
         if extras:

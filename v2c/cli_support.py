@@ -59,11 +59,24 @@ def ignore_sigint_from_now_on() -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+class _BarSafeHandler(logging.StreamHandler):
+    """Log lines go above a running tqdm progress bar (`tqdm.write`) instead of through it."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            from tqdm import tqdm
+
+            tqdm.write(self.format(record), file=self.stream)
+        except Exception:  # noqa: BLE001 - logging must never raise
+            self.handleError(record)
+
+
 def configure_logging(verbose: int, quiet: bool) -> None:
-    """Log level of the ``v2c`` loggers on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR with
-    -q."""
-    level = logging.ERROR if quiet else {0: logging.WARNING, 1: logging.INFO}.get(verbose, logging.DEBUG)
-    handler = logging.StreamHandler(sys.stderr)
+    """Log level of the ``v2c`` loggers on stderr: INFO (stage progress) by default when stderr is a terminal,
+    WARNING when it is not (pipes, logs, tests); INFO with -v, DEBUG with -vv, ERROR with -q."""
+    default = logging.INFO if sys.stderr.isatty() else logging.WARNING
+    level = logging.ERROR if quiet else {0: default, 1: logging.INFO}.get(verbose, logging.DEBUG)
+    handler = _BarSafeHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(message)s" if verbose < 2 else "%(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger("v2c")
     root.handlers[:] = [handler]
