@@ -298,6 +298,7 @@ def _under_freecad():
     return True
 
 
-# The GUI's macro runner executes the file as __main__, freecadcmd as a module named after the file.
-if __name__ in ("__main__", "freecad_import") and _under_freecad():
+# The GUI's macro runner executes the file as __main__; freecadcmd imports it as a module named after the file,
+# so there V2C_STEP says it is being run rather than imported by another script.
+if (__name__ == "__main__" or (__name__ == "freecad_import" and os.environ.get("V2C_STEP"))) and _under_freecad():
     main()
