@@ -227,6 +227,10 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
         if p.returncode == 130:  # the old set, or the new one when the signal came just after the commit
             assert text.strip().splitlines()[-1] == "interrupted", text
             assert after == before or new, delay
+        elif p.returncode == -signal.SIGINT:
+            # on a loaded machine the interpreter can still be starting (before Python, let alone v2c, handles
+            # SIGINT): the default action ends it, silently, before it touched anything
+            assert text == "" and after == before, (delay, text)
         else:
             assert p.returncode == 0, text
             assert new, (delay, text, {n: after[n] == before[n] for n in SET})
