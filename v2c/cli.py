@@ -7,14 +7,21 @@ Errors, Ctrl-C and logging follow `v2c.cli_support`: ``error: <message>`` and ex
 from __future__ import annotations
 
 import importlib
+import os
 import pkgutil
+import sys
 from typing import Any
 
 import click
 
 from v2c import __version__
 from v2c import commands as _commands
-from v2c.cli_support import configure_logging, ignore_sigint_from_now_on, run_with_error_policy
+from v2c.cli_support import (
+    EXIT_INTERRUPTED,
+    configure_logging,
+    ignore_sigint_from_now_on,
+    run_with_error_policy,
+)
 
 
 class V2cGroup(click.Group):
@@ -49,6 +56,15 @@ def run() -> None:
     so a late Ctrl-C cannot turn a finished command's exit status into death by SIGINT."""
     try:
         main(prog_name="v2c")
+    except SystemExit as e:
+        ignore_sigint_from_now_on()
+        if e.code == EXIT_INTERRUPTED:
+            # after Ctrl-C: leave now with 130. Interpreter shutdown could still turn it into death by SIGINT
+            # (-2; seen once in many runs), and there is nothing left to finish: the outputs are committed or not.
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(EXIT_INTERRUPTED)
+        raise
     finally:
         ignore_sigint_from_now_on()
 
