@@ -21,7 +21,7 @@ test: setup
 # The main job on a bundled sample: SCAN/reconstruction.step (+ .vbrep.json and the .png figure next to it).
 DEMO_SCAN ?= samples/turned_unaligned
 demo: setup
-	$(V2C) to-step $(DEMO_SCAN)/
+	$(V2C) to-step $(DEMO_SCAN)/ --force  # the bundled sample folder is v2c's own: replace whatever an older v2c wrote
 	@echo "open $(DEMO_SCAN)/reconstruction.step in FreeCAD; the figure is $(DEMO_SCAN)/reconstruction.png"
 
 lint: setup

@@ -234,9 +234,15 @@ def result_figure(scan: Any, instances: np.ndarray, vbrep: VBRep, path: str | Pa
     bottom = np.concatenate([_title(p3, f"{source} (camera view)"), _title(p4, f"{source} (turned view)")], 1)
     fig = np.concatenate([top, bottom, _legend(top.shape[1])], 0)
     if path is not None:
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.png")
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(fig, cv2.COLOR_RGB2BGR)):
-            raise OSError(f"{path}: could not write the figure")
-        tmp.replace(path)
+        import io
+
+        from PIL import Image, PngImagePlugin
+
+        from v2c.io_safe import v2c_origin, write_bytes_atomic
+
+        info = PngImagePlugin.PngInfo()
+        info.add_text("Software", v2c_origin())  # the mark by which v2c knows the file as its own
+        buf = io.BytesIO()
+        Image.fromarray(fig).save(buf, "PNG", pnginfo=info, compress_level=6)
+        write_bytes_atomic(Path(path), buf.getvalue())  # exclusive temporary in the folder, renamed into place
     return fig

@@ -18,7 +18,6 @@ frame.
 
 from __future__ import annotations
 
-import os
 import re
 import time
 from collections.abc import Iterator
@@ -49,6 +48,8 @@ from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, face
 from exporters.brep_faces import edges_of
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
+from v2c.errors import V2cError
+from v2c.io_safe import atomic_write, v2c_origin
 from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
@@ -98,7 +99,7 @@ def face_name(face: VFace) -> str:
 
 
 # ------------------------------------------------------------------------------------------------ writing
-class StepExportError(RuntimeError):
+class StepExportError(V2cError, RuntimeError):
     """The VB-Rep cannot be written as a useful STEP (no face could be built); the message says why."""
 
 
@@ -224,24 +225,19 @@ def write(
         # A product of edges alone is useless and crashes FreeCAD 0.20's import: refuse rather than write it.
         detail = "; ".join(built.warnings[:3]) or "the VB-Rep has no faces"
         raise StepExportError(f"{path}: no face could be built ({detail})")
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix or '.step'}")
-    try:
-        with quiet_occt():
-            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
-            # The file must hold what was built: OCCT's reader heals faces (and may split one, losing its
-            # name). Faces the round trip changed are written again from their mesh outline.
-            areas = written_face_areas(tmp)
-            changed = frozenset(
-                fid for fid, a in built.built_area.items()
-                if abs(areas.get(fid, 0.0) - a) > cfg.roundtrip_tol_rel * a
-            )
-            if changed:
-                built = build(vbrep, frame, cfg, force_outline=changed)
-                write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_write(path) as tmp, quiet_occt():  # exclusive temporary in the folder, renamed into place
+        write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built),
+                        originating_system=v2c_origin())
+        # The file must hold what was built: OCCT's reader heals faces (and may split one, losing its name).
+        # Faces the round trip changed are written again from their mesh outline.
+        areas = written_face_areas(tmp)
+        changed = frozenset(
+            fid for fid, a in built.built_area.items() if abs(areas.get(fid, 0.0) - a) > cfg.roundtrip_tol_rel * a
+        )
+        if changed:
+            built = build(vbrep, frame, cfg, force_outline=changed)
+            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built),
+                            originating_system=v2c_origin())
     invalid = [fid for fid, face in built.faces.items() if not BRepCheck_Analyzer(face).IsValid()]
     shape_valid = BRepCheck_Analyzer(built.shape).IsValid()
     warnings = list(built.warnings) + [f"face {fid}: fails BRepCheck" for fid in invalid]

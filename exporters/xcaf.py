@@ -17,12 +17,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from OCP.APIHeaderSection import APIHeaderSection_MakeHeader
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.Interface import Interface_Static
 from OCP.Quantity import Quantity_Color, Quantity_TOC_sRGB
 from OCP.STEPCAFControl import STEPCAFControl_Controller, STEPCAFControl_Reader, STEPCAFControl_Writer
 from OCP.STEPControl import STEPControl_AsIs
-from OCP.TCollection import TCollection_ExtendedString
+from OCP.TCollection import TCollection_ExtendedString, TCollection_HAsciiString
 from OCP.TDataStd import TDataStd_Name
 from OCP.TDF import TDF_Label, TDF_LabelSequence
 from OCP.TDocStd import TDocStd_Document
@@ -39,13 +40,15 @@ from OCP.XCAFDoc import (
     XCAFDoc_LayerTool,
 )
 
+from v2c.errors import V2cError
+
 #: STEP schema written (AP242 DIS, the OCCT name of AP242).
 SCHEMA = "AP242DIS"
 
 RGB = tuple[float, float, float]
 
 
-class XcafError(RuntimeError):
+class XcafError(V2cError, RuntimeError):
     """The STEP file could not be written or read with its attributes."""
 
 
@@ -104,9 +107,12 @@ def _color(rgb: RGB) -> Quantity_Color:
 
 
 def write_xcaf_step(
-    path: str | Path, shape: TopoDS_Shape, product: str, subshapes: list[SubShapeAttrs]
+    path: str | Path, shape: TopoDS_Shape, product: str, subshapes: list[SubShapeAttrs],
+    originating_system: str | None = None,
 ) -> None:
     """Write ``shape`` as one product named ``product`` with the sub-shape attributes to a STEP AP242 file.
+
+    originating_system: written into the header's FILE_NAME (default: OCCT's own text).
 
     Lengths are written as millimetres (the shape must already be in millimetres). Raises XcafError when a
     sub-shape is not part of ``shape`` or the writer fails.
@@ -117,17 +123,17 @@ def write_xcaf_step(
     ct = XCAFDoc_DocumentTool.ColorTool_s(main)
     lt = XCAFDoc_DocumentTool.LayerTool_s(main)
     root = st.AddShape(shape, False)
-    TDataStd_Name.Set_s(root, TCollection_ExtendedString(product))
+    TDataStd_Name.Set_s(root, TCollection_ExtendedString(product, True))  # True: the str arrives as UTF-8 bytes
     for sub in subshapes:
         label = st.AddSubShape(root, sub.shape)
         if label.IsNull():
             raise XcafError(f"sub-shape {sub.name!r} is not part of the shape")
-        TDataStd_Name.Set_s(label, TCollection_ExtendedString(sub.name))
+        TDataStd_Name.Set_s(label, TCollection_ExtendedString(sub.name, True))
         if sub.color is not None:
             kind = XCAFDoc_ColorCurv if sub.shape.ShapeType() == TopAbs_EDGE else XCAFDoc_ColorSurf
             ct.SetColor(label, _color(sub.color), kind)
         if sub.layer is not None:
-            lt.SetLayer(label, TCollection_ExtendedString(sub.layer))
+            lt.SetLayer(label, TCollection_ExtendedString(sub.layer, True))
 
     STEPCAFControl_Controller.Init_s()
     writer = STEPCAFControl_Writer()
@@ -140,6 +146,9 @@ def write_xcaf_step(
     writer.SetLayerMode(True)
     if not writer.Transfer(doc, STEPControl_AsIs):
         raise XcafError("STEPCAFControl_Writer.Transfer failed")
+    if originating_system:  # FILE_NAME's originating system: how `v2c` knows a file is its own
+        header = APIHeaderSection_MakeHeader(writer.ChangeWriter().Model())
+        header.SetOriginatingSystem(TCollection_HAsciiString(originating_system))
     if writer.Write(str(path)) != IFSelect_RetDone:
         raise XcafError(f"{path}: STEP write failed")
 

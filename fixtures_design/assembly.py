@@ -2,14 +2,14 @@
 
 The part in the assembly is either the reconstructed part (the VB-Rep's faces as open shells, from
 `exporters.brep.build_brep`, or its face meshes when that fails) or the true part (e.g. a synthetic scan's
-gt/part.step, camera frame, millimetres), moved into the fixture's output frame. Files are written atomically
-(a temporary file renamed into place). Millimetres throughout.
+gt/part.step, camera frame, millimetres), moved into the fixture's output frame. The three files are one
+`v2c.io_safe.OutputSet`: exclusive temporaries in the output folder, committed together. Millimetres throughout.
 """
 
 from __future__ import annotations
 
 import copy
-import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +23,8 @@ from OCP.TopoDS import TopoDS_Compound, TopoDS_Iterator
 
 from fixtures_design.frames import FrameMap, camera_mm_matrix
 from fixtures_design.model import Fixture, transformed
+from v2c.errors import OutputError
+from v2c.io_safe import OutputSet
 from v2c.vbrep.model import VBRep
 
 FIXTURE_COLOR = (0.85, 0.55, 0.1)
@@ -108,13 +110,10 @@ def assembly(fixture: Fixture, part: Shape | None, part_label: str = "part") -> 
     return Compound(children=children, label=f"{fixture.kind.value}_assembly")
 
 
-def _atomic(path: Path, write: object) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    if not write(tmp):
-        tmp.unlink(missing_ok=True)
-        raise OSError(f"{path}: the exporter reported a failure")
-    os.replace(tmp, path)
+def _export(out: OutputSet, path: Path, write: Callable[[Path], bool]) -> Path:
+    """Write one file of the set through its exclusive temporary; the exporter's False is an error."""
+    if not write(out.temp(path)):
+        raise OutputError(f"{path}: the exporter reported a failure; the previous files were left as they were")
     return path
 
 
@@ -127,7 +126,9 @@ def write_fixture(fixture: Fixture, out_dir: str | Path, part: Shape | None = No
     """
     out = Path(out_dir)
     stem = stem or f"fixture_{fixture.kind.value}"
-    step = _atomic(out / f"{stem}.step", lambda p: export_step(fixture.solid, p))
-    stl = _atomic(out / f"{stem}.stl", lambda p: export_stl(fixture.solid, p, tolerance=0.05))
-    asm = _atomic(out / f"{stem}_assembly.step", lambda p: export_step(assembly(fixture, part, part_label), p))
+    with OutputSet() as files:  # the three files are committed together: all new or all old
+        step = _export(files, out / f"{stem}.step", lambda p: export_step(fixture.solid, p))
+        stl = _export(files, out / f"{stem}.stl", lambda p: export_stl(fixture.solid, p, tolerance=0.05))
+        asm = _export(files, out / f"{stem}_assembly.step",
+                      lambda p: export_step(assembly(fixture, part, part_label), p))
     return FixtureFiles(step, stl, asm)

@@ -59,9 +59,10 @@ def ground_height(scan: object, vbrep: VBRep, ring_px: int = 25) -> float | None
 STEP_SUFFIXES = (".step", ".stp")
 
 
-def load_vbrep(source: str | Path, segmentation: str = "learned") -> tuple[VBRep, object | None]:
-    """A VB-Rep from a scan folder (reconstructed), a VB-Rep JSON file or a ``v2c to-step`` STEP file
-    (`fixtures_design.step_input`); the loaded scan (or None)."""
+def load_vbrep(source: str | Path, segmentation: str = "learned",
+               roi: tuple[int, int, int, int] | None = None) -> tuple[VBRep, object | None]:
+    """A VB-Rep from a scan folder (reconstructed, within ``roi`` pixels x0, y0, x1, y1 when given), a VB-Rep JSON
+    file or a ``v2c to-step`` STEP file (`fixtures_design.step_input`); the loaded scan (or None)."""
     path = Path(source)
     if path.is_file() and path.suffix == ".json":
         return VBRep.load(path), None
@@ -72,7 +73,7 @@ def load_vbrep(source: str | Path, segmentation: str = "learned") -> tuple[VBRep
     from v2c.pipeline import reconstruct
     from v2c.scan import load_scan
 
-    scan = load_scan(path)
+    scan = load_scan(path, roi=roi)
     return reconstruct(scan, segmentation=segmentation), scan
 
 
@@ -85,6 +86,7 @@ def fixture_for_scan(
     segmentation: str = "learned",
     part: PartChoice = "reconstructed",
     params: Params | None = None,
+    roi: tuple[int, int, int, int] | None = None,
 ) -> FixtureRun:
     """Design a fixture of ``kind`` for a scan folder or VB-Rep JSON and write its files into ``out_dir``.
 
@@ -94,7 +96,7 @@ def fixture_for_scan(
     Raises `NoReferenceError` when no intersection edge qualifies; nothing is written then.
     """
     source = Path(source)
-    vbrep, scan = load_vbrep(source, segmentation)
+    vbrep, scan = load_vbrep(source, segmentation, roi)
     from_step = source.suffix.lower() in STEP_SUFFIXES
     if from_step:
         frame = Frame.CAMERA  # the VB-Rep is in the file's frame already

@@ -37,7 +37,7 @@ def test_fit_command_recovers_the_tilted_plane(tiny_scan_dir: Path, tmp_path: Pa
 def test_fit_command_bad_input_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "fit.json"
     r = CliRunner().invoke(main, ["fit", str(tmp_path / "missing"), "-o", str(out)])
-    assert r.exit_code == 1 and "Error" in r.output
+    assert r.exit_code == 1 and r.output.startswith("error: ") and "scan folder not found" in r.output
     assert not out.exists()
 
 

@@ -11,10 +11,17 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["load_scan", "reconstruct"]
+__all__ = ["__version__", "load_scan", "reconstruct"]
 
 
 def __getattr__(name: str) -> Any:
+    if name == "__version__":  # the installed distribution's version, looked up on first use
+        from importlib import metadata
+
+        try:
+            return metadata.version("v2c")
+        except metadata.PackageNotFoundError:  # a source tree on sys.path without an installed distribution
+            return "0.0.0+unknown"
     if name == "reconstruct":
         from v2c.pipeline import reconstruct
 

@@ -6,12 +6,14 @@
 
 `scan_to_step` = `v2c.scan.load_scan` -> `v2c.pipeline.reconstruct` -> `exporters.step.write` (millimetres,
 part frame by default), then the extras next to the STEP: ``<stem>.vbrep.json`` (the VB-Rep) and
-``<stem>.png`` (the result figure of `exporters.figure`). Every file is written atomically (temporary file in
-the same folder, then renamed), so an interrupted run never leaves a half-written STEP.
+``<stem>.png`` (the result figure of `exporters.figure`). The files are one `v2c.io_safe.OutputSet`: written to
+exclusive temporaries in the output folder and committed together, so a failed or interrupted run leaves the
+complete previous set (or nothing) and never a new STEP beside an old JSON and figure.
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +24,8 @@ if TYPE_CHECKING:
     from exporters.step import StepReport
     from v2c.scan import Scan
     from v2c.vbrep.model import VBRep
+
+log = logging.getLogger(__name__)
 
 #: File name of the STEP written into the scan folder when no output is given.
 DEFAULT_STEP_NAME = "reconstruction.step"
@@ -89,47 +93,64 @@ def scan_to_step(
     extras: bool = True,
     roi: str | tuple[int, int, int, int] | None = None,
     ablation: str = "full",
+    force: bool = False,
 ) -> ScanExport:
     """Reconstruct one scan folder and write its STEP (default ``SCAN/reconstruction.step``) and, unless
     ``extras`` is False, the VB-Rep JSON and figure next to it. Raises `v2c.scan.ScanError` for a bad scan and
-    whatever the pipeline raises; on any error no STEP is written."""
+    whatever the pipeline raises; on any error no STEP is written. force: replace existing files that v2c did
+    not write (otherwise `v2c.errors.OutputError`, checked before the pipeline runs)."""
     from exporters import step as step_export
     from exporters.figure import result_figure
     from exporters.readback import check_written
     from v2c import pipeline
+    from v2c.io_safe import OutputSet, check_replaceable
     from v2c.scan import load_scan
 
     scan_dir = Path(scan_dir)
     out = Path(out) if out is not None else scan_dir / DEFAULT_STEP_NAME
+    for dest in (out, *extras_paths(out)) if extras else (out,):  # fail before minutes of work, not after
+        check_replaceable(dest, force)
     seconds: dict[str, float] = {}
     t = time.perf_counter()
     scan = load_scan(scan_dir, roi=roi)
     seconds["load"] = time.perf_counter() - t
+    log.info("%s: %d x %d px, %d valid pixels, loaded in %.2f s", scan_dir, scan.width, scan.height,
+             int(scan.valid.sum()), seconds["load"])
     t = time.perf_counter()
     vbrep, seg, _ = pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation,
                                          return_stages=True)
     seconds["reconstruct"] = time.perf_counter() - t
-    out.parent.mkdir(parents=True, exist_ok=True)
-    t = time.perf_counter()
-    report = step_export.write(vbrep, out, frame=frame, product=scan_dir.name)
-    seconds["step"] = time.perf_counter() - t
-    t = time.perf_counter()
-    readback = check_written(vbrep, out, report.frame_map)
-    seconds["readback"] = time.perf_counter() - t
-    result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
-                        seconds=seconds, readback=readback)
-    if extras:
+    with OutputSet(force=force) as files:  # committed together on leaving the block; nothing changed on an exception
         t = time.perf_counter()
-        json_path, png_path = extras_paths(out)
-        result.vbrep_json = vbrep.save(json_path)
+        tmp = files.temp(out)
         try:
-            # drawn from the file as read back: the figure shows what the user got
-            if readback.drawn is not None:
-                result_figure(scan, seg.instances, readback.drawn, png_path, source="STEP as written")
-            else:
-                result_figure(scan, seg.instances, vbrep, png_path)
-            result.figure = png_path
-        except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
-            result.warnings.append(f"figure not written ({type(exc).__name__}: {exc})")
-        seconds["extras"] = time.perf_counter() - t
+            report = step_export.write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem)
+        except step_export.StepExportError as exc:  # name the destination, not our temporary
+            raise step_export.StepExportError(f"{str(exc).replace(str(tmp), str(out))}; nothing written") from None
+        report.path = out
+        seconds["step"] = time.perf_counter() - t
+        log.info("STEP: %d faces, %d edges, %.2f s", report.n_faces, report.n_edges, seconds["step"])
+        t = time.perf_counter()
+        readback = check_written(vbrep, tmp, report.frame_map)  # what the user gets, read back through OCCT
+        readback.path = out
+        seconds["readback"] = time.perf_counter() - t
+        log.info("%s", readback.summary())
+        result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
+                            seconds=seconds, readback=readback)
+        if extras:
+            t = time.perf_counter()
+            json_path, png_path = extras_paths(out)
+            vbrep.save(files.temp(json_path))
+            result.vbrep_json = json_path
+            try:
+                # drawn from the file as read back: the figure shows what the user got
+                drawn = readback.drawn
+                result_figure(scan, seg.instances, drawn if drawn is not None else vbrep, files.temp(png_path),
+                              source="STEP as written" if drawn is not None else "VB-Rep")
+                result.figure = png_path
+            except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
+                files.forget(png_path)
+                files.remove(png_path)  # an old figure would not belong to the new set
+                result.warnings.append(f"figure not written ({type(exc).__name__}: {exc})")
+            seconds["extras"] = time.perf_counter() - t
     return result

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from time import perf_counter
 from typing import Any
@@ -14,13 +15,15 @@ from typing import Any
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.model import VBRep
 
+log = logging.getLogger(__name__)
 
-def reconstruct(scan: Any, segmentation: Any = "oracle", ablation: str = "full",
+
+def reconstruct(scan: Any, segmentation: Any = "learned", ablation: str = "full",
                 config: VBRepConfig | None = None, fit_config: Any = None,
                 return_stages: bool = False) -> VBRep | tuple[VBRep, Any, Any]:
     """Reconstruct the VB-Rep of one scan (camera frame, metres).
 
-    scan: a `v2c.scan.Scan` or a scan folder path. segmentation: "oracle" | "learned" | "geometric", or a
+    scan: a `v2c.scan.Scan` or a scan folder path. segmentation: "learned" (default) | "geometric" | "oracle", or a
     ready `Segmentation`. ablation: the fit ablation ("full", "no-axis", "no-int", "fit-only").
     config: VB-Rep extraction thresholds; fit_config: a `v2c.fit.FitConfig` (default when None).
     return_stages: also return the Segmentation and the FitResult (for figures and benchmarks).
@@ -40,12 +43,15 @@ def reconstruct(scan: Any, segmentation: Any = "oracle", ablation: str = "full",
     else:
         seg = segmentation
     timings["segment"] = perf_counter() - t
+    log.info("segment (%s): %d instances, %.2f s", seg.method, len(seg.labels) - 1, timings["segment"])
     t = perf_counter()
     fit = fit_scan(scan, seg, fit_config, ablation=ablation)
     timings["fit"] = perf_counter() - t
+    log.info("fit (%s): %d primitives, %.2f s", ablation, len(fit.primitives), timings["fit"])
     t = perf_counter()
     vbrep = extract_vbrep(scan, seg, fit, config)
     timings["vbrep"] = perf_counter() - t
+    log.info("VB-Rep: %d faces, %d edges, %.2f s", len(vbrep.faces), len(vbrep.edges), timings["vbrep"])
     timings["total"] = perf_counter() - t0
     vbrep.meta["timings"] = timings
     vbrep.meta["fit_timings"] = {k: float(v) for k, v in getattr(fit, "timings", {}).items()}

@@ -14,31 +14,40 @@ full image size (so K, pixel coordinates and ground truth stay valid) and the RO
 
 from __future__ import annotations
 
-import json
 import math
-import struct
-import zlib
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
 
-#: Metres per depth unit when camera.json does not say (RealSense default; SCAN_FORMAT.md).
-DEFAULT_DEPTH_SCALE_M = 0.001
-#: BOP's default depth unit when its camera entry has no ``depth_scale`` (millimetres per unit).
-BOP_DEFAULT_DEPTH_SCALE_MM = 1.0
+from v2c.camera import (  # noqa: F401 - re-exported: the loader's public names
+    BOP_DEFAULT_DEPTH_SCALE_MM,
+    DEFAULT_DEPTH_SCALE_M,
+    Camera,
+    check_intrinsics_plausible,
+    load_camera,
+    parse_camera,
+)
+from v2c.errors import ScanError
+from v2c.scan_checks import (
+    ScanLimits,
+    check_depth_surface,
+    check_depth_values,
+    current_limits,
+    read_image_bytes,
+    read_json,
+    read_npy,
+    scan_limits,
+)
+
+__all__ = ["Camera", "GroundTruth", "Scan", "ScanError", "ScanLimits", "backproject", "load_camera", "load_scan",
+           "parse_camera", "parse_roi", "read_image", "roi_to_mask", "scan_limits"]
 
 COLOR_NAMES = ("color.png", "color.jpg", "color.jpeg")
 DEPTH_NAMES = ("depth.png", "depth.npy")
 GT_DIR = "gt"
-
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-
-class ScanError(ValueError):
-    """A scan folder that cannot be used. The message names the file and the problem."""
 
 
 @dataclass
@@ -95,6 +104,7 @@ class Scan:
     depth_scale: float = DEFAULT_DEPTH_SCALE_M  # metres per unit of depth.png (1.0 for depth.npy)
     camera_format: str = "v2c"  # "v2c" | "open3d" | "bop": which camera.json form was read
     files: dict[str, Path] = field(default_factory=dict)  # "color", "depth", "camera"[, "mask"]: files read
+    notes: list[str] = field(default_factory=list)  # what the loader changed (readings dropped as implausible)
 
     @property
     def height(self) -> int:
@@ -217,65 +227,22 @@ def parse_roi(text: str | tuple | list | None) -> tuple[int, int, int, int] | No
 # image files
 
 
-def _check_png_complete(data: bytes, path: Path) -> None:
-    """Walk the PNG chunks: signature, each chunk whole with a correct CRC, ending with IEND."""
-    if not data.startswith(_PNG_SIGNATURE):
-        raise ScanError(f"{path}: not a PNG file (bad signature)")
-    pos, n = len(_PNG_SIGNATURE), len(data)
-    while True:
-        if pos + 12 > n:
-            raise ScanError(f"{path}: truncated PNG (ends at byte {n} inside the chunk list, no IEND)")
-        (length,) = struct.unpack(">I", data[pos : pos + 4])
-        ctype = data[pos + 4 : pos + 8]
-        end = pos + 12 + length
-        if end > n:
-            raise ScanError(
-                f"{path}: truncated PNG (chunk {ctype.decode('latin-1')!r} needs {end} bytes, file has {n})"
-            )
-        (crc,) = struct.unpack(">I", data[end - 4 : end])
-        if zlib.crc32(data[pos + 4 : end - 4]) & 0xFFFFFFFF != crc:
-            raise ScanError(f"{path}: corrupt PNG (CRC mismatch in chunk {ctype.decode('latin-1')!r})")
-        if ctype == b"IEND":
-            return
-        pos = end
-
-
-def _check_jpeg_complete(data: bytes, path: Path) -> None:
-    """JPEG must start with SOI (FFD8) and end with EOI (FFD9); decoders silently grey-fill a truncated tail."""
-    if not data.startswith(b"\xff\xd8"):
-        raise ScanError(f"{path}: not a JPEG file (no SOI marker)")
-    if not data.rstrip(b"\x00\r\n ").endswith(b"\xff\xd9"):
-        raise ScanError(f"{path}: truncated JPEG (no EOI marker at the end)")
-
-
-def read_image(path: Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
-    """Read a PNG or JPEG fully, checking that the file is complete before decoding it.
+def read_image(path: Path, flags: int = cv2.IMREAD_UNCHANGED, limits: ScanLimits | None = None) -> np.ndarray:
+    """Read a PNG or JPEG fully: header (pixel count against ``limits.max_pixels``), chunk CRCs and completeness
+    are checked before decoding (`v2c.scan_checks.read_image_bytes`).
 
     Returns the array as OpenCV decodes it (BGR channel order for colour). Raises ScanError naming the file.
     """
     path = Path(path)
-    if not path.is_file():
-        raise ScanError(f"{path}: file not found")
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise ScanError(f"{path}: cannot read ({e.strerror or e})") from None
-    if not data:
-        raise ScanError(f"{path}: empty file")
-    if data.startswith(_PNG_SIGNATURE):
-        _check_png_complete(data, path)
-    elif data.startswith(b"\xff\xd8"):
-        _check_jpeg_complete(data, path)
-    else:
-        raise ScanError(f"{path}: not a PNG or JPEG image")
+    data = read_image_bytes(path, limits)
     img = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     if img is None or img.size == 0:
         raise ScanError(f"{path}: cannot decode image")
     return img
 
 
-def _read_color(path: Path) -> np.ndarray:
-    img = read_image(path, cv2.IMREAD_UNCHANGED)
+def _read_color(path: Path, limits: ScanLimits | None = None) -> np.ndarray:
+    img = read_image(path, cv2.IMREAD_UNCHANGED, limits)
     if img.dtype != np.uint8:
         raise ScanError(f"{path}: colour image must be 8-bit, got {img.dtype}")
     if img.ndim == 2:
@@ -289,8 +256,9 @@ def _read_color(path: Path) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def _read_depth_png(path: Path, scale_m: float) -> np.ndarray:
-    raw = read_image(path, cv2.IMREAD_UNCHANGED)
+def _read_depth_png(path: Path, scale_m: float, limits: ScanLimits) -> tuple[np.ndarray, list[str]]:
+    """depth.png (uint16 units x scale_m metres per unit) -> (float32 metres, notes); range-checked."""
+    raw = read_image(path, cv2.IMREAD_UNCHANGED, limits)
     if raw.ndim != 2:
         raise ScanError(f"{path}: depth image must have one channel, got {raw.shape[2]}")
     if raw.dtype == np.uint8:
@@ -299,25 +267,20 @@ def _read_depth_png(path: Path, scale_m: float) -> np.ndarray:
         )
     if raw.dtype != np.uint16:
         raise ScanError(f"{path}: depth image must be 16-bit unsigned, got {raw.dtype}")
-    return (raw.astype(np.float64) * scale_m).astype(np.float32)
+    if raw.size and (raw == np.iinfo(np.uint16).max).all():
+        raise ScanError(f"{path}: every depth value is 65535, the 16-bit maximum (saturated or a 'no reading' "
+                        "marker); expected distances, 0 = no reading")
+    return check_depth_values(raw.astype(np.float64) * scale_m, path, limits,
+                              f"{scale_m:g} m per unit from camera.json")
 
 
-def _read_depth_npy(path: Path) -> np.ndarray:
-    try:
-        arr = np.load(path, allow_pickle=False)
-    except Exception as e:  # noqa: BLE001 - numpy raises ValueError/EOFError/OSError/UnpicklingError
-        raise ScanError(f"{path}: cannot read .npy ({type(e).__name__}: {e})") from None
-    if not isinstance(arr, np.ndarray) or arr.ndim != 2:
-        raise ScanError(f"{path}: depth must be a 2-D (H, W) array, got shape {getattr(arr, 'shape', None)}")
-    if arr.dtype.kind not in "fiu":
-        raise ScanError(f"{path}: depth must be a real-number array (float metres), got {arr.dtype}")
-    arr = arr.astype(np.float64)
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        raise ScanError(f"{path}: {int(bad.sum())} non-finite depth values (NaN/inf); use 0 for no reading")
-    if (arr < 0).any():
-        raise ScanError(f"{path}: {int((arr < 0).sum())} negative depth values; depth is metres, 0 = no reading")
-    return arr.astype(np.float32)
+def _read_depth_npy(path: Path, limits: ScanLimits) -> tuple[np.ndarray, list[str]]:
+    """depth.npy (float metres) -> (float32 metres, notes); integer arrays are refused (units unknown)."""
+    arr = read_npy(path, limits)
+    if arr.dtype.kind in "iub":
+        raise ScanError(f"{path}: depth.npy holds {arr.dtype} numbers; expected float metres (for integer depth "
+                        "units write a 16-bit depth.png and give depth_scale in camera.json)")
+    return check_depth_values(arr.astype(np.float64), path, limits, "float metres")
 
 
 def _read_label_png(path: Path, what: str) -> np.ndarray:
@@ -328,134 +291,11 @@ def _read_label_png(path: Path, what: str) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# camera.json
-
-
-@dataclass
-class Camera:
-    """Intrinsics read from camera.json. K in pixels; depth_scale in metres per depth.png unit."""
-
-    K: np.ndarray
-    depth_scale: float
-    width: int | None
-    height: int | None
-    format: str  # "v2c" | "open3d" | "bop"
-
-
-def _numbers(value: Any, path: Path, key: str, count: int, what: str) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ScanError(f"{path}: '{key}' must be {what}, got {value!r}") from None
-    if arr.size != count or (arr.ndim == 2 and arr.shape != (3, 3)) or arr.ndim > 2:
-        raise ScanError(f"{path}: '{key}' must be {what}; K is not 3x3 (got shape {arr.shape})")
-    if not np.all(np.isfinite(arr)):
-        raise ScanError(f"{path}: '{key}' holds non-finite values")
-    return arr
-
-
-def _positive_scale(value: Any, path: Path, key: str) -> float:
-    try:
-        s = float(value)
-    except (TypeError, ValueError):
-        raise ScanError(f"{path}: '{key}' must be a number, got {value!r}") from None
-    if not math.isfinite(s) or s <= 0:
-        raise ScanError(f"{path}: '{key}' must be a positive number, got {value!r}")
-    return s
-
-
-def _optional_size(d: dict, key: str, path: Path) -> int | None:
-    if key not in d or d[key] is None:
-        return None
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v) or v <= 0:
-        raise ScanError(f"{path}: '{key}' must be a positive integer, got {v!r}")
-    return int(v)
-
-
-def parse_camera(d: Any, path: Path) -> Camera:
-    """Interpret a camera.json object in one of the three accepted forms.
-
-    - v2c: ``K`` (3x3 nested, or 9 numbers row-major), ``depth_scale`` (metres per unit; default 0.001),
-      ``width``/``height`` optional.
-    - Open3D ``PinholeCameraIntrinsic``: ``intrinsic_matrix`` (9 numbers, column-major), ``width``, ``height``.
-      Open3D files carry no depth scale, so 0.001 m/unit is assumed unless ``depth_scale`` is given; a given value
-      above 1 is read in Open3D's own convention (units per metre, e.g. 1000), otherwise as metres per unit.
-    - BOP ``scene_camera.json`` entry: ``cam_K`` (9 numbers, row-major), ``depth_scale`` in MILLIMETRES per unit
-      (default 1). A whole BOP file keyed by image id is accepted too: its first entry (smallest id) is used.
-    """
-    if not isinstance(d, dict):
-        raise ScanError(f"{path}: camera.json must hold a JSON object, got {type(d).__name__}")
-    # a BOP scene_camera.json keyed by image id: {"0": {"cam_K": ...}, ...}
-    if d and not any(k in d for k in ("K", "intrinsic_matrix", "cam_K")) and all(
-        isinstance(v, dict) and "cam_K" in v for v in d.values()
-    ):
-        def _key(k: str) -> tuple[int, Any]:
-            return (0, int(k)) if str(k).lstrip("-").isdigit() else (1, str(k))
-
-        d = d[min(d, key=_key)]
-
-    if "K" in d:
-        fmt = "v2c"
-        K = _numbers(d["K"], path, "K", 9, "a 3x3 matrix or 9 numbers row-major").reshape(3, 3)
-        scale = _positive_scale(d.get("depth_scale", DEFAULT_DEPTH_SCALE_M), path, "depth_scale")
-    elif "intrinsic_matrix" in d:
-        fmt = "open3d"
-        K = _numbers(d["intrinsic_matrix"], path, "intrinsic_matrix", 9,
-                     "9 numbers, column-major (a 3x3 K)").reshape(3, 3).T
-        scale = DEFAULT_DEPTH_SCALE_M
-        if "depth_scale" in d:
-            s = _positive_scale(d["depth_scale"], path, "depth_scale")
-            scale = 1.0 / s if s > 1.0 else s
-    elif "cam_K" in d:
-        fmt = "bop"
-        K = _numbers(d["cam_K"], path, "cam_K", 9, "9 numbers, row-major (a 3x3 K)").reshape(3, 3)
-        scale = 1e-3 * _positive_scale(d.get("depth_scale", BOP_DEFAULT_DEPTH_SCALE_MM), path, "depth_scale")
-    else:
-        raise ScanError(
-            f"{path}: no intrinsics found: need 'K' (v2c), 'intrinsic_matrix' (Open3D) or 'cam_K' (BOP); "
-            f"keys are {sorted(d)[:10]}"
-        )
-    _check_K(K, path)
-    return Camera(K=K, depth_scale=scale, width=_optional_size(d, "width", path),
-                  height=_optional_size(d, "height", path), format=fmt)
-
-
-def _check_K(K: np.ndarray, path: Path) -> None:
-    if K.shape != (3, 3):
-        raise ScanError(f"{path}: K must be 3x3, got shape {K.shape}")
-    if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ScanError(f"{path}: K has a non-positive focal length (fx={K[0, 0]:g}, fy={K[1, 1]:g})")
-    if abs(K[1, 0]) > 1e-9 or abs(K[2, 0]) > 1e-9 or abs(K[2, 1]) > 1e-9 or abs(K[2, 2] - 1.0) > 1e-9:
-        raise ScanError(
-            f"{path}: K is not a pinhole intrinsic matrix (need [[fx, s, cx], [0, fy, cy], [0, 0, 1]]); "
-            f"got {K.tolist()} (an Open3D matrix written row-major?)"
-        )
-
-
-def _load_json(path: Path) -> Any:
-    if not path.is_file():
-        raise ScanError(f"{path}: file not found")
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as e:
-        raise ScanError(f"{path}: invalid JSON ({e.msg} at line {e.lineno}, column {e.colno})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ScanError(f"{path}: cannot read ({e})") from None
-
-
-def load_camera(path: Path) -> Camera:
-    """Read and check a camera.json (any of the three forms of :func:`parse_camera`)."""
-    path = Path(path)
-    return parse_camera(_load_json(path), path)
-
-
-# ----------------------------------------------------------------------------------------------------------------
 # the scan folder
 
 
 def _pick(folder: Path, names: tuple[str, ...], what: str) -> Path:
-    found = [folder / n for n in names if (folder / n).is_file()]
+    found = [folder / n for n in names if os.path.lexists(folder / n)]  # a broken link is reported by its reader
     if not found:
         raise ScanError(f"{folder / names[0]}: file not found ({what}: need one of {', '.join(names)})")
     if len(found) > 1:
@@ -480,6 +320,7 @@ def load_ground_truth(folder: Path, height: int, width: int, depth_scale: float,
     folder = Path(folder)
     faces_p, labels_p = folder / "faces.png", folder / "labels.png"
     prim_p, meta_p, step_p = folder / "primitives.json", folder / "meta.json", folder / "part.step"
+    limits = current_limits()
     for p in (faces_p, labels_p, prim_p, meta_p, step_p):
         if not p.is_file():
             raise ScanError(f"{p}: file not found (ground truth)")
@@ -499,18 +340,27 @@ def load_ground_truth(folder: Path, height: int, width: int, depth_scale: float,
     if not candidates:
         raise ScanError(f"{dc_png}: file not found (ground truth)")
     dc_path = candidates[0]  # the same format as the scan's depth when both exist
+    # noise-free depth: finite and non-negative like the scan's depth, but no plausibility refusal (an
+    # all-background ground truth is still ground truth)
     if dc_path.suffix == ".npy":
-        depth_clean = _read_depth_npy(dc_path)
+        dc = read_npy(dc_path, limits).astype(np.float64)
     else:
-        depth_clean = _read_depth_png(dc_path, depth_scale)
+        dc = read_image(dc_path, cv2.IMREAD_UNCHANGED, limits)
+        if dc.ndim != 2 or dc.dtype != np.uint16:
+            raise ScanError(f"{dc_path}: noise-free depth must be a one-channel 16-bit image, got {dc.dtype} "
+                            f"with shape {dc.shape}")
+        dc = dc.astype(np.float64) * depth_scale
+    if not np.isfinite(dc).all() or (dc < 0).any():
+        raise ScanError(f"{dc_path}: noise-free depth holds negative or non-finite values; expected metres >= 0")
+    depth_clean = dc.astype(np.float32)
     _check_size(depth_clean, height, width, dc_path, Path("the colour image"))
 
-    prims = _load_json(prim_p)
+    prims = read_json(prim_p, limits)
     if isinstance(prims, dict) and isinstance(prims.get("primitives"), list):
         prims = prims["primitives"]
     if not isinstance(prims, list) or not all(isinstance(p, dict) for p in prims):
         raise ScanError(f"{prim_p}: must hold a list of primitive objects")
-    meta = _load_json(meta_p)
+    meta = read_json(meta_p, limits)
     if not isinstance(meta, dict):
         raise ScanError(f"{meta_p}: must hold a JSON object")
     n_faces = len(prims)
@@ -521,13 +371,16 @@ def load_ground_truth(folder: Path, height: int, width: int, depth_scale: float,
                        step_path=step_p)
 
 
-def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = None) -> Scan:
+def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = None,
+              limits: ScanLimits | None = None) -> Scan:
     """Load and validate a scan folder (SCAN_FORMAT.md).
 
     path: the folder. roi: optional (x0, y0, x1, y1) pixels, x1/y1 exclusive, or the string "x0,y0,x1,y1"; it
-    restricts :attr:`Scan.valid` and must lie inside the image. Returns a :class:`Scan` (depth in metres, camera
-    frame); raises :class:`ScanError` naming the file and the problem.
+    restricts :attr:`Scan.valid` and must lie inside the image. limits: what a plausible scan is (image size,
+    depth range, intrinsics, part size; default `current_limits()`). Returns a :class:`Scan` (depth in metres,
+    camera frame); raises :class:`ScanError` naming the file, the value and what was expected.
     """
+    limits = limits or current_limits()
     folder = Path(path)
     if not folder.exists():
         raise ScanError(f"{folder}: scan folder not found")
@@ -538,14 +391,14 @@ def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = No
     cam_p = folder / "camera.json"
     color_p = _pick(folder, COLOR_NAMES, "colour image")
     depth_p = _pick(folder, DEPTH_NAMES, "depth")
-    cam = load_camera(cam_p)
+    cam = load_camera(cam_p, limits)
 
-    color = _read_color(color_p)
+    color = _read_color(color_p, limits)
     h, w = color.shape[:2]
     if depth_p.suffix == ".npy":
-        depth = _read_depth_npy(depth_p)
+        depth, notes = _read_depth_npy(depth_p, limits)
     else:
-        depth = _read_depth_png(depth_p, cam.depth_scale)
+        depth, notes = _read_depth_png(depth_p, cam.depth_scale, limits)
     if depth.shape != (h, w):
         raise ScanError(
             f"{depth_p}: size {depth.shape[1]}x{depth.shape[0]} differs from {color_p.name} {w}x{h} "
@@ -555,13 +408,12 @@ def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = No
         raise ScanError(
             f"{cam_p}: width x height {cam.width}x{cam.height} disagrees with the images ({w}x{h})"
         )
-    if not (depth > 0).any():
-        raise ScanError(f"{depth_p}: all depth values are zero (no readings)")
+    check_intrinsics_plausible(cam.K, w, h, cam_p, limits)
 
     mask = None
     mask_p = folder / "mask.png"
-    if mask_p.exists():
-        m = read_image(mask_p, cv2.IMREAD_UNCHANGED)
+    if os.path.lexists(mask_p):
+        m = read_image(mask_p, cv2.IMREAD_UNCHANGED, limits)
         if m.ndim == 3:
             m = m.max(axis=2)
         _check_size(m, h, w, mask_p, color_p)
@@ -584,8 +436,10 @@ def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = No
     scan = Scan(path=folder, color=color, depth=depth, K=cam.K.astype(np.float64), mask=mask, roi=roi_t, gt=gt,
                 depth_scale=1.0 if depth_p.suffix == ".npy" else cam.depth_scale, camera_format=cam.format,
                 files={"color": color_p, "depth": depth_p, "camera": cam_p}
-                | ({"mask": mask_p} if mask is not None else {}))
-    if not scan.valid.any():
-        where = " and ".join(x for x, on in (("mask.png", mask is not None), (f"ROI {roi_t}", roi_t)) if on)
+                | ({"mask": mask_p} if mask is not None else {}), notes=notes)
+    valid = scan.valid
+    where = " and ".join(x for x, on in (("mask.png", mask is not None), (f"ROI {roi_t}", roi_t)) if on)
+    if not valid.any():
         raise ScanError(f"{depth_p}: no depth reading inside {where}")
+    check_depth_surface(scan.depth, valid, scan.K, depth_p, limits, f" inside {where}" if where else "")
     return scan

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from v2c.cli_support import max_pixels_option
+
 
 def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
     from v2c.scan import ScanError, parse_roi
@@ -36,9 +38,11 @@ def _short_params(d: dict) -> str:
 
 
 @click.command("fit")
+@max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(path_type=str))
-@click.option("--segmentation", "method", default="oracle", show_default=True,
-              type=click.Choice(["oracle", "learned", "geometric"]), help="Where the surface instances come from.")
+@click.option("--segmentation", "method", default="learned", show_default=True,
+              type=click.Choice(["learned", "geometric", "oracle"]),
+              help="Where the surface instances come from (oracle needs a synthetic scan's gt/).")
 @click.option("--ablation", default="full", show_default=True,
               type=click.Choice(["full", "no-axis", "no-int", "fit-only"]),
               help="full: shared axis frame + intersection refinement; no-axis / no-int drop one; fit-only both.")
@@ -47,20 +51,26 @@ def _short_params(d: dict) -> str:
 @click.option("--roi", callback=_roi_option, default=None, metavar="x0,y0,x1,y1",
               help="Region of interest in pixels (x1, y1 exclusive).")
 @click.option("--seed", default=0, show_default=True, help="Seed of the RANSAC sampling.")
-def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi, seed: int) -> None:
+@click.option("--force", is_flag=True, help="Replace an existing file that v2c did not write.")
+def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi, seed: int, force: bool) -> None:
     """Fit primitives to the scan folder SCAN: print type, axis class, parameters, inliers and RMS of each, and
     write them (camera frame, metres) as JSON."""
     from v2c.fit import FitConfig, fit_scan
+    from v2c.io_safe import check_replaceable, write_text_atomic
     from v2c.scan import ScanError, load_scan
     from v2c.segment import segment
 
+    out = output or Path(scan_dir) / "fit.json"
+    check_replaceable(out, force)  # before the work, not after
     try:
         scan = load_scan(scan_dir, roi=roi)
         seg = segment(scan, method)
     except (ScanError, ValueError, OSError) as e:  # OSError: e.g. a segmenter's missing weights file
         raise click.ClickException(str(e)) from None
     res = fit_scan(scan, seg, FitConfig(seed=seed), ablation)
-    data = res.to_json()
+    from v2c.io_safe import v2c_origin
+
+    data = {"generator": f"{v2c_origin()} fit", **res.to_json()}  # first key: v2c knows the file as its own
     data.update({"scan": str(scan.path), "segmentation": method})
     click.echo(f"{len(res.primitives)} primitives, part size {1000 * res.scale:.1f} mm, ablation {ablation}, "
                f"{res.timings['total']:.2f} s")
@@ -69,7 +79,5 @@ def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi,
     for p in data["primitives"]:
         click.echo(f"  #{p['instance']:<3d} {p['type']:<8} axis {p['axis_label'] or '-':<2} "
                    f"inliers {p['inliers']:6d}  rms {1000 * p['rms_m']:.2f} mm  {_short_params(p)}")
-    out = output or Path(scan_dir) / "fit.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(data, indent=1))
+    write_text_atomic(out, json.dumps(data, indent=1))
     click.echo(f"wrote {out}")

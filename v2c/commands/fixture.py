@@ -6,8 +6,11 @@ from pathlib import Path
 
 import click
 
+from v2c.cli_support import max_pixels_option, roi_option
+
 
 @click.command("fixture")
+@max_pixels_option
 @click.argument("scan", type=click.Path(path_type=Path))
 @click.option("--kind", type=click.Choice(["corner", "pin", "cradle", "nest"]), required=True,
               help="corner: L block on a convex edge; pin: locating pin in a hole; cradle: U block under a "
@@ -26,8 +29,9 @@ import click
                    "Raise it to absorb reconstruction error.")
 @click.option("--part", "part", type=click.Choice(["reconstructed", "true", "none"]), default="reconstructed",
               show_default=True, help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).")
+@roi_option
 def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence: float, segmentation: str,
-            clearance: float | None, part: str) -> None:
+            clearance: float | None, part: str, roi: tuple[int, int, int, int] | None) -> None:
     """Design a fixture for SCAN (a scan folder, a VB-Rep JSON, or a STEP written by `v2c to-step`) and write
     <kind> STEP, STL and assembly STEP. A STEP input keeps its own frame.
 
@@ -47,11 +51,11 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
         params = dataclasses.replace(params, clearance=clearance)
     try:
         res = fixture_for_scan(scan, kind, out, frame=frame, min_confidence=min_confidence,
-                               segmentation=segmentation, part=part, params=params)
+                               segmentation=segmentation, part=part, params=params, roi=roi)
     except (ScanError, NoReferenceError, FileNotFoundError) as exc:
         raise click.ClickException(str(exc)) from None
     except ValueError as exc:
-        raise click.ClickException(f"{scan}: {exc}") from None
+        raise click.ClickException(str(exc) if str(scan) in str(exc) else f"{scan}: {exc}") from None
     fx = res.fixture
     ref = fx.reference
     what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f})" if hasattr(

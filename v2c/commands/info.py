@@ -6,6 +6,8 @@ from collections import Counter
 
 import click
 
+from v2c.cli_support import max_pixels_option
+
 
 def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
     from v2c.scan import ScanError, parse_roi
@@ -37,6 +39,8 @@ def describe_scan(scan) -> list[str]:
     else:
         depth_src = f"{depth_file.name if depth_file else 'depth.png'} x {scan.depth_scale:g} m/unit"
     lines.append(f"            source {depth_src}")
+    for note in getattr(scan, "notes", []):
+        lines.append(f"            note: {note}")
     lines.append(
         f"intrinsics  fx {scan.fx:.3f}  fy {scan.fy:.3f}  cx {scan.cx:.3f}  cy {scan.cy:.3f} px "
         f"(camera.json form: {scan.camera_format})"
@@ -84,6 +88,7 @@ def describe_scan(scan) -> list[str]:
 
 
 @click.command("info")
+@max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(file_okay=True, dir_okay=True, path_type=str))
 @click.option("--roi", callback=_roi_option, default=None, metavar="x0,y0,x1,y1",
               help="Region of interest in pixels (x1, y1 exclusive); restricts the valid pixels.")

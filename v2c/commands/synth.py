@@ -67,7 +67,7 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
               help="fill: the bounding sphere fills 0.3-0.7 of the image (as before); extent: the part's extent is "
                    "30-70 % of the smaller image side (SCAN_FORMAT.md).  [default: extent with --appearance "
                    "random, else fill]")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
             families: tuple[str, ...] | None, jobs: int, start: int, png_compression: int, preview: Path | None,
             print_share: float, appearance: str, framing: str | None, quiet: bool) -> None:

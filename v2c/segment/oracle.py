@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from v2c.errors import ScanError
 from v2c.labels import IGNORE
 from v2c.segment.types import Segmentation
 
@@ -16,7 +17,7 @@ def segment_oracle(scan) -> Segmentation:
     Raises ValueError when the scan has no ground truth.
     """
     if scan.gt is None:
-        raise ValueError(f"{scan.path}: oracle segmentation needs gt/ (a synthetic scan)")
+        raise ScanError(f"{scan.path}: oracle segmentation needs gt/ (a synthetic scan); use --segmentation learned")
     faces = np.asarray(scan.gt.faces).astype(np.int64)
     labels = np.asarray(scan.gt.labels).astype(np.int64)
     keep = (faces > 0) & (labels != IGNORE)

@@ -352,17 +352,18 @@ class VBRep:
         return cls.from_dict(json.loads(text))
 
     def save(self, path: str | Path) -> Path:
-        """Write the JSON to ``path`` (atomically: a temporary file renamed into place). Returns the path."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(self.to_json())
-        tmp.replace(path)
-        return path
+        """Write the JSON (UTF-8) to ``path`` atomically (`v2c.io_safe`: an exclusive temporary in the same folder,
+        renamed into place). Returns the path."""
+        from v2c.io_safe import write_text_atomic
+
+        return write_text_atomic(Path(path), self.to_json())
 
     @classmethod
     def load(cls, path: str | Path) -> VBRep:
         path = Path(path)
         try:
-            return cls.from_json(path.read_text())
-        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            return cls.from_json(path.read_text(encoding="utf-8"))
+        except RecursionError:
+            raise ValueError(f"{path}: not a valid VB-Rep JSON (nested too deeply)") from None
+        except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError) as exc:
             raise ValueError(f"{path}: not a valid VB-Rep JSON ({exc})") from exc
