@@ -42,7 +42,7 @@ EDGE_TYPES = tuple(EDGE_COLORS)
 MARK = "V2C_FREECAD_IMPORT "
 
 _ENTITY = re.compile(r"#(\d+)\s*=\s*(.*?);\s*(?=#\d+\s*=|ENDSEC;)", re.DOTALL)
-_NAME = re.compile(r"^(intersection|visibility|occluded|silhouette):([0-9.]+):e(\d+)$")
+_NAME = re.compile(r"^(intersection|visibility|occluded|silhouette):([0-9.]+):e(\d+)(?::tangent)?$")
 
 
 class TypedEdgeRecord:

@@ -26,7 +26,8 @@ SCRIPT = Path(fci.__file__)
 
 def _broken_box():
     vb = box_corner()
-    vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]  # edges 3 and 4 become free edges
+    vb.faces[0].mesh_triangles = vb.faces[0].mesh_triangles[:0]  # face 0 cannot be built: edges 3, 4 are free
+    vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]
     return vb
 
 
