@@ -20,7 +20,7 @@ coax_max_splits levels.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -28,10 +28,10 @@ from scipy.optimize import least_squares
 
 from v2c.fit.config import FitConfig
 from v2c.fit.points import backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import ransac_fit
+from v2c.fit.ransac import RansacFit, ransac_fit, select_type, supported
 from v2c.groups import groups_sharing_keys
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
-from v2c.primitives import Cylinder
+from v2c.primitives import Cylinder, Plane
 from v2c.primitives.directions import tangent_basis
 from v2c.segment.types import Segmentation
 
@@ -285,13 +285,35 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
 
 
+def _flat(i: int, x: np.ndarray, nrm: np.ndarray, off: float, labels: np.ndarray, size: float, cfg: RefineConfig,
+          rng: np.random.Generator, normals: np.ndarray) -> bool:
+    """True when instance ``i`` (points ``x``, metres; its plane n.x = off), whose label is not a plane, is flat:
+    its plane explains it within flat_sigma sensor sigmas (robust residual sigma), and a fit of its label's type
+    does not earn its curvature (`fit.ransac.supported` and GRIC against the plane, with the sensor's noise
+    model; ``normals`` (N, 3) the points' depth-gradient normals): a true shallow cone or a wide fillet keeps
+    its own face."""
+    sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
+    if 1.4826 * np.median(np.abs(x @ nrm - off)) > cfg.flat_sigma * sigma:
+        return False
+    ptype = TYPE_NAMES[int(TYPE_OF_LABEL[int(labels[i])])]
+    if ptype not in ("cylinder", "cone", "sphere", "torus") or len(x) < 6:
+        return True
+    fit_cfg = replace(FitConfig(), noise_sigma_coeff=cfg.noise_sigma_coeff)
+    got = ransac_fit(ptype, x, normals, size, fit_cfg, rng)
+    if got is None or not supported(got.primitive, x[got.inliers] if got.inliers.sum() >= 3 else x, fit_cfg):
+        return True
+    plane = RansacFit(Plane(off * nrm, nrm), np.ones(len(x), bool), 1.0)
+    return select_type({"plane": plane, ptype: got}, x, size, fit_cfg) == "plane"
+
+
 def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
                    geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
     """``seg`` with adjacent plane instances merged where they lie on one plane (normals within merge_angle_deg,
     each one's points within merge_tol_part part sizes of the other's plane, median): the network cut a face where
     it saw a print edge, a shadow or noise, sometimes with two axis classes. With merge_flat, instances of other
-    labels whose own plane explains their points within flat_sigma sensor sigmas take part too (printed art: on
-    real frames the network calls pieces of a box side cylinders and cones). The merged instance keeps the
+    labels take part too where they are flat (`_flat`: their own plane explains them within flat_sigma sensor
+    sigmas and their label's type does not earn its curvature; printed art: on real frames the network calls
+    pieces of a box side cylinders and cones). The merged instance keeps the
     largest plane-labelled piece's label and score. Only touching instances (4-neighbour pixel pairs)."""
     inst = np.asarray(seg.instances).astype(np.int32)
     valid = (np.asarray(depth) > 0) & (inst > 0)
@@ -315,9 +337,10 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
         x = pts[valid & (inst == i)]
         if len(x) >= max(cfg.merge_min_px, 3) and (is_plane[i] or len(x) >= cfg.flat_min_px):
             nrm, off = _plane_ransac(x, 0.5 * cfg.tol_part * size, cfg, rng)
-            if not is_plane[i]:  # another label: only where its own plane explains it within the sensor noise
-                sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-                if 1.4826 * np.median(np.abs(x @ nrm - off)) > cfg.flat_sigma * sigma:
+            if not is_plane[i]:
+                fc = FitConfig()
+                ip = instance_points(pts, valid, inst, np.array([i]), fc.normal_window_px, fc.normal_sobel_px)[int(i)]
+                if not _flat(i, ip.points, nrm, off, labels, size, cfg, rng, ip.normals):
                     continue
             planes[int(i)] = (nrm, off, x)
     cos_min = np.cos(np.deg2rad(cfg.merge_angle_deg))
