@@ -221,3 +221,31 @@ def test_three_coaxial_sections_are_split_at_both_steps() -> None:
     assert set(out.labels[1:].tolist()) == {label_of("cylinder", "X")}
     old = split_coaxial_steps(seg, depth, K, RefineConfig(coax_clip_mad=0.0))
     assert matched(old) == 1
+
+
+def test_flat_piece_with_a_curved_label_merges_and_a_curved_piece_does_not() -> None:
+    """Printed art: a piece of one tilted plane (sensor noise, sigma = 0.0015 z^2 = 0.4 mm at 0.5 m) that the
+    network calls a cylinder merges into its plane, and the merged face is a plane; the same piece bent into a
+    150 mm radius cylinder across its whole 200 mm width (off the plane by up to 38 mm) stays apart."""
+    from v2c.segment.refine import merge_coplanar
+
+    rng = np.random.default_rng(4)
+    flat = _tilted_plane(rng, 0.0015 * 0.5**2)
+    inst = np.ones((H, W), np.int32)
+    inst[:, 80:] = 2
+    labels = np.array([0, PLANE_Z, CYL_Z], np.uint8)
+    seg = Segmentation(inst, labels, np.array([0, 0.9, 0.85], np.float32), "learned")
+    out = merge_coplanar(seg, flat, K, RefineConfig())
+    assert out.num_instances == 1 and list(out.labels) == [0, PLANE_Z]
+    # the other side bent: a cylinder of radius 150 mm whose axis runs along the image rows, bulging towards the
+    # camera over columns 80-159 (x = 0 to 0.2 m at 0.5 m)
+    u = np.arange(W, dtype=float)[None, :].repeat(H, 0)
+    x = (u - K[0, 2]) / K[0, 0] * flat
+    bump = np.sqrt(np.maximum(0.15**2 - (x - 0.1) ** 2, 0.0)) - np.sqrt(0.15**2 - 0.1**2)
+    curved = np.where(u >= 80, flat - bump, flat)
+    out = merge_coplanar(seg, curved, K, RefineConfig())
+    assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, CYL_Z]
+    # and a group of flat pieces none of which is labelled plane becomes a plane of no axis class
+    both = Segmentation(inst, np.array([0, CYL_Z, label_of("cone", "Z")], np.uint8), seg.scores, "learned")
+    out = merge_coplanar(both, flat, K, RefineConfig())
+    assert out.num_instances == 1 and list(out.labels) == [0, label_of("plane", "U")]

@@ -60,8 +60,9 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
               help="Folder of generated scans (default $V2C_BENCH_CACHE or ~/.cache/v2c/bench).")
 @click.option("--no-step", is_flag=True, help="Skip the (timed) STEP export of every reconstruction.")
 @click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
-              help="Instead: run to-step on the real frames in DIR with the regions of interest of --rois and "
-                   "report box angles and can radii.")
+              help="Instead: reconstruct the real frames in DIR with the regions of interest of --rois, every "
+                   "--segmentation method, and report faces per side, box angles, can radii, depth RMS, the "
+                   "share of object pixels within 3 mm of the STEP, runtime (docs/bench.md).")
 @click.option("--rois", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="ROI file for --real (default: v2c/bench/real_rois.json).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
@@ -107,9 +108,10 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     from v2c.bench import run
 
     if real_dir is not None:
-        report = run.real_frames_report(real_dir, rois or run.DEFAULT_ROIS, segmentation[0], out_dir,
-                                        progress=not quiet)
-        click.echo(run.format_real_table(report))
+        from v2c.bench import real
+
+        report = real.real_bench(real_dir, rois or run.DEFAULT_ROIS, segmentation, out_dir, progress=not quiet)
+        click.echo(real.format_table(report))
         click.echo(f"outputs in {report['out_dir']}")
         _write_json(json_out, report)
         return

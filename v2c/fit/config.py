@@ -50,6 +50,22 @@ class FitConfig:
     complexity_penalty: float = 0.02    # "inliers" rule: inlier-fraction penalty per parameter (fraction)
     gric_trunc: float = 4.0             # GRIC: squared residuals are truncated at this many sigma^2 (ratio)
     gric_min_sigma: float = 0.0005      # GRIC: floor of the noise level (part-size units)
+    # -- model selection against near-degenerate primitives (ransac.curvature_support, docs/geometry.md) ---------
+    noise_sigma_coeff: float = 0.0015   # depth noise sigma = this * z^2 (1/m, z in metres): the D4xx model of the
+                                        # synthetic `sensor` profile (synth.noise.SensorNoise.sigma_coeff_per_m);
+                                        # used as a per-point floor of GRIC's sigma and by the sagitta test
+    support_extent_ratio: float = 3.0   # a curved fit whose radius exceeds this many times the patch's extent
+                                        # across its curvature is not supported by the patch: its normals turn by
+                                        # less than 2 asin(1 / (2 ratio)) = 19.2 degrees over it (ratio); a plane
+    support_sagitta_sigma: float = 2.0  # nor is one departing from its own best plane by less than this many
+                                        # depth sigmas (the sagitta, in noise units; ratio) ...
+    support_sagitta_turn_deg: float = 75.0  # ... while its normals turn by less than this over the patch (degrees):
+                                        # most of a quarter circle is curvature however shallow (a fillet a few
+                                        # pixels wide); a noisy fit of a shallow arc turns by up to ~55 degrees
+    support_trim_pct: float = 2.0       # percentiles trimmed at each end for the turn and the sagitta (%)
+    support_label_certain: float = 0.999  # a curved label at least this probable (the oracle's ground truth: 1)
+                                        # is kept even where its patch cannot show the curvature: certainty about
+                                        # the type outweighs any evidence of the points ([0, 1])
     seed: int = 0                       # seed of all random sampling
 
     # -- global aligned fit (shared frame R) ----------------------------------------------------------------------

@@ -16,7 +16,17 @@ from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.points import InstancePoints, backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import cone_ok, fit_instance, inlier_mask, plausible, torus_ok
+from v2c.fit.ransac import (
+    RansacFit,
+    cone_ok,
+    fit_instance,
+    inlier_mask,
+    plausible,
+    ransac_fit,
+    select_type,
+    supported,
+    torus_ok,
+)
 from v2c.fit.result import ABLATIONS, FitResult
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive
@@ -129,6 +139,7 @@ class _Fits:
     weights: dict[int, float] = field(default_factory=dict)
     inliers: dict[int, np.ndarray] = field(default_factory=dict)
     searched: list[int] = field(default_factory=list)
+    scores: dict[int, float] = field(default_factory=dict)  # label confidence of each instance ([0, 1])
 
 
 def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale: float,
@@ -147,8 +158,44 @@ def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale:
             out.searched.append(i)
             ax = None if got_type == "sphere" else ax
         out.prims[i] = _canonical(f.primitive, ip.points[f.inliers])
+        out.scores[i] = float(seg.scores[i]) if i < len(seg.scores) else 0.0
         out.want[i], out.weights[i], out.inliers[i] = ax, float(np.count_nonzero(f.inliers)), f.inliers
     return out
+
+
+def _planes_where_unsupported(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[int, int | None],
+                              frame: np.ndarray, use_frame: bool, scale: float, config: FitConfig) -> None:
+    """Curved labels their patch does not support (`ransac.supported`: a radius beyond support_extent_ratio
+    patch extents, or a sagitta under the sensor noise), or whose fit does not beat a plane's by GRIC with the
+    sensor's noise model (`ransac.select_type`: a loose RANSAC inlier band lets a bent fit through), become
+    planes, in place. Checked after the axis test, so
+    a true cylinder whose free RANSAC axis was off is judged with the part frame's axis. The plane joins the
+    frame only when its normal lies within snap_deg of a frame axis (the label's axis class named the
+    cylinder's axis, not a plane normal). Certain labels (score >= support_label_certain: the oracle's) stay."""
+    for i in sorted(fits.prims):  # loop over instances
+        p, ip = fits.prims[i], ipts[i]
+        if isinstance(p, Plane) or i in fits.searched or fits.scores.get(i, 0.0) >= config.support_label_certain:
+            continue
+        f = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 3]))
+        if f is None:
+            continue
+        if supported(p, ip.points[fits.inliers[i]], config) and select_type(
+                {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config) != "plane":
+            continue
+        q = _canonical(f.primitive, ip.points[f.inliers] if f.inliers.any() else ip.points)
+        axis_idx[i] = -1
+        cos = np.abs(frame @ q.axis_vector)
+        k = int(np.argmax(cos))
+        if cos[k] > np.cos(np.deg2rad(config.snap_deg)):
+            axis_idx[i] = k
+            if use_frame:
+                q = _canonical(fit_with_axis(q, ip.points, ip.normals, frame[k] * (np.sign(q.axis_vector @ frame[k])
+                                                                                    or 1.0), scale, config),
+                               ip.points)
+        fits.prims[i] = q
+        fits.inliers[i] = _inliers(q, ip, scale, config)
+        fits.want[i] = "?"
+        fits.searched.append(i)
 
 
 def _joint_terms(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[int, int | None],
@@ -182,12 +229,13 @@ def _keep_plausible(new: list[Primitive], old: list[Primitive], terms: list[Term
                     scale: float, config: FitConfig) -> list[Primitive]:
     """A joint solve has no bounds: a primitive it drove out of range (cone half angle beyond 90 degrees or a cone
     wider than max_radius at its points, negative radius, a torus outside its data-derived radius bounds
-    `ransac.torus_limits`) goes back to its value before the solve, its axis re-set from the current frame when
-    aligned."""
+    `ransac.torus_limits`, a curvature its points no longer support, `ransac.supported`) goes back to its value
+    before the solve, its axis re-set from the current frame when aligned."""
     out = []
     for p, q, tm in zip(new, old, terms, strict=True):
         if (p.is_finite() and plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2)
-                and cone_ok(p, tm.points, scale, config)):
+                and cone_ok(p, tm.points, scale, config)
+                and (supported(p, tm.points, config) or not supported(q, tm.points, config))):
             out.append(p)
         elif tm.axis_index is not None and tm.axis_index >= 0:
             out.append(q.from_local(np.zeros(q.local_size), tm.axis_sign * frame[tm.axis_index]))
@@ -247,6 +295,7 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
             if p is not fits.prims[i]:
                 fits.prims[i] = p
                 fits.inliers[i] = _inliers(p, ipts[i], scale, config)
+    _planes_where_unsupported(fits, ipts, axis_idx, frame, use_frame, scale, config)
     order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
     prims = [tm.prim for tm in terms]
     if ablation != "fit-only":

@@ -20,7 +20,7 @@ coax_max_splits levels.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -28,10 +28,10 @@ from scipy.optimize import least_squares
 
 from v2c.fit.config import FitConfig
 from v2c.fit.points import backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import ransac_fit
+from v2c.fit.ransac import RansacFit, ransac_fit, select_type, supported
 from v2c.groups import groups_sharing_keys
-from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL
-from v2c.primitives import Cylinder
+from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
+from v2c.primitives import Cylinder, Plane
 from v2c.primitives.directions import tangent_basis
 from v2c.segment.types import Segmentation
 
@@ -67,6 +67,13 @@ class RefineConfig:
     merge_tol_part: float = 0.01  # ... and each one's points within this median distance of the other's plane
     #                                (part-size units)
     merge_min_px: int = 8  # instances with fewer valid pixels take part with a plane through their points (pixels)
+    merge_flat: bool = True  # instances of any label take part in the merge where one plane explains their points
+    # within the sensor's noise (printed art cut a box side into pieces the network calls cylinders and cones)
+    flat_sigma: float = 1.5  # ... robust residual sigma (1.4826 MAD) of their plane within this many sensor sigmas
+    # (ratio) ...
+    flat_min_px: int = 30  # ... and at least this many valid pixels (pixels)
+    noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): FitConfig's, the
+    # synthetic `sensor` profile's D4xx model
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
     sample_points: int = 800  # points scoring them (count)
     seed: int = 0
@@ -278,12 +285,36 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
 
 
+def _flat(i: int, x: np.ndarray, nrm: np.ndarray, off: float, labels: np.ndarray, size: float, cfg: RefineConfig,
+          rng: np.random.Generator, normals: np.ndarray) -> bool:
+    """True when instance ``i`` (points ``x``, metres; its plane n.x = off), whose label is not a plane, is flat:
+    its plane explains it within flat_sigma sensor sigmas (robust residual sigma), and a fit of its label's type
+    does not earn its curvature (`fit.ransac.supported` and GRIC against the plane, with the sensor's noise
+    model; ``normals`` (N, 3) the points' depth-gradient normals): a true shallow cone or a wide fillet keeps
+    its own face."""
+    sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
+    if 1.4826 * np.median(np.abs(x @ nrm - off)) > cfg.flat_sigma * sigma:
+        return False
+    ptype = TYPE_NAMES[int(TYPE_OF_LABEL[int(labels[i])])]
+    if ptype not in ("cylinder", "cone", "sphere", "torus") or len(x) < 6:
+        return True
+    fit_cfg = replace(FitConfig(), noise_sigma_coeff=cfg.noise_sigma_coeff)
+    got = ransac_fit(ptype, x, normals, size, fit_cfg, rng)
+    if got is None or not supported(got.primitive, x[got.inliers] if got.inliers.sum() >= 3 else x, fit_cfg):
+        return True
+    plane = RansacFit(Plane(off * nrm, nrm), np.ones(len(x), bool), 1.0)
+    return select_type({"plane": plane, ptype: got}, x, size, fit_cfg) == "plane"
+
+
 def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
                    geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
     """``seg`` with adjacent plane instances merged where they lie on one plane (normals within merge_angle_deg,
     each one's points within merge_tol_part part sizes of the other's plane, median): the network cut a face where
-    it saw a print edge, a shadow or noise, sometimes with two axis classes. The merged instance keeps the largest
-    piece's label and score. Only touching instances (4-neighbour pixel pairs)."""
+    it saw a print edge, a shadow or noise, sometimes with two axis classes. With merge_flat, instances of other
+    labels take part too where they are flat (`_flat`: their own plane explains them within flat_sigma sensor
+    sigmas and their label's type does not earn its curvature; printed art: on real frames the network calls
+    pieces of a box side cylinders and cones). The merged instance keeps the
+    largest plane-labelled piece's label and score. Only touching instances (4-neighbour pixel pairs)."""
     inst = np.asarray(seg.instances).astype(np.int32)
     valid = (np.asarray(depth) > 0) & (inst > 0)
     if not (cfg.enabled and cfg.merge) or not valid.any():
@@ -296,15 +327,21 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
                             np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)])
     pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
     pairs = np.unique(np.sort(pairs, axis=1), axis=0)
-    pairs = pairs[is_plane[pairs[:, 0]] & is_plane[pairs[:, 1]]]
+    if not cfg.merge_flat:
+        pairs = pairs[is_plane[pairs[:, 0]] & is_plane[pairs[:, 1]]]
     if not len(pairs):
         return seg
     rng = np.random.default_rng(cfg.seed)
     planes: dict[int, tuple[np.ndarray, float, np.ndarray]] = {}
     for i in np.unique(pairs):  # loop over candidate instances
         x = pts[valid & (inst == i)]
-        if len(x) >= max(cfg.merge_min_px, 3):
+        if len(x) >= max(cfg.merge_min_px, 3) and (is_plane[i] or len(x) >= cfg.flat_min_px):
             nrm, off = _plane_ransac(x, 0.5 * cfg.tol_part * size, cfg, rng)
+            if not is_plane[i]:
+                fc = FitConfig()
+                ip = instance_points(pts, valid, inst, np.array([i]), fc.normal_window_px, fc.normal_sobel_px)[int(i)]
+                if not _flat(i, ip.points, nrm, off, labels, size, cfg, rng, ip.normals):
+                    continue
             planes[int(i)] = (nrm, off, x)
     cos_min = np.cos(np.deg2rad(cfg.merge_angle_deg))
     keys: dict[int, list[int]] = {}
@@ -322,11 +359,17 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
     items = sorted(keys)
     lut = np.arange(len(labels), dtype=np.int32)
     area = np.bincount(inst.ravel(), minlength=len(labels))
+    out_labels, out_scores = np.array(labels), np.array(seg.scores)
     for group in groups_sharing_keys([keys[i] for i in items]):
         ids = [items[g] for g in group]
-        lut[ids] = max(ids, key=lambda j: (area[j], -j))  # the largest piece's label and score stand
+        # the largest plane-labelled piece's label and score stand (the largest piece's where none is a plane:
+        # then a merged group of flat pieces is a plane of no axis class, at that piece's score)
+        flat_ids = [j for j in ids if is_plane[j]] or ids
+        root = max(flat_ids, key=lambda j: (area[j], -j))
+        if not is_plane[root]:
+            out_labels[root] = label_of("plane", "U")
+        lut[ids] = root
     roots = np.unique(lut)  # ids 0..N renumbered without the merged ones (labels[k] is instance k's)
     compact = np.zeros(len(labels), np.int32)
     compact[roots] = np.arange(len(roots), dtype=np.int32)
-    return Segmentation(compact[lut[inst]], np.asarray(seg.labels)[roots], np.asarray(seg.scores)[roots],
-                        seg.method)
+    return Segmentation(compact[lut[inst]], out_labels[roots], out_scores[roots], seg.method)

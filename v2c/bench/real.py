@@ -1,0 +1,262 @@
+"""`v2c bench --real DIR`: the pipeline on the real RGB-D frames of ``DIR`` (../shared/data/real), each with the
+region of interest of ``real_rois.json`` around one box or can, measured against what is known of the objects.
+
+Per frame and segmentation method (``learned``, ``geometric``):
+
+- ``faces``: faces of the STEP file as written and read back (`exporters.step.read_typed`), and
+  ``faces_per_side``: that count over the object's visible surfaces (``visible_sides`` of real_rois.json, counted
+  by eye on color.png: a box shows 3 sides in every frame here, a can its side and top). Faces of other objects
+  inside the ROI (the cracker box's ROI holds the mustard bottle and the soup can) count too.
+- ``box``: ``largest_two_deg``, the angle (degrees) between the normals of the two largest planar faces (VB-Rep
+  mesh area) of distinct directions (a plane within 20 degrees of a larger one is a piece of the same side: printed
+  art splits sides into parallel pieces, which ``faces_per_side`` counts); ``largest_two_raw_deg`` the same for
+  the two largest planes whatever their direction; and `run.box_angles` (the three largest planes of distinct
+  directions, their largest deviation from 90 degrees).
+- ``can``: the radius of the largest cylindrical face (`run.can_radius`) against the published size.
+- ``depth_rms_mm``: RMS distance (mm) from the points of the pixels the segmentation assigned to fitted faces to
+  their own face's surface (the unbounded primitive); ``depth_median_mm`` the median of the same distances.
+- ``coverage_3mm``: the share of the object's depth pixels within ``near_mm`` (3 mm) of a face of the STEP file
+  as written (camera frame, mm) and read back through OCCT. The object's pixels are *not* the segmentation's: they
+  are the ROI's valid depth pixels standing more than `GeometricConfig.min_height_m` above the RANSAC ground plane
+  (`segment.geometric.part_region`, a depth heuristic: no face assignment involved, so pixels the segmentation
+  dropped count as misses). ``coverage_3mm_faces``: the same share over the pixels the segmentation assigned to
+  faces. Distances: the read-back shape is tessellated (`synth.occ.tessellate`), each point's nearest mesh
+  vertex (KD-tree) decides where it is clearly inside (< near) or clearly outside (> near + the longest triangle
+  edge), and the exact point-to-triangle distance (trimesh) decides the rest.
+- ``seconds``: wall time of load + reconstruction + STEP write (the read-back, figure and metrics are not
+  counted), ``cpu_seconds`` the CPU time of this process over the same span (steadier on a shared machine); ``process_start_s`` (once per run): a fresh interpreter importing the pipeline and loading the model
+  (`run.process_start_seconds`), so a frame from the command line costs ``seconds + process_start_s``.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from v2c.bench.run import DEFAULT_ROIS, _error_text, _face_area, _jsonable, box_angles, can_radius
+
+#: Distance (mm) within which an object pixel counts as explained by a STEP face.
+NEAR_MM = 3.0
+#: Linear deflection (mm) of the tessellation of the read-back STEP.
+DEFLECTION_MM = 0.2
+
+
+def load_frames(path: Path = DEFAULT_ROIS) -> dict[str, dict[str, Any]]:
+    """frame folder name -> {"roi", "object", "name", "expected", "visible_sides"} of ``path``."""
+    return json.loads(Path(path).read_text())["frames"]
+
+
+def step_mesh(step_path: Path, deflection_mm: float = DEFLECTION_MM) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (n, 3) mm, triangles (m, 3)) of every face of the STEP at ``step_path`` read back through OCCT
+    (`exporters.step.read_typed`), in the file's frame."""
+    from exporters.step import read_typed
+    from v2c.synth.occ import faces_of, tessellate
+
+    shape = read_typed(step_path).shape
+    fm = tessellate(shape, faces_of(shape), deflection_mm, 0.2)
+    return fm.vertices, fm.triangles
+
+
+def distances_to_mesh(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
+                      near: float) -> np.ndarray:
+    """(N,) distances from ``points`` to the mesh (units of the inputs), each one exact or an upper bound, such
+    that ``distance < near`` is exactly the true test: the nearest vertex (of the mesh subdivided to edges of at
+    most near / 2) bounds the distance from above, and from below by its value minus the longest edge; points
+    whose bounds straddle ``near`` go through trimesh's exact closest point."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, float)
+    if len(pts) == 0 or len(triangles) == 0:
+        return np.full(len(pts), np.inf)
+    # densify long triangles so that the vertex bound is tight (thin faces have long edges)
+    v, t = trimesh.remesh.subdivide_to_size(vertices, triangles, max_edge=max(near / 2, 1e-9), max_iter=12)
+    d_vert, _ = cKDTree(v).query(pts)
+    edge = float(np.max(np.linalg.norm(v[t] - v[np.roll(t, 1, axis=1)], axis=2)))
+    out = d_vert.copy()
+    unsure = (d_vert >= near) & (d_vert - edge < near)
+    if unsure.any():
+        mesh = trimesh.Trimesh(v, t, process=False)
+        _, d, _ = trimesh.proximity.closest_point(mesh, pts[unsure])
+        out[unsure] = d
+    return out
+
+
+def _surface_distances(points: np.ndarray, inst: np.ndarray, fit: Any) -> np.ndarray:
+    """Distances (m) of the face pixels' points to their own fitted primitive (camera frame)."""
+    out = []
+    for i, prim in fit.primitives.items():
+        m = inst == i
+        if m.any():
+            out.append(np.abs(prim.signed_distance(points[m])))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir: Path,
+                  near_mm: float = NEAR_MM) -> dict[str, Any]:
+    """Reconstruct one frame with its ROI, write its STEP (camera frame) and figure into ``out_dir``, read the STEP
+    back and measure it (module docstring). Raises whatever the pipeline raises."""
+    from exporters import step as step_export
+    from exporters.figure import result_figure
+    from v2c import pipeline
+    from v2c.scan import backproject, load_scan
+    from v2c.segment.geometric import GeometricConfig, part_region
+
+    stem = f"{folder.name}_{segmentation}"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0, c0 = time.perf_counter(), time.process_time()
+    scan = load_scan(folder, roi=tuple(spec["roi"]))
+    vbrep, seg, fit = pipeline.reconstruct(scan, segmentation=segmentation, return_stages=True)
+    step_path = out_dir / f"{stem}.step"
+    report = step_export.write(vbrep, step_path, frame="camera", product=stem)
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    entry: dict[str, Any] = {"ok": True, "error": None, "seconds": seconds, "cpu_seconds": cpu,
+                             "step": str(step_path),
+                             "stage_seconds": vbrep.meta.get("timings", {}), "warnings": list(report.warnings)}
+    try:
+        figure = out_dir / f"{stem}.png"
+        result_figure(scan, seg.instances, vbrep, figure)
+        entry["figure"] = str(figure)
+    except Exception as exc:  # noqa: BLE001 - a figure is a convenience: the measurement stands without it
+        entry["warnings"].append(f"figure not written ({_error_text(exc)})")
+
+    from exporters.step import read_typed
+
+    typed = read_typed(step_path)
+    n_sides = spec.get("visible_sides")
+    entry["faces"] = len(typed.faces)
+    entry["faces_per_side"] = len(typed.faces) / n_sides if n_sides else None
+    entry["face_types"] = {t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
+                           for t_ in ("plane", "cylinder", "cone", "sphere", "torus")}
+    if spec["object"] == "box":
+        planes = sorted((f for f in vbrep.faces if f.primitive.get("type") == "plane"), key=_face_area,
+                        reverse=True)
+        box = box_angles(vbrep)
+        # the two largest planes of distinct directions (box_angles' first pair): printed art splits a box side
+        # into parallel pieces, counted by faces_per_side; the raw two largest planes are kept too
+        box["largest_two_deg"] = box["pairs"][0]["angle_deg"] if box["pairs"] else float("nan")
+        if len(planes) >= 2:
+            n0, n1 = (np.asarray(f.primitive["params"]["normal"], float) for f in planes[:2])
+            cos = abs(float(n0 @ n1) / (np.linalg.norm(n0) * np.linalg.norm(n1)))
+            box["largest_two_raw_deg"] = float(np.degrees(np.arccos(min(1.0, cos))))
+        else:
+            box["largest_two_raw_deg"] = float("nan")
+        entry["box"] = box
+    else:
+        can = can_radius(vbrep)
+        exp = spec.get("expected", {}).get("radius_mm")
+        if exp:
+            can["error_pct"] = 100.0 * (can["radius_mm"] - float(exp)) / float(exp)
+        entry["can"] = can
+
+    pts = backproject(scan.depth, scan.K)
+    inst = np.asarray(seg.instances)
+    d_fit = _surface_distances(pts, inst, fit)
+    entry["depth_rms_mm"] = float(1000 * np.sqrt(np.mean(d_fit**2))) if len(d_fit) else float("nan")
+    entry["depth_median_mm"] = float(1000 * np.median(d_fit)) if len(d_fit) else float("nan")
+
+    obj = part_region(scan, GeometricConfig())[0]
+    faces_px = (inst > 0) & scan.valid & np.isin(inst, list(fit.primitives))
+    verts, tris = step_mesh(step_path)
+    sel = obj | faces_px
+    d = distances_to_mesh(1000.0 * pts[sel], verts, tris, near_mm)
+    dmap = np.full(inst.shape, np.inf)
+    dmap[sel] = d
+    entry["object_px"] = int(obj.sum())
+    entry["coverage_3mm"] = float(np.mean(dmap[obj] < near_mm)) if obj.any() else float("nan")
+    entry["coverage_3mm_faces"] = float(np.mean(dmap[faces_px] < near_mm)) if faces_px.any() else float("nan")
+    return entry
+
+
+def real_bench(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentations: tuple[str, ...] = ("learned",),
+               out_dir: Path | None = None, progress: bool = True, start: bool = True) -> dict[str, Any]:
+    """Every frame of ``rois_path`` found in ``data_dir``, with every segmentation method: `measure_frame`, a
+    frame that fails reported with its error. ``start``: also measure the process start once."""
+    from tqdm import tqdm
+
+    from v2c.bench.run import process_start_seconds
+
+    frames_spec = load_frames(rois_path)
+    out_dir = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="v2c-real-"))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+    jobs = [(name, spec, m) for m in segmentations for name, spec in frames_spec.items()]
+    for name, spec, method in tqdm(jobs, desc="real", unit="frame", disable=not progress):
+        folder = Path(data_dir) / name
+        row: dict[str, Any] = {"frame": name, "segmentation": method, "object": spec["object"],
+                               "name": spec.get("name"), "roi": spec["roi"], "expected": spec.get("expected", {}),
+                               "visible_sides": spec.get("visible_sides")}
+        rows.append(row)
+        if not folder.is_dir():
+            row.update(ok=False, error=f"{folder}: not found")
+            continue
+        t = time.perf_counter()
+        try:
+            row.update(measure_frame(folder, spec, method, out_dir))
+        except Exception as exc:  # noqa: BLE001 - the report says which frame failed and why
+            row.update(ok=False, error=_error_text(exc), seconds=time.perf_counter() - t)
+    summary = {m: _summary([r for r in rows if r["segmentation"] == m]) for m in segmentations}
+    start_s = process_start_seconds(list(segmentations)) if start else float("nan")
+    return _jsonable({"data_dir": str(data_dir), "segmentations": list(segmentations), "out_dir": str(out_dir),
+                      "near_mm": NEAR_MM, "process_start_s": start_s, "frames": rows, "summary": summary})
+
+
+def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = [r for r in rows if r.get("ok")]
+    boxes = [r for r in ok if r["object"] == "box"]
+    cans = [r for r in ok if r["object"] == "can" and r["expected"].get("radius_mm")]
+
+    def mean(v: list[float]) -> float:
+        v = [x for x in v if x is not None and np.isfinite(x)]
+        return float(np.mean(v)) if v else float("nan")
+
+    return {"frames": len(rows), "failed": len(rows) - len(ok),
+            "faces_per_side": mean([r["faces_per_side"] for r in ok if r.get("faces_per_side")]),
+            "box_angle_error_deg": mean([abs(90.0 - r["box"]["largest_two_deg"]) for r in boxes]),
+            "can_radius_error_pct": mean([abs(r["can"].get("error_pct", float("nan"))) for r in cans]),
+            "coverage_3mm": mean([r["coverage_3mm"] for r in ok]),
+            "depth_rms_mm": mean([r["depth_rms_mm"] for r in ok]),
+            "seconds_median": float(np.median([r["seconds"] for r in ok])) if ok else float("nan"),
+            "cpu_seconds_median": float(np.median([r["cpu_seconds"] for r in ok])) if ok else float("nan")}
+
+
+def _f(v: Any, fmt: str = ".1f") -> str:
+    return "" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, fmt)
+
+
+def format_table(report: dict[str, Any]) -> str:
+    """Markdown table of `real_bench`, one row per frame and method, then a summary line per method."""
+    lines = [("| frame | object | seg. | faces | faces/side | measured | expected | depth RMS mm | "
+              "within 3 mm (object / faces) | s (CPU s) |"),
+             "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | ---: |"]
+    for r in report["frames"]:
+        if not r.get("ok"):
+            meas, exp = f"error: {r.get('error')}", ""
+        elif r["object"] == "box":
+            b = r["box"]
+            meas = f"two largest planes {_f(b['largest_two_deg'])} deg (3 planes: max error " \
+                   f"{_f(b['max_error_deg'])}; any direction {_f(b.get('largest_two_raw_deg'))})"
+            exp = "90 deg"
+        else:
+            c = r["can"]
+            rad = r["expected"].get("radius_mm")
+            meas = f"radius {_f(c['radius_mm'])} mm" + (f" ({_f(c.get('error_pct'), '+.1f')} %)" if rad else "")
+            exp = f"{rad:.1f} mm" if rad else ""
+        cov = f"{_f(100 * r['coverage_3mm'])} / {_f(100 * r['coverage_3mm_faces'])} %" if r.get("ok") else ""
+        lines.append(f"| {r['frame']} | {r['object']} | {r['segmentation']} | {r.get('faces', '')} | "
+                     f"{_f(r.get('faces_per_side'))} | {meas} | {exp} | {_f(r.get('depth_rms_mm'), '.2f')} | "
+                     f"{cov} | {_f(r.get('seconds'))} ({_f(r.get('cpu_seconds'))}) |")
+    for m, s in report["summary"].items():
+        lines.append("")
+        lines.append(f"{m}: {s['frames'] - s['failed']} of {s['frames']} frames ok; faces per visible side "
+                     f"{_f(s['faces_per_side'], '.2f')}; box angle error {_f(s['box_angle_error_deg'])} deg; can "
+                     f"radius error {_f(s['can_radius_error_pct'])} %; within {report['near_mm']:g} mm "
+                     f"{_f(100 * s['coverage_3mm'])} %; depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
+                     f"{_f(s['seconds_median'])} s ({_f(s['cpu_seconds_median'])} CPU s) per frame + "
+                     f"{_f(report['process_start_s'])} s process start")
+    return "\n".join(lines)
