@@ -213,9 +213,15 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
     cmd = [sys.executable, "-m", "v2c", "to-step", str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"),
            "--segmentation", "oracle", "--force"]  # --force: the old set is a stand-in, not v2c's
     outcomes = []
-    # from 2 s on: in its first ~0.1 s (longer on a loaded machine) the interpreter is still starting, before any
-    # v2c code can catch the signal (measured: silent death by SIGINT, or Python's own KeyboardInterrupt trace)
-    for delay in (2.0, 3.0, 4.5, 6.0):
+    # The moments are fractions of this run's own duration, measured first without a signal: a fixed schedule
+    # (2-6 s) missed the whole run on an idle machine, where the tiny scan takes under 2 s. Not before 0.3 s: in its
+    # first ~0.1 s (longer on a loaded machine) the interpreter is still starting, before any v2c code can catch
+    # the signal (measured: silent death by SIGINT, or Python's own KeyboardInterrupt trace).
+    t0 = time.perf_counter()
+    first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert first.returncode == 0, first.stdout + first.stderr
+    total = time.perf_counter() - t0
+    for delay in [max(0.3, f * total) for f in (0.35, 0.55, 0.75, 0.9)]:
         before = _old_set(out)
         p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         time.sleep(delay)
