@@ -88,13 +88,16 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
                    "LEAVE_OUT_FAMILIES of v2c.synth.features when it exists).")
 @click.option("--family-scans", default=14, show_default=True, type=click.IntRange(1),
               help="--suite unseen: scans per leave-out family.")
+@click.option("--reliability", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the reliability diagram (PNG) of the first column's edge confidences here: share of "
+                   "edges whose type is right against their confidence, raw and calibrated, ECE in the legend.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
             cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
             out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool, suite: str,
             views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
-            family_scans: int, quiet: bool) -> None:
+            family_scans: int, reliability: Path | None, quiet: bool) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md). ``--suite unseen`` measures parts nothing
@@ -117,7 +120,7 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
                ablation=tuple(a for a in order if a in ablation), cad_dir=cad_dir, size=size, json_out=json_out,
                jobs=jobs, scans_dir=scans_dir, cache_dir=cache_dir, no_step=no_step, figure_dir=figure_dir,
                weights=weights, seg_only=seg_only, views=views, corpus_dir=corpus_dir, parts=parts,
-               unseen_families=unseen_families, family_scans=family_scans, quiet=quiet)
+               unseen_families=unseen_families, family_scans=family_scans, reliability=reliability, quiet=quiet)
         return
     cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
                           ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
@@ -134,14 +137,26 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     click.echo(what)
     click.echo(run.format_table(result))
     click.echo(run.format_notes(result))
+    _reliability(reliability, result, f"in-family bench, seed {seed}, {len(result['scans'])} scans")
     _write_json(json_out, result)
+
+
+def _reliability(path: Path | None, result: dict, title: str) -> None:
+    """The reliability diagram of the first column's rows (`v2c.bench.run.write_reliability`)."""
+    if path is None:
+        return
+    from v2c.bench import run
+
+    col = result["columns"][0]
+    rows = [r for r in result["rows"] if f"{r['segmentation']}/{r['ablation']}" == col]
+    click.echo(f"reliability diagram: {run.write_reliability(rows, path, f'{title}, {col}')}")
 
 
 def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
            cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
            cache_dir: Path | None, no_step: bool, figure_dir: Path | None, weights: Path | None, seg_only: bool,
            views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
-           family_scans: int, quiet: bool) -> None:
+           family_scans: int, reliability: Path | None, quiet: bool) -> None:
     """``--suite unseen`` / ``corpus-val``: `v2c.bench.suite.run_and_report`."""
     from v2c.bench import run
     from v2c.bench import suite as S
@@ -162,6 +177,7 @@ def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], 
         result = S.run_and_report(cfg, progress=not quiet, echo=click.echo)
     except ValueError as e:
         raise click.ClickException(str(e)) from None
+    _reliability(reliability, result, f"suite {suite}, seed {seed}, {len(result['scans'])} scans")
     _write_json(json_out, result)
 
 
