@@ -54,8 +54,17 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
         raise click.ClickException(f"{scan}: {exc}") from None
     fx = res.fixture
     ref = fx.reference
-    what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f})" if hasattr(
-        ref, "edge_id") else f"footprint ({len(ref.outlines)} outline(s))"
+    if hasattr(ref, "edge_id"):
+        # the chosen edge's figures: calibrated probability that it is a true edge, raw score, 1-sigma position
+        e = next((e for e in res.vbrep.edges if e.id == ref.edge_id), None)
+        extra = ""
+        if e is not None and e.confidence_raw is not None:
+            extra += f", raw score {e.confidence_raw:.2f}"
+        if e is not None and e.sigma_mm is not None:
+            extra += f", position 1-sigma {e.sigma_mm:.2f} mm"
+        what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f} = probability right{extra})"
+    else:
+        what = f"footprint ({len(ref.outlines)} outline(s))"
     click.echo(f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces")
     for p in (res.files.step, res.files.stl, res.files.assembly):
         click.echo(f"  {p}")
