@@ -147,6 +147,9 @@ def test_vbrep_json_carries_sigma_and_raw_confidence(heldout, tmp_path) -> None:
     assert len(sig) >= 0.8 * len(v.edges)
     # millimetres of the right magnitude for a part of ~0.2 m at ~0.6 m seen by 320 px: not microns, not metres
     assert 0.05 < float(np.median(sig)) < 10.0
+    # a face is at least as uncertain as the sensor's depth noise at its depth (0.0015 z^2, face-wide part)
+    fs = [f.sigma_mm for f in v.faces if f.sigma_mm is not None]
+    assert min(fs) >= 1000 * 0.0015 * 0.3**2
     assert all(f.sigma_mm is None or f.sigma_mm >= 0 for f in v.faces)
     p = v.save(tmp_path / "v.json")
     back = VBRep.load(p)
@@ -189,9 +192,14 @@ def test_sigma_grows_with_depth_noise() -> None:
     assert sig[0] < sig[1] < sig[2]
     # the sensor-noise floor: a fit residual below the sensor's noise at that depth does not shrink the sigma
     X = _plane_points(2000, 0.0)
-    floor = UncertaintyConfig(depth_sigma_coeff_per_m=0.0015)
+    sz = 0.0015 * 0.5**2  # metres: the sensor law's sigma at 0.5 m
+    floor = UncertaintyConfig(depth_sigma_coeff_per_m=0.0015, depth_correlated=0.0)
     s = face_sigma_m(face_covariance(plane, X, 0.0, floor), X)
-    assert s == pytest.approx(0.0015 * 0.25 / np.sqrt(2000), rel=0.1)
+    assert s == pytest.approx(sz / np.sqrt(2000), rel=0.1)
+    # ... and its face-wide part is not averaged out by the 2000 points
+    fc = face_covariance(plane, X, 0.0, UncertaintyConfig(depth_sigma_coeff_per_m=0.0015))
+    assert face_sigma_m(fc, X) == pytest.approx(np.hypot(sz / np.sqrt(2000), sz), rel=0.02)
+    assert fc.fit_sigma_at(X.mean(0)[None])[0] == pytest.approx(sz / np.sqrt(2000), rel=0.1)
 
 
 def test_intersection_sigma_combines_faces_and_angle() -> None:

@@ -112,6 +112,7 @@ class VBRepConfig:
     #   (v2c.vbrep.calibration): "shipped" = v2c/vbrep/confidence_calibration.json, a path, or None (raw)
     sigma_depth_coeff_per_m: float = 0.0015  # 1/m: depth noise sigma = coeff * z^2, a floor under the fit residual
     #   in the positional uncertainty (v2c.vbrep.uncertainty)
+    sigma_depth_correlated: float = 1.0  # fraction of that depth sigma common to a whole face (not averaged out)
     sigma_min_angle_deg: float = 5.0  # degrees: intersection angle floor of an edge's positional sigma
 
     seed: int = 0

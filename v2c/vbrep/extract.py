@@ -660,7 +660,7 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
         load_map(None if cfg.conf_calibration == "shipped" else cfg.conf_calibration)
     # positional uncertainty: each face's fit covariance from its observed points (v2c.vbrep.uncertainty)
     ucfg = UncertaintyConfig(depth_sigma_coeff_per_m=cfg.sigma_depth_coeff_per_m,
-                             min_angle_deg=cfg.sigma_min_angle_deg)
+                             depth_correlated=cfg.sigma_depth_correlated, min_angle_deg=cfg.sigma_min_angle_deg)
     face_pts = {i: measured_points(ctx.instances == i, ctx.depth, ctx.K) for i in inst_ids}
     covs = {i: face_covariance(ctx.faces[i].prim, face_pts[i], ctx.faces[i].residual, ucfg) for i in inst_ids}
     focal = float(np.sqrt(ctx.K[0, 0] * ctx.K[1, 1]))
