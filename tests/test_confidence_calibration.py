@@ -232,3 +232,39 @@ def test_cylinder_sigma_is_finite_despite_its_free_turn() -> None:
     cyl = Cylinder([0, 0, 0.5], [0, 1, 0], r)
     sig = face_sigma_m(face_covariance(cyl, X, s, NO_FLOOR), X)
     assert np.isfinite(sig) and s / np.sqrt(n) < sig < 10 * s / np.sqrt(n)
+
+
+# ---------------------------------------------------------------------------- fixtures: clearance from sigma
+
+def test_fixture_default_clearance_grows_with_injected_noise() -> None:
+    """The box-corner VB-Rep's faces get the sigma of a plane fitted to their own mesh points with injected depth
+    noise (face-wide part off, so that the fit's covariance alone carries the noise): the corner's default
+    clearance is max(0.2 mm, k sigma) and grows with the noise; an explicit clearance is kept as given."""
+    from fixtures_design import CornerParams
+    from fixtures_design.design import CLEARANCE_K, design_fixture
+    from v2c.primitives import from_dict
+    from v2c.vbrep.examples import box_corner
+
+    cfg = UncertaintyConfig(depth_sigma_coeff_per_m=0.0)
+    clearances = []
+    for noise in (0.0, 0.02, 0.08):  # metres of depth noise on 200 points per face: sigma 0, ~1.4 mm, ~5.7 mm
+        vb = box_corner()
+        rng = np.random.default_rng(3)
+        for f in vb.faces:
+            prim = from_dict(f.primitive)
+            P = np.asarray(f.mesh_vertices, float)
+            X = P[rng.integers(0, len(P), 200)]
+            X = X + rng.normal(0.0, noise, len(X))[:, None] * prim.normal(X)
+            fc = face_covariance(prim, X, noise, cfg)
+            f.sigma_mm = 1000.0 * face_sigma_m(fc, X)
+        fx = design_fixture(vb, "corner")
+        sig = max(f.sigma_mm for f in vb.faces if f.id in fx.reference.faces)
+        assert fx.params.clearance == pytest.approx(max(CornerParams().clearance, CLEARANCE_K * sig))
+        clearances.append(fx.params.clearance)
+        assert design_fixture(vb, "corner", CornerParams(clearance=0.3)).params.clearance == 0.3
+    assert clearances[0] == CornerParams().clearance
+    assert clearances[0] < clearances[1] < clearances[2]
+    # a VB-Rep without sigma (written before it existed) keeps the kind's clearance
+    vb = box_corner()
+    assert all(f.sigma_mm is None for f in vb.faces)
+    assert design_fixture(vb, "corner").params.clearance == CornerParams().clearance

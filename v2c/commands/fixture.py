@@ -22,8 +22,8 @@ import click
 @click.option("--segmentation", type=click.Choice(["learned", "geometric", "oracle"]), default="learned",
               show_default=True, help="Segmentation used by the pipeline (oracle needs a synthetic scan's gt/).")
 @click.option("--clearance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
-              help="Gap between fixture and part in millimetres (default: the fixture kind's, 0.1-0.2 mm). "
-                   "Raise it to absorb reconstruction error.")
+              help="Gap between fixture and part in millimetres (default: the larger of the fixture kind's, "
+                   "0.1-0.2 mm, and 2 x the 1-sigma position error of the faces it mates with).")
 @click.option("--part", "part", type=click.Choice(["reconstructed", "true", "none"]), default="reconstructed",
               show_default=True, help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).")
 def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence: float, segmentation: str,
@@ -42,9 +42,10 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
     from fixtures_design.run import fixture_for_scan
     from v2c.scan import ScanError
 
-    params = DEFAULT_PARAMS[FixtureKind(kind)]
+    # without --clearance: None, so that design_fixture raises the kind's clearance to k x the mating faces' sigma
+    params = None
     if clearance is not None:
-        params = dataclasses.replace(params, clearance=clearance)
+        params = dataclasses.replace(DEFAULT_PARAMS[FixtureKind(kind)], clearance=clearance)
     try:
         res = fixture_for_scan(scan, kind, out, frame=frame, min_confidence=min_confidence,
                                segmentation=segmentation, part=part, params=params)
@@ -65,6 +66,7 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
         what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f} = probability right{extra})"
     else:
         what = f"footprint ({len(ref.outlines)} outline(s))"
-    click.echo(f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces")
+    click.echo(f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces, "
+               f"clearance {fx.params.clearance:.2f} mm")
     for p in (res.files.step, res.files.stl, res.files.assembly):
         click.echo(f"  {p}")
