@@ -238,10 +238,11 @@ def test_cylinder_sigma_is_finite_despite_its_free_turn() -> None:
 
 def test_fixture_default_clearance_grows_with_injected_noise() -> None:
     """The box-corner VB-Rep's faces get the sigma of a plane fitted to their own mesh points with injected depth
-    noise (face-wide part off, so that the fit's covariance alone carries the noise): the corner's default
-    clearance is max(0.2 mm, k sigma) and grows with the noise; an explicit clearance is kept as given."""
+    noise (face-wide part off, so that the fit's covariance alone carries the noise): with clearance_k = 2 the
+    corner's default clearance is max(0.2 mm, 2 sigma) and grows with the noise; an explicit clearance is kept as
+    given; the default k (0) keeps the kind's clearance."""
     from fixtures_design import CornerParams
-    from fixtures_design.design import CLEARANCE_K, design_fixture
+    from fixtures_design.design import design_fixture
     from v2c.primitives import from_dict
     from v2c.vbrep.examples import box_corner
 
@@ -257,14 +258,15 @@ def test_fixture_default_clearance_grows_with_injected_noise() -> None:
             X = X + rng.normal(0.0, noise, len(X))[:, None] * prim.normal(X)
             fc = face_covariance(prim, X, noise, cfg)
             f.sigma_mm = 1000.0 * face_sigma_m(fc, X)
-        fx = design_fixture(vb, "corner")
+        fx = design_fixture(vb, "corner", clearance_k=2.0)
         sig = max(f.sigma_mm for f in vb.faces if f.id in fx.reference.faces)
-        assert fx.params.clearance == pytest.approx(max(CornerParams().clearance, CLEARANCE_K * sig))
+        assert fx.params.clearance == pytest.approx(max(CornerParams().clearance, 2.0 * sig))
         clearances.append(fx.params.clearance)
-        assert design_fixture(vb, "corner", CornerParams(clearance=0.3)).params.clearance == 0.3
+        assert design_fixture(vb, "corner", CornerParams(clearance=0.3), clearance_k=2.0).params.clearance == 0.3
+        assert design_fixture(vb, "corner").params.clearance == CornerParams().clearance  # default k = 0: off
     assert clearances[0] == CornerParams().clearance
     assert clearances[0] < clearances[1] < clearances[2]
     # a VB-Rep without sigma (written before it existed) keeps the kind's clearance
     vb = box_corner()
     assert all(f.sigma_mm is None for f in vb.faces)
-    assert design_fixture(vb, "corner").params.clearance == CornerParams().clearance
+    assert design_fixture(vb, "corner", clearance_k=2.0).params.clearance == CornerParams().clearance

@@ -22,8 +22,8 @@ import click
 @click.option("--segmentation", type=click.Choice(["learned", "geometric", "oracle"]), default="learned",
               show_default=True, help="Segmentation used by the pipeline (oracle needs a synthetic scan's gt/).")
 @click.option("--clearance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
-              help="Gap between fixture and part in millimetres (default: the larger of the fixture kind's, "
-                   "0.1-0.2 mm, and 2 x the 1-sigma position error of the faces it mates with).")
+              help="Gap between fixture and part in millimetres (default: the fixture kind's, 0.1-0.2 mm). "
+                   "Raise it to absorb reconstruction error.")
 @click.option("--part", "part", type=click.Choice(["reconstructed", "true", "none"]), default="reconstructed",
               show_default=True, help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).")
 def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence: float, segmentation: str,
@@ -42,7 +42,7 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
     from fixtures_design.run import fixture_for_scan
     from v2c.scan import ScanError
 
-    # without --clearance: None, so that design_fixture raises the kind's clearance to k x the mating faces' sigma
+    # without --clearance: None, the kind's defaults (design_fixture may raise them by its clearance_k)
     params = None
     if clearance is not None:
         params = dataclasses.replace(DEFAULT_PARAMS[FixtureKind(kind)], clearance=clearance)
