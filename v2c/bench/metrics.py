@@ -37,10 +37,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from v2c.bench.segmentation import match_faces
-from v2c.bench.vbrep import edge_type_accuracy, gt_points, part_size
+from v2c.bench.vbrep import edge_correctness, edge_type_accuracy, gt_points, part_size
 from v2c.labels import AXIS_ALIGN_TOL_DEG, IGNORE, axis_class
 from v2c.vbrep.mesh import sample_surface
-from v2c.vbrep.model import VBRep, VFace
+from v2c.vbrep.model import EdgeType, VBRep, VFace
 from v2c.vbrep.raycast import intersect, pixel_rays
 
 ANALYTIC_TYPES = ("plane", "cylinder", "cone", "sphere", "torus")
@@ -343,6 +343,14 @@ def scan_metrics(vbrep: VBRep, scan: Any, config: MetricConfig = MetricConfig(),
             et = edge_type_accuracy(vbrep, scan, tol_px=config.edge_tol_px)
             out["edge_type_accuracy"] = et["accuracy"]
             out["edge_type"] = et
+            # per edge: type, confidence (calibrated), raw confidence, right or not: the bench's ECE
+            ok = edge_correctness(vbrep, scan, tol_px=config.edge_tol_px)
+            out["edge_labels"] = {
+                "type": [EdgeType(e.type).value for e in vbrep.edges],
+                "confidence": [float(e.confidence) for e in vbrep.edges],
+                "confidence_raw": [float(e.confidence if e.confidence_raw is None else e.confidence_raw)
+                                   for e in vbrep.edges],
+                "ok": [int(k) for k in ok]}
         except Exception as exc:  # noqa: BLE001 - another stage's metric must not hide the others; reported
             out["edge_type_accuracy"] = float("nan")
             out["edge_type_error"] = f"{type(exc).__name__}: {exc}"

@@ -62,6 +62,7 @@ ZERO_IF_FAILED = ("precision", "recall", "recall_all", "precision_75", "recall_7
 MEAN_OVER_OK = ("chamfer", "chamfer_all", "alignment", "type_accuracy", "axis_accuracy", "depth_error",
                 "depth_coverage", "edge_type_accuracy")
 STAGES = ("load", "segment", "fit", "vbrep", "step")
+ECE_BINS = 10  # equal-width confidence bins of the expected calibration error
 
 
 @dataclass(frozen=True)
@@ -462,10 +463,48 @@ def summarise(rows: list[dict[str, Any]], process_start_s: float = float("nan"))
     out["runtime_stages"] = {s: _median([x.get(s, np.nan) for x in rt]) for s in STAGES}
     fit_sub = sorted({k for x in rt for k in x if k.startswith("fit.") and k != "fit.total"})
     out["runtime_fit_stages"] = {k[4:]: _median([x.get(k, np.nan) for x in rt]) for k in fit_sub}
+    out.update(calibration_summary(ok))
     out["process_start_s"] = process_start_s
     out["set_runtime_s"] = (process_start_s + float(np.nansum([x.get("to_step", np.nan) for x in rt]))
                             if rt else float("nan"))
     return out
+
+
+def edge_label_arrays(rows: list[dict[str, Any]]) -> dict[str, np.ndarray]:
+    """The per-edge labels (`scan_metrics`' ``edge_labels``) of rows, pooled: type, confidence, confidence_raw,
+    ok."""
+    labs = [r["edge_labels"] for r in rows if r.get("edge_labels")]
+    return {"type": np.array([t for la in labs for t in la["type"]], object),
+            **{k: np.array([v for la in labs for v in la[k]], float) for k in ("confidence", "confidence_raw", "ok")}}
+
+
+def calibration_summary(rows: list[dict[str, Any]], n_bins: int = ECE_BINS) -> dict[str, Any]:
+    """Expected calibration error (``n_bins`` equal-width bins, edges pooled over the scans) of the edge
+    confidence against the bench's right/wrong label (v2c.bench.vbrep.edge_correctness): ``ece_intersection`` /
+    ``ece_all`` of the calibrated confidence, ``*_raw`` of the raw product of factors, ``calibration_edges`` and
+    ``intersection_edges`` (counts) and ``intersection_right`` (share right)."""
+    from v2c.vbrep.calibration import expected_calibration_error as ece
+
+    a = edge_label_arrays(rows)
+    s = a["type"] == "intersection"
+    return {"ece_intersection": ece(a["confidence"][s], a["ok"][s], n_bins),
+            "ece_intersection_raw": ece(a["confidence_raw"][s], a["ok"][s], n_bins),
+            "ece_all": ece(a["confidence"], a["ok"], n_bins), "ece_all_raw": ece(a["confidence_raw"], a["ok"], n_bins),
+            "calibration_edges": len(a["ok"]), "intersection_edges": int(s.sum()),
+            "intersection_right": float(a["ok"][s].mean()) if s.any() else float("nan")}
+
+
+def write_reliability(rows: list[dict[str, Any]], path: Path, title: str, n_bins: int = ECE_BINS) -> Path:
+    """Reliability diagram (PNG) of rows' pooled edges: intersection edges raw and calibrated, all edges
+    calibrated."""
+    from v2c.vbrep.calibration import reliability_diagram
+
+    a = edge_label_arrays(rows)
+    s = a["type"] == "intersection"
+    return reliability_diagram({"intersection, raw": (a["confidence_raw"][s], a["ok"][s]),
+                                "intersection, calibrated": (a["confidence"][s], a["ok"][s]),
+                                "all edges, raw": (a["confidence_raw"], a["ok"]),
+                                "all edges, calibrated": (a["confidence"], a["ok"])}, path, title, n_bins)
 
 
 def _jsonable(x: Any) -> Any:
@@ -500,6 +539,8 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("type accuracy", "type_accuracy", "pct"),
     ("depth error (median, / part size)", "depth_error", "f4"),
     ("edge-type accuracy", "edge_type_accuracy", "pct"),
+    ("intersection-edge confidence ECE (10 bins; raw factors)", "ece_intersection", "ece"),
+    ("all-edge confidence ECE (10 bins; raw factors)", "ece_all", "ece"),
     ("runtime per scan, median wall (s)", "runtime", "s"),
     ("runtime per scan, median CPU (s)", "runtime_cpu", "s"),
 )
@@ -514,6 +555,8 @@ def _fmt(v: Any, kind: str) -> str:
         return f"{v:.2f}"
     if kind == "f1":
         return f"{v:.1f}"
+    if kind == "ece":
+        return f"{v:.3f}"
     return f"{v:.4f}"
 
 
@@ -535,6 +578,8 @@ def format_table(result: dict[str, Any], paper: bool = True) -> str:
     for title, key, kind in TABLE_ROWS:
         cells = [_fmt(summ[c].get(key), kind) if not (c.startswith(GT) and key.startswith("runtime")) else ""
                  for c in cols]
+        if kind == "ece":  # calibrated (raw)
+            cells = [f"{x} ({_fmt(summ[c].get(key + '_raw'), kind)})" if x else "" for x, c in zip(cells, cols)]
         if paper:
             cells += [_fmt(PAPER.get(a, {}).get(key), kind) for a in abl_order]
         lines.append(f"| {title} | " + " | ".join(cells) + " |")

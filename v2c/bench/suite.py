@@ -423,6 +423,9 @@ SUITE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("Chamfer distance, visible R (lower is better)", "chamfer", "f4"),
     ("Chamfer distance, worst scan", "chamfer_max", "f4"),
     ("edge-type accuracy", "edge_type_accuracy", "pct"),
+    ("intersection-edge confidence ECE (10 bins)", "ece_intersection", "ece"),
+    ("intersection-edge confidence ECE, raw factors", "ece_intersection_raw", "ece"),
+    ("all-edge confidence ECE (10 bins)", "ece_all", "ece"),
     ("runtime per scan, median wall (s)", "runtime", "s"),
     ("runtime per scan, median CPU (s)", "runtime_cpu", "s"),
 )

@@ -135,6 +135,45 @@ def edge_type_accuracy(vbrep: VBRep, scan: Any, tol_px: float = 3.0, gt: GTEdgeS
     return out
 
 
+def edge_correctness(vbrep: VBRep, scan: Any, tol_px: float = 3.0, min_share: float = 0.5,
+                     gt: GTEdgeSamples | None = None, gt_config: GTTypeConfig | None = None) -> np.ndarray:
+    """Per predicted edge, whether its type is right (bool array, one per ``vbrep.edges``).
+
+    The matching of `edge_type_accuracy` seen from the prediction: each point of the edge's projected polyline
+    (densified to 0.5 px) looks for the nearest ground-truth record within ``tol_px`` pixels on the ground-truth
+    face(s) its own faces map to (`face_to_gt`); the point is right when that record's type equals the edge's.
+    The edge is right when at least ``min_share`` of its points are. For an intersection edge this reads: a true
+    edge of the part, where two true surfaces meet, lies within ``tol_px`` pixels of it along at least half its
+    length. An edge with no record in reach (a spurious edge, or one on a face that matches no true face) is
+    wrong."""
+    gt = gt if gt is not None else gt_edge_samples(scan, gt_config or GTTypeConfig())
+    fmap = face_to_gt(vbrep, scan)
+    pts, eid, _ = _edge_points(vbrep)
+    ok = np.zeros(len(vbrep.edges), bool)
+    trees: dict[int, tuple[cKDTree, np.ndarray]] = {}
+    for g in np.unique(gt.face):
+        rec = np.flatnonzero(gt.face == g)
+        trees[int(g)] = (cKDTree(gt.uv[rec]), gt.type[rec])
+    for k, e in enumerate(vbrep.edges):
+        sel = eid == k
+        if not sel.any():
+            continue
+        gfaces = {fmap.get(int(f), 0) for f in e.faces} - {0}
+        best_d = np.full(int(sel.sum()), np.inf)
+        best_t = np.full(int(sel.sum()), "", dtype=object)
+        for g in gfaces:
+            if g not in trees:
+                continue
+            tree, types = trees[g]
+            d, j = tree.query(pts[sel], distance_upper_bound=tol_px)
+            better = np.isfinite(d) & (d < best_d)
+            best_d[better] = d[better]
+            best_t[better] = types[j[better]]
+        right = best_t == EdgeType(e.type).value
+        ok[k] = bool(np.mean(right) >= min_share)
+    return ok
+
+
 def evaluate(scan_dirs: list[str], segmentation: str = "oracle", ablation: str = "full") -> list[dict[str, Any]]:
     """Reconstruct each scan and measure it: one row per scan (chamfer, chamfer_all, the edge-type accuracy
     fields, seconds per stage)."""

@@ -93,13 +93,16 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option("--appearance", default="plain", show_default=True, type=click.Choice(["plain", "random"]),
               help="--suite unseen / corpus-val: random renders the scans with appearance and framing "
                    "randomization (v2c synth --appearance random; cached apart from plain).")
+@click.option("--reliability", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the reliability diagram (PNG) of the first column's edge confidences here: share of "
+                   "edges whose type is right against their confidence, raw and calibrated, ECE in the legend.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
             cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
             out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool, suite: str,
             views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
-            family_scans: int, appearance: str, quiet: bool) -> None:
+            family_scans: int, appearance: str, reliability: Path | None, quiet: bool) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md). ``--suite unseen`` measures parts nothing
@@ -123,7 +126,8 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
                ablation=tuple(a for a in order if a in ablation), cad_dir=cad_dir, size=size, json_out=json_out,
                jobs=jobs, scans_dir=scans_dir, cache_dir=cache_dir, no_step=no_step, figure_dir=figure_dir,
                weights=weights, seg_only=seg_only, views=views, corpus_dir=corpus_dir, parts=parts,
-               unseen_families=unseen_families, family_scans=family_scans, appearance=appearance, quiet=quiet)
+               unseen_families=unseen_families, family_scans=family_scans, appearance=appearance,
+               reliability=reliability, quiet=quiet)
         return
     if appearance != "plain":
         raise click.UsageError("--appearance belongs to --suite unseen / corpus-val (for the family suite: "
@@ -143,14 +147,26 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     click.echo(what)
     click.echo(run.format_table(result))
     click.echo(run.format_notes(result))
+    _reliability(reliability, result, f"in-family bench, seed {seed}, {len(result['scans'])} scans")
     _write_json(json_out, result)
+
+
+def _reliability(path: Path | None, result: dict, title: str) -> None:
+    """The reliability diagram of the first column's rows (`v2c.bench.run.write_reliability`)."""
+    if path is None:
+        return
+    from v2c.bench import run
+
+    col = result["columns"][0]
+    rows = [r for r in result["rows"] if f"{r['segmentation']}/{r['ablation']}" == col]
+    click.echo(f"reliability diagram: {run.write_reliability(rows, path, f'{title}, {col}')}")
 
 
 def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
            cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
            cache_dir: Path | None, no_step: bool, figure_dir: Path | None, weights: Path | None, seg_only: bool,
            views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
-           family_scans: int, appearance: str, quiet: bool) -> None:
+           family_scans: int, appearance: str, reliability: Path | None, quiet: bool) -> None:
     """``--suite unseen`` / ``corpus-val``: `v2c.bench.suite.run_and_report`."""
     from v2c.bench import run
     from v2c.bench import suite as S
@@ -174,6 +190,7 @@ def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], 
         result = S.run_and_report(cfg, progress=not quiet, echo=click.echo)
     except ValueError as e:
         raise click.ClickException(str(e)) from None
+    _reliability(reliability, result, f"suite {suite}, seed {seed}, {len(result['scans'])} scans")
     _write_json(json_out, result)
 
 

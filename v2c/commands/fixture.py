@@ -46,9 +46,10 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
     from fixtures_design.run import fixture_for_scan
     from v2c.scan import ScanError
 
-    params = DEFAULT_PARAMS[FixtureKind(kind)]
+    # without --clearance: None, the kind's defaults (design_fixture may raise them by its clearance_k)
+    params = None
     if clearance is not None:
-        params = dataclasses.replace(params, clearance=clearance)
+        params = dataclasses.replace(DEFAULT_PARAMS[FixtureKind(kind)], clearance=clearance)
     try:
         res = fixture_for_scan(scan, kind, out, frame=frame, min_confidence=min_confidence,
                                segmentation=segmentation, part=part, params=params, roi=roi)
@@ -58,8 +59,18 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
         raise click.ClickException(str(exc) if str(scan) in str(exc) else f"{scan}: {exc}") from None
     fx = res.fixture
     ref = fx.reference
-    what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f})" if hasattr(
-        ref, "edge_id") else f"footprint ({len(ref.outlines)} outline(s))"
-    click.echo(f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces")
+    if hasattr(ref, "edge_id"):
+        # the chosen edge's figures: calibrated probability that it is a true edge, raw score, 1-sigma position
+        e = next((e for e in res.vbrep.edges if e.id == ref.edge_id), None)
+        extra = ""
+        if e is not None and e.confidence_raw is not None:
+            extra += f", raw score {e.confidence_raw:.2f}"
+        if e is not None and e.sigma_mm is not None:
+            extra += f", position 1-sigma {e.sigma_mm:.2f} mm"
+        what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f} = probability right{extra})"
+    else:
+        what = f"footprint ({len(ref.outlines)} outline(s))"
+    click.echo(f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces, "
+               f"clearance {fx.params.clearance:.2f} mm")
     for p in (res.files.step, res.files.stl, res.files.assembly):
         click.echo(f"  {p}")

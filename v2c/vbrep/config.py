@@ -108,5 +108,11 @@ class VBRepConfig:
     conf_length_px: float = 15.0  # pixels: edge length at which the length factor is 1 - exp(-1)
     conf_angle_deg: float = 20.0  # degrees: surface angle at which the angle factor saturates to 1
     conf_depth: float = 0.03  # scale units: edge-to-depth disagreement at which the depth factor is exp(-1)
+    conf_calibration: str | None = "shipped"  # the map from raw confidence to probability right
+    #   (v2c.vbrep.calibration): "shipped" = v2c/vbrep/confidence_calibration.json, a path, or None (raw)
+    sigma_depth_coeff_per_m: float = 0.0015  # 1/m: depth noise sigma = coeff * z^2, a floor under the fit residual
+    #   in the positional uncertainty (v2c.vbrep.uncertainty)
+    sigma_depth_correlated: float = 1.0  # fraction of that depth sigma common to a whole face (not averaged out)
+    sigma_min_angle_deg: float = 5.0  # degrees: intersection angle floor of an edge's positional sigma
 
     seed: int = 0

@@ -31,6 +31,7 @@ from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Sphere
 from v2c.primitives.directions import tangent_basis
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
+from v2c.vbrep.calibration import load_map
 from v2c.vbrep.classify import KIND_INT, FaceGeom, classify_samples
 from v2c.vbrep.confidence import edge_confidence, face_confidence
 from v2c.vbrep.config import VBRepConfig
@@ -51,6 +52,13 @@ from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, build_loops, postprocess
 from v2c.vbrep.raycast import as_primitive, intersect, pixel_rays, project, sheet_depth
 from v2c.vbrep.topology import drop_degenerate, snap_to_surfaces, valid_primitive
+from v2c.vbrep.uncertainty import (
+    UncertaintyConfig,
+    face_covariance,
+    face_sigma_m,
+    intersection_sigma_m,
+    outline_sigma_m,
+)
 
 # sample codes: intersection; near = first instance (silhouette / visibility); near = second (silhouette / vis)
 _C_INT, _C_A_SIL, _C_A_VIS, _C_B_SIL, _C_B_VIS = range(5)
@@ -648,19 +656,36 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
     inst_ids = sorted(i for i in ctx.faces if i in bounded)
     ctx.stats["faces_without_edges"] = sorted(int(i) for i in ctx.faces if i not in bounded)
     fid = {inst: k for k, inst in enumerate(inst_ids)}
+    cmap = None if cfg.conf_calibration is None else \
+        load_map(None if cfg.conf_calibration == "shipped" else cfg.conf_calibration)
+    # positional uncertainty: each face's fit covariance from its observed points (v2c.vbrep.uncertainty)
+    ucfg = UncertaintyConfig(depth_sigma_coeff_per_m=cfg.sigma_depth_coeff_per_m,
+                             depth_correlated=cfg.sigma_depth_correlated, min_angle_deg=cfg.sigma_min_angle_deg)
+    face_pts = {i: measured_points(ctx.instances == i, ctx.depth, ctx.K) for i in inst_ids}
+    covs = {i: face_covariance(ctx.faces[i].prim, face_pts[i], ctx.faces[i].residual, ucfg) for i in inst_ids}
+    focal = float(np.sqrt(ctx.K[0, 0] * ctx.K[1, 1]))
     edges = []
     for k, p in enumerate(protos):
         s = p.stats
         length_px = float(np.sum(np.linalg.norm(np.diff(project(p.pts, ctx.K), axis=0), axis=1)))
-        conf = edge_confidence(p.type, residual=s.get("residual", 0.0), depth_err=s.get("depth_err", np.nan),
-                               length_px=length_px, angle=s.get("angle", np.nan), gap=s.get("gap", np.nan),
-                               jump=s.get("jump", np.inf), vis_share=s.get("vis_share", 0.0),
-                               agreement=s.get("agreement", 1.0), gap_thr=ctx.gap_thr, scale=scale, cfg=cfg)
-        conf *= s.get("factor", 1.0)
+        raw = edge_confidence(p.type, residual=s.get("residual", 0.0), depth_err=s.get("depth_err", np.nan),
+                              length_px=length_px, angle=s.get("angle", np.nan), gap=s.get("gap", np.nan),
+                              jump=s.get("jump", np.inf), vis_share=s.get("vis_share", 0.0),
+                              agreement=s.get("agreement", 1.0), gap_thr=ctx.gap_thr, scale=scale, cfg=cfg)
+        raw = round(raw * s.get("factor", 1.0), 4)
+        conf = raw if cmap is None else round(float(cmap.apply(p.type, raw)), 4)
         curve = dict(p.curve) if p.type is EdgeType.INTERSECTION and p.curve is not None else None
         tangent = bool(curve.pop("tangent", False)) if curve is not None else False
-        edges.append(VEdge(k, p.type, round(conf, 4), tuple(fid[f] for f in p.faces), p.pts, p.v0, p.v1,
-                           curve, tangent=tangent))
+        fc = [covs.get(f) for f in p.faces]
+        if any(c is None for c in fc):
+            sig = None
+        elif len(fc) == 2:
+            sig = intersection_sigma_m(fc[0], fc[1], p.pts, ucfg)
+        else:
+            sig = outline_sigma_m(fc[0], p.pts, focal, ucfg)
+        sig_mm = round(1000.0 * sig, 5) if sig is not None and np.isfinite(sig) else None
+        edges.append(VEdge(k, p.type, conf, tuple(fid[f] for f in p.faces), p.pts, p.v0, p.v1,
+                           curve, tangent=tangent, confidence_raw=raw, sigma_mm=sig_mm))
     vverts = [VVertex(k, v.kind, v.position, v.pixel) for k, v in enumerate(vertices)]
     loops = build_loops(protos, fid, ctx.K)
     bounds = None  # the part's box: what its observed points span, padded
@@ -686,8 +711,9 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
         mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px,
                            cfg.mesh_max_edge * scale, cfg.mesh_surface_tol * scale, box,
                            cfg.mesh_plane_long and isinstance(fg.prim, Plane) and conf >= cfg.mesh_loose_min_conf)
+        fsig = face_sigma_m(covs[inst], face_pts[inst]) if covs[inst] is not None else float("nan")
         vfaces.append(VFace(fid[inst], inst, fg.prim.to_dict(), fg.axis_label, loops.get(fid[inst], []), mv, mt,
-                            round(conf, 4)))
+                            round(conf, 4), sigma_mm=round(1000.0 * fsig, 5) if np.isfinite(fsig) else None))
     meta = {
         "segmentation": getattr(seg, "method", None),
         "faces": {str(fid[i]): {"sheet": ctx.sheets[i].sheet, "concave": ctx.sheets[i].concave,

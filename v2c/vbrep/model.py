@@ -9,8 +9,9 @@ JSON layout (``FORMAT_VERSION`` 1)::
     {"format": "v2c.vbrep", "format_version": 1,
      "frame": 3x3, "K": 3x3, "image_size": [w, h], "scale": float, "meta": {...},
      "faces": [{"id", "instance", "primitive", "axis_label", "loops", "mesh_vertices", "mesh_triangles",
-                "confidence"}, ...],
-     "edges": [{"id", "type", "confidence", "faces", "polyline", "v0", "v1", "curve"}, ...],
+                "confidence", "sigma_mm"}, ...],
+     "edges": [{"id", "type", "confidence", "faces", "polyline", "v0", "v1", "curve", "tangent",
+                "confidence_raw", "sigma_mm"}, ...],
      "vertices": [{"id", "kind", "position", "pixel"}, ...]}
 
 Arrays are nested lists; float arrays keep their exact values (JSON floats are written with ``repr`` precision),
@@ -103,6 +104,9 @@ class VFace:
     loops: boundary loops as (edge id, reversed) pairs; the outer loop first.
     mesh_vertices: (n, 3) float camera-frame metres; mesh_triangles: (m, 3) int indices into mesh_vertices.
     confidence: [0, 1].
+    sigma_mm: 1-sigma position error (millimetres) of the fitted surface along its normal at the face's observed
+      points' centroid, from the fit's covariance and the depth noise (v2c.vbrep.uncertainty); None when unknown
+      (a VB-Rep written before it existed).
     """
 
     id: int
@@ -113,6 +117,7 @@ class VFace:
     mesh_vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mesh_triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     confidence: float = 1.0
+    sigma_mm: float | None = None
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, VFace):
@@ -127,6 +132,7 @@ class VFace:
             and _eq_arr(self.mesh_vertices, other.mesh_vertices)
             and _eq_arr(self.mesh_triangles, other.mesh_triangles)
             and self.confidence == other.confidence
+            and self.sigma_mm == other.sigma_mm
         )
 
     def to_dict(self) -> dict:
@@ -139,6 +145,7 @@ class VFace:
             "mesh_vertices": np.asarray(self.mesh_vertices, np.float64).tolist(),
             "mesh_triangles": np.asarray(self.mesh_triangles, np.int64).tolist(),
             "confidence": float(self.confidence),
+            "sigma_mm": None if self.sigma_mm is None else float(self.sigma_mm),
         }
 
     @classmethod
@@ -152,6 +159,7 @@ class VFace:
             mesh_vertices=_arr(d.get("mesh_vertices", []), np.float64, (3,)),
             mesh_triangles=_arr(d.get("mesh_triangles", []), np.int64, (3,)),
             confidence=float(d.get("confidence", 1.0)),
+            sigma_mm=None if d.get("sigma_mm") is None else float(d["sigma_mm"]),
         )
 
 
@@ -168,7 +176,11 @@ class VEdge:
       None for other edge types.
     tangent: an intersection edge where its two faces meet tangentially (G1: a fillet, a blend, a dome on a
       cylinder); its polyline runs along their line of contact.
-    confidence: [0, 1], see docs/vbrep.md.
+    confidence: [0, 1], the calibrated probability that the edge's type is right (docs/vbrep.md, "Confidence").
+    confidence_raw: the uncalibrated product of factors it was mapped from (v2c.vbrep.confidence); None in a
+      VB-Rep written before calibration existed.
+    sigma_mm: 1-sigma position error (millimetres) of the edge across its run, RMS over its samples, propagated
+      from its faces' fit covariances and the depth noise (v2c.vbrep.uncertainty); None when unknown.
     """
 
     id: int
@@ -180,6 +192,8 @@ class VEdge:
     v1: int
     curve: dict | None = None
     tangent: bool = False
+    confidence_raw: float | None = None
+    sigma_mm: float | None = None
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, VEdge):
@@ -194,6 +208,8 @@ class VEdge:
             and self.v1 == other.v1
             and _deep_eq(self.curve, other.curve)
             and bool(self.tangent) == bool(other.tangent)
+            and self.confidence_raw == other.confidence_raw
+            and self.sigma_mm == other.sigma_mm
         )
 
     def to_dict(self) -> dict:
@@ -207,6 +223,8 @@ class VEdge:
             "v1": int(self.v1),
             "curve": _jsonable(self.curve),
             "tangent": bool(self.tangent),
+            "confidence_raw": None if self.confidence_raw is None else float(self.confidence_raw),
+            "sigma_mm": None if self.sigma_mm is None else float(self.sigma_mm),
         }
 
     @classmethod
@@ -226,6 +244,8 @@ class VEdge:
             v1=int(d["v1"]),
             curve=curve,
             tangent=bool(d.get("tangent", False)),
+            confidence_raw=None if d.get("confidence_raw") is None else float(d["confidence_raw"]),
+            sigma_mm=None if d.get("sigma_mm") is None else float(d["sigma_mm"]),
         )
 
 
