@@ -14,6 +14,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from v2c.atomic import atomic_file
 from v2c.vbrep.model import EdgeType, VBRep, VertexKind
 
 #: sRGB edge colours by type (SCAN_FORMAT.md).
@@ -233,8 +234,7 @@ def result_figure(scan: Any, instances: np.ndarray, vbrep: VBRep, path: str | Pa
     fig = np.concatenate([top, bottom, _legend(top.shape[1])], 0)
     if path is not None:
         path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.png")
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(fig, cv2.COLOR_RGB2BGR)):
-            raise OSError(f"{path}: could not write the figure")
-        tmp.replace(path)
+        with atomic_file(path, suffix=".png") as tmp:  # OpenCV picks the format by the suffix
+            if not cv2.imwrite(str(tmp), cv2.cvtColor(fig, cv2.COLOR_RGB2BGR)):
+                raise OSError(f"{path}: could not write the figure")
     return fig

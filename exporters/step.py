@@ -18,7 +18,6 @@ frame.
 
 from __future__ import annotations
 
-import os
 import re
 import time
 from collections.abc import Iterator
@@ -48,6 +47,7 @@ from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape
 from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, translate_built
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
+from v2c.atomic import atomic_file
 from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
@@ -189,14 +189,9 @@ def write(
     warnings = list(built.warnings) + [f"face {fid}: fails BRepCheck" for fid in invalid]
     if not shape_valid and not invalid:
         warnings.append("the assembled shape fails BRepCheck")
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix or '.step'}")
-    try:
-        with quiet_occt():
-            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    # exclusive temporary name keyed by the output (v2c.atomic): a retried task sweeps a killed attempt's file
+    with atomic_file(path, suffix=path.suffix or ".step") as tmp, quiet_occt():
+        write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built))
     return StepReport(
         path=path,
         frame=frame,

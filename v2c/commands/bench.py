@@ -9,6 +9,8 @@ from pathlib import Path
 
 import click
 
+from v2c.commands import executor_config, executor_options, jobs_given
+
 
 def _csv(allowed: tuple[str, ...]):
     def parse(ctx: click.Context, param: click.Parameter, value: str) -> tuple[str, ...]:
@@ -50,7 +52,8 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the summary and every per-scan row here.")
 @click.option("--jobs", default=2, show_default=True, type=click.IntRange(1),
-              help="Worker processes (one thread each).")
+              help="Worker processes (one thread each); with --executor ray: most scans in flight "
+                   "[default there: the whole cluster].")
 @click.option("--scans", "scans_dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
               help="Use the scan folders in DIR (the first N) instead of generating scans.")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
@@ -71,16 +74,21 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
               help="Instead: score the segmentation alone (its instances matched to the gt faces: precision, "
                    "recall, type / axis accuracy, mean IoU, seconds per scan) on the same scans.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
-            cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
+@executor_options
+@click.pass_context
+def command(ctx: click.Context, n: int, seed: int, noise: str, segmentation: tuple[str, ...],
+            ablation: tuple[str, ...], cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
             out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool,
-            quiet: bool) -> None:
+            quiet: bool, executor: str, ray_address: str | None) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md)."""
     from v2c.bench import run
+    from v2c.executors import ExecutorError
+    from v2c.synth.dataset import SynthError
 
+    where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
     if real_dir is not None:
         report = run.real_frames_report(real_dir, rois or run.DEFAULT_ROIS, segmentation[0], out_dir,
                                         progress=not quiet)
@@ -91,13 +99,15 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
     order = ("full", "no-axis", "no-int", "fit-only", "gt")
     cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
                           ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
-                          scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
+                          scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights,
+                          executor=where.kind, ray_address=where.address, ray_jobs=where.jobs if
+                          where.kind == "ray" else None)
     if seg_only:
         _segmentation_only(cfg, json_out, quiet)
         return
     try:
         result = run.run_benchmark(cfg, progress=not quiet)
-    except ValueError as e:
+    except (ValueError, ExecutorError, SynthError) as e:
         raise click.ClickException(str(e)) from None
     what = f"{len(result['scans'])} {'CAD-part' if cad_dir else 'synthetic'} scans, {noise} noise, " \
            f"{size[0]}x{size[1]}, seed {seed}, segmentation {','.join(segmentation)}"
@@ -111,10 +121,12 @@ def _segmentation_only(cfg, json_out: Path | None, quiet: bool) -> None:
     """The segmenters of ``cfg`` on its scans, scored alone (`v2c.bench.segmentation`)."""
     from v2c.bench import run
     from v2c.bench import segmentation as S
+    from v2c.executors import ExecutorError
+    from v2c.synth.dataset import SynthError
 
     try:
         scans = run.prepare_scans(cfg, progress=not quiet)
-    except ValueError as e:
+    except (ValueError, ExecutorError, SynthError) as e:
         raise click.ClickException(str(e)) from None
     result = S.run(scans, list(cfg.segmentations), lambda scan, method: run.segment_scan(scan, method, cfg.weights),
                    log=(lambda *a: None) if quiet else (lambda m: click.echo(m, err=True)))

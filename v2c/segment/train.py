@@ -20,6 +20,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from v2c.executors import ExecutorConfig
 from v2c.labels import IGNORE, NUM_CLASSES
 from v2c.segment.data import CachedScans, build_cache, dequantise, find_scans
 from v2c.segment.net import NetConfig, UNet, bf16_supported, load_weights, save_weights
@@ -48,10 +49,11 @@ RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RE
 
 
 def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
-                           recipe: tuple = TRAINING_RECIPE) -> list[Path]:
+                           recipe: tuple = TRAINING_RECIPE, executor: str | ExecutorConfig = "local") -> list[Path]:
     """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
 
-    Equivalent to one `v2c synth` run per recipe row.
+    Equivalent to one `v2c synth` run per recipe row; ``jobs`` local processes, or ``executor`` (e.g. a Ray
+    cluster, `v2c.executors.ExecutorConfig`).
     """
     from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
     from v2c.synth.scene import SceneConfig
@@ -67,7 +69,8 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
         done += [sub / scan_name(i) for i in range(have)]
         if have < n:
             cfg = SynthConfig(width=w, height=h, noise=noise, scene=SceneConfig(print_share=share))
-            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have)
+            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have,
+                                     executor=executor)
     return done
 
 

@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from v2c.atomic import atomic_file
+
 FORMAT_NAME = "v2c.vbrep"
 FORMAT_VERSION = 1
 
@@ -348,9 +350,8 @@ class VBRep:
     def save(self, path: str | Path) -> Path:
         """Write the JSON to ``path`` (atomically: a temporary file renamed into place). Returns the path."""
         path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(self.to_json())
-        tmp.replace(path)
+        with atomic_file(path) as tmp:
+            tmp.write_text(self.to_json())
         return path
 
     @classmethod
