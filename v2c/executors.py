@@ -13,8 +13,8 @@ Executors:
   ``jobs`` spawned processes (spawned, not forked: forking a process whose OCCT / embree / torch thread pools run
   deadlocks), each set up once by ``initializer(*initargs)``.
 - ``ray``: one Ray task per item on the cluster at ``address`` ("auto": the cluster `ray start` runs on this
-  machine; "HOST:PORT": that head node; None: an already initialised Ray, else the cluster named by $RAY_ADDRESS or
-  started on this machine, else a new local instance). At most ``jobs`` tasks are in flight (None or 0: twice the
+  machine; "HOST:PORT": that head node; None: an already initialised Ray, else the cluster named by $RAY_ADDRESS,
+  else a new local instance on this machine's cores). At most ``jobs`` tasks are in flight (None or 0: twice the
   cluster's CPUs), each on ``cpus_per_task`` CPUs. A task whose worker process dies is re-run up to ``max_retries``
   times (Ray's ``max_retries``); exceptions raised by ``fn`` are not retried (they are deterministic here). Workers
   run each task in the driver's working directory (so relative paths mean the same) and call the initializer once
@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import socket
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -45,7 +46,7 @@ class ExecutorError(RuntimeError):
 
 @dataclass(frozen=True)
 class ExecutorConfig:
-    """Where tasks run. kind: "local" or "ray"; address: Ray cluster (see the module doc); jobs: local worker
+    """Where tasks run. kind: "local" or "ray"; address: Ray cluster (`connect_ray`); jobs: local worker
     processes (<= 1: this process) or most Ray tasks in flight (None: twice the cluster's CPUs); max_retries: Ray
     re-runs of a task whose worker died; cpus_per_task: Ray CPUs reserved per task (one thread per task)."""
 
@@ -121,16 +122,50 @@ def ray_module() -> Any:
     return ray
 
 
-def connect_ray(ray: Any, address: str | None = None) -> None:
-    """Connect this process to the Ray cluster at ``address`` unless Ray is already initialised here."""
+def connect_ray(ray: Any, address: str | None = None, probe_timeout_s: float = 5.0) -> None:
+    """Connect this process to the Ray cluster at ``address`` unless Ray is already initialised here.
+
+    address: "auto" (the cluster `ray start` runs on this machine), "HOST:PORT" (its head node), or None ($RAY_ADDRESS
+    when set, else a new local instance: never a cluster that a stale /tmp/ray/ray_current_cluster names, which
+    Ray would wait on for minutes). A given address is first probed with a TCP connection of at most
+    ``probe_timeout_s`` seconds, so that an address where nothing answers fails at once."""
     if ray.is_initialized():
         return
+    if address is None and not os.environ.get("RAY_ADDRESS"):
+        address = "local"
+    elif address is not None:
+        _probe(address, probe_timeout_s)
     try:
         ray.init(address=address)
     except (ConnectionError, RuntimeError, ValueError) as exc:
-        where = f"at {address}" if address else "(none running and a local one did not start)"
-        raise ExecutorError(f"no Ray cluster {where}: {str(exc).splitlines()[0] if str(exc) else exc!r}; "
-                            "start one with `ray start --head` (docs/scale.md)") from None
+        raise ExecutorError(f"no Ray cluster at --ray-address {address}: {_first_line(exc)}; start one with "
+                            "`ray start --head` (docs/scale.md)") from None
+
+
+def _first_line(exc: BaseException) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0].strip("'\"")
+
+
+def _probe(address: str, timeout_s: float) -> None:
+    """Raise `ExecutorError` when nothing accepts a TCP connection at the Ray cluster ``address`` names."""
+    try:  # Ray's own reading of the address ("auto": the cluster file of `ray start`; localhost: this node's IP)
+        from ray._private.services import canonicalize_bootstrap_address
+
+        resolved = canonicalize_bootstrap_address(address)
+    except ConnectionError as exc:
+        raise ExecutorError(f"no Ray cluster at --ray-address {address}: {_first_line(exc)}; start one with "
+                            "`ray start --head` (docs/scale.md)") from None
+    except Exception:  # noqa: BLE001 - a Ray without this helper: let ray.init judge the address
+        return
+    if not resolved:
+        return
+    host, _, port = resolved.rpartition(":")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout_s).close()
+    except (OSError, ValueError):
+        raise ExecutorError(f"no Ray cluster at --ray-address {address}: nothing answers at {resolved} "
+                            f"(a cluster stopped without `ray stop`?); start one with `ray start --head` "
+                            "(docs/scale.md)") from None
 
 
 #: Initializers already run in this (worker) process, by (module, name, initargs).

@@ -15,7 +15,7 @@ def executor_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """Add ``--executor local|ray`` and ``--ray-address`` (parameters ``executor`` and ``ray_address``)."""
     f = click.option("--ray-address", "ray_address", default=None, metavar="auto|HOST:PORT",
                      help="Ray cluster to run on with --executor ray: 'auto' = the one `ray start` runs on this "
-                          "machine, HOST:PORT = its head node [default: $RAY_ADDRESS, else a local instance].")(f)
+                          "machine, HOST:PORT = its head node [default: $RAY_ADDRESS, else a new local instance].")(f)
     return click.option("--executor", type=click.Choice(["local", "ray"]), default="local", show_default=True,
                         help="Where the per-scan tasks run: local processes, or a Ray cluster (needs "
                              "`pip install 'v2c[ray]'`; docs/scale.md).")(f)
