@@ -11,6 +11,7 @@ import filecmp
 import json
 import os
 import re
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
@@ -153,6 +154,26 @@ def test_to_step_on_ray_equals_local_and_reports_the_failed_scan(cluster, to_ste
     assert sorted(p.name for p in out.iterdir()) == expected
     assert_same_outputs(local_out, out)
     assert _no_temporaries(out) == []
+
+
+def test_bench_and_training_data_on_ray_equal_local(cluster, local_synth: Path, tmp_path: Path) -> None:
+    from v2c.bench.run import BenchConfig, run_benchmark
+    from v2c.segment.train import generate_training_data
+
+    cfg = BenchConfig(n=3, size=(160, 120), segmentations=("oracle",), ablations=("full",), jobs=1,
+                      scans_dir=local_synth)
+    rows = {}
+    for kind in ("local", "ray"):
+        result = run_benchmark(replace(cfg, executor=kind), progress=False)
+        rows[kind] = [{k: v for k, v in r.items() if k != "runtime"} for r in result["rows"]]
+    assert len(rows["local"]) == 3 and all(r["ok"] for r in rows["local"])
+    assert rows["ray"] == rows["local"]  # every metric of every scan
+    recipe = ((160, 120, "none", 2, 7),)  # one row of a training recipe: 2 scans of seed 7
+    local = generate_training_data(tmp_path / "local", recipe=recipe)
+    remote = generate_training_data(tmp_path / "ray", recipe=recipe, executor=RAY)
+    assert [p.relative_to(tmp_path / "ray") for p in remote] == [p.relative_to(tmp_path / "local") for p in local]
+    assert len(local) == 2
+    assert_same_outputs(tmp_path / "local", tmp_path / "ray")
 
 
 # ------------------------------------------------------------------------------------ a worker killed midway
