@@ -3,8 +3,8 @@
 Starts a local Ray instance with 2 CPUs, warms both workers up (imports, learned model), then times
 `v2c synth` of N scans and `v2c to-step` of M of them with at most 1 and at most 2 tasks in flight (the executor's
 ``jobs``), checks that both give the same files, and prints / writes a JSON record: wall seconds, scans per second,
-the 2-worker speed-up, seconds per scan on one worker, the load average before each run and the workers' peak
-memory.
+the 2-worker speed-up, wall and median CPU seconds per scan on one worker, the load average before each run and the
+workers' peak memory.
 
     PYTHONPATH=$PWD .venv/bin/python scripts/ray_throughput.py --synth 16 --to-step 8 --out /tmp/ray_tp \
         --json docs/figures/ray_throughput.json
@@ -24,7 +24,7 @@ from pathlib import Path
 
 from v2c.commands.to_step import _to_step_task
 from v2c.executors import ExecutorConfig, run_tasks
-from v2c.synth.dataset import SynthConfig, generate_dataset
+from v2c.synth.dataset import SynthConfig, generate_dataset, generate_scan
 
 
 def _digest(folder: Path, skip_suffixes: tuple[str, ...] = ()) -> str:
@@ -35,6 +35,23 @@ def _digest(folder: Path, skip_suffixes: tuple[str, ...] = ()) -> str:
             h.update(p.relative_to(folder).as_posix().encode())
             h.update(p.read_bytes())
     return h.hexdigest()
+
+
+def _timed(fn, item) -> tuple[float, float]:
+    """Run ``fn(item)`` in the worker; (wall s, CPU s of this process) it took. The CPU seconds are what one free
+    core needs for the scan, whatever else shares the machine."""
+    t, c = time.perf_counter(), time.process_time()
+    fn(item)
+    return time.perf_counter() - t, time.process_time() - c
+
+
+def _synth_one(args: tuple) -> None:
+    generate_scan(*args)
+
+
+def _median(values: list[float]) -> float:
+    v = sorted(values)
+    return 0.5 * (v[(len(v) - 1) // 2] + v[len(v) // 2]) if v else float("nan")
 
 
 def _peak_rss_mib(_: int) -> tuple[int, float]:
@@ -80,18 +97,25 @@ def main() -> int:
     for workers in (1, 2):
         where = ExecutorConfig("ray", jobs=workers)
         load = os.getloadavg()[0]
+        folder = args.out / f"synth_{workers}"
+        folder.mkdir()
         t = time.perf_counter()
-        generate_dataset(args.out / f"synth_{workers}", args.synth, 0, cfg, progress=False, executor=where)
+        res = list(run_tasks(partial(_timed, _synth_one), [(folder, 0, i, cfg) for i in range(args.synth)], where))
         synth_s = time.perf_counter() - t
-        scans = sorted((args.out / f"synth_{workers}").iterdir())[: args.to_step]
+        synth_failed = [str(item[2]) for item, _, exc in res if exc is not None]
+        synth_cpu = [r[1] for _, r, exc in res if exc is None]
+        scans = sorted(folder.iterdir())[: args.to_step]
         load2 = os.getloadavg()[0]
         t = time.perf_counter()
-        res = list(run_tasks(step_task(args.out / f"steps_{workers}"), scans, where))
+        res = list(run_tasks(partial(_timed, step_task(args.out / f"steps_{workers}")), scans, where))
         steps_s = time.perf_counter() - t
         failed = [str(item) for item, _, exc in res if exc is not None]
+        step_cpu = [r[1] for _, r, exc in res if exc is None]
         runs[workers] = {"synth_s": synth_s, "synth_scans_per_s": args.synth / synth_s, "synth_load1": load,
+                         "synth_cpu_s_median": _median(synth_cpu), "synth_failed": synth_failed,
                          "to_step_s": steps_s, "to_step_scans_per_s": args.to_step / steps_s,
-                         "to_step_load1": load2, "to_step_failed": failed}
+                         "to_step_load1": load2, "to_step_cpu_s_median": _median(step_cpu),
+                         "to_step_failed": failed}
         print(f"{workers} worker(s): synth {args.synth} scans {synth_s:.1f} s (load {load:.2f}), "
               f"to-step {args.to_step} scans {steps_s:.1f} s (load {load2:.2f})", file=sys.stderr)
     record["runs"] = runs
@@ -99,6 +123,7 @@ def main() -> int:
     record["to_step_speedup"] = runs[1]["to_step_s"] / runs[2]["to_step_s"]
     record["synth_s_per_scan_1_worker"] = runs[1]["synth_s"] / args.synth
     record["to_step_s_per_scan_1_worker"] = runs[1]["to_step_s"] / args.to_step
+    record["load1_end"] = os.getloadavg()[0]
     record["same_synth_files"] = _digest(args.out / "synth_1") == _digest(args.out / "synth_2")
     # STEP headers carry a timestamp and the VB-Rep JSON timings: compare the figures byte for byte
     record["same_to_step_figures"] = (_digest(args.out / "steps_1", (".step", ".json"))
