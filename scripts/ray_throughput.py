@@ -90,7 +90,7 @@ def main() -> int:
                        extras=True, roi=None)
 
     # warm-up: both workers import the stack and load the model before anything is timed
-    warm = generate_dataset(args.out / "warm", 2, 99, cfg, progress=False, executor=ExecutorConfig("ray", jobs=2))
+    warm = generate_dataset(args.out / "warm", 4, 99, cfg, progress=False, executor=ExecutorConfig("ray", jobs=2))
     assert all(exc is None for _, _, exc in run_tasks(step_task(args.out / "warm_steps"), warm,
                                                      ExecutorConfig("ray", jobs=2)))
     runs: dict = {}
