@@ -1,4 +1,5 @@
-"""Print the requirements of pyproject.toml (dependencies + the dev extra) that the running environment lacks.
+"""Print the requirements of pyproject.toml (dependencies + the dev and ray extras) that the running environment
+lacks.
 
 Used by scripts/setup.sh to bring an existing .venv up to date without re-resolving the whole stack: a full
 `pip install -e .[dev]` re-installs cadquery-ocp-novtk (build123d's declared dependency, removed on purpose by
@@ -18,7 +19,7 @@ from pathlib import Path
 from packaging.requirements import Requirement
 
 
-def missing_requirements(pyproject: Path, extras: tuple[str, ...] = ("dev",)) -> list[str]:
+def missing_requirements(pyproject: Path, extras: tuple[str, ...] = ("dev", "ray")) -> list[str]:
     data = tomllib.loads(pyproject.read_text(encoding="utf-8"))
     project = data["project"]
     reqs = list(project.get("dependencies", []))

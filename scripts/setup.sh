@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
 # One-shot set-up of a fresh machine: the Debian FreeCAD package (for STEP import tests, when root),
 # a virtual environment in .venv and the pinned Python stack (torch 2.13.0 CPU; cadquery 2.8.0 + build123d 0.12.0
-# on OCP 7.9.3; no torchvision). Safe to run again and from several shells at once: it takes a lock, and only does
-# what is missing (the stamp .venv/.v2c-installed records a hash of pyproject.toml and of this install recipe).
+# on OCP 7.9.3; no torchvision; the ray extra for --executor ray). Safe to run again and from several shells at
+# once: it takes a lock, and only does what is missing (the stamp .venv/.v2c-installed records a hash of
+# pyproject.toml and of this install recipe).
 #
 # Environment: PYTHON (interpreter for the venv, default python3.11), V2C_WHEELS (folder with a local torch CPU
 # wheel, default /opt/wheels), V2C_SKIP_FREECAD=1 (do not apt-get FreeCAD).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-RECIPE=4  # bump when the install steps below change, so existing venvs are brought up to date
+RECIPE=5  # bump when the install steps below change, so existing venvs are brought up to date
 
 log() { echo "[setup] $*"; }
 die() { echo "[setup] ERROR: $*" >&2; exit 1; }
@@ -78,7 +79,7 @@ if [ "$(cat "$STAMP" 2>/dev/null || true)" != "$WANT" ]; then
     "$VPY" -m pip install -q --upgrade pip setuptools wheel
     install_torch
     # Everything else in ONE resolve (pyproject pins cadquery==2.8.0 and build123d==0.12.0 side by side).
-    "$VPY" -m pip install -q -e ".[dev]"
+    "$VPY" -m pip install -q -e ".[dev,ray]"
   fi
   # cadquery needs cadquery-ocp, build123d needs cadquery-ocp-novtk: both write site-packages/OCP/. Keep one.
   "$VPY" scripts/ocp_single.py --fix --hashes

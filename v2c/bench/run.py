@@ -4,7 +4,8 @@
    version, noise profile, image size, seed and CAD files (`scan_cache_dir`); scan i of a seed is a pure function
    of (seed, i), so a run of n scans reuses the first n of any earlier run with the same key and generates only
    what is missing. ``scans_dir`` uses existing scan folders instead.
-2. Every scan, in a process pool (one thread per worker: ``jobs`` workers = ``jobs`` cores), is reconstructed as
+2. Every scan, in a process pool (one thread per worker: ``jobs`` workers = ``jobs`` cores) or as one task of a Ray
+   cluster (``executor`` "ray", `v2c.executors`), is reconstructed as
    `v2c to-step --frame camera --no-extras` does it, each stage timed: load, segment (once per segmentation
    method, counted into every ablation), fit and VB-Rep extraction (`v2c.pipeline.reconstruct`) per ablation,
    STEP export (`exporters.step.write`); then every metric of `v2c.bench.metrics.scan_metrics`.
@@ -41,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from v2c.bench.metrics import MetricConfig
+from v2c.executors import ExecutorConfig, run_tasks
 
 ABLATIONS = ("full", "no-axis", "no-int", "fit-only")
 GT = "gt"  # pseudo-ablation: the ideal VB-Rep built from the ground truth
@@ -83,6 +85,16 @@ class BenchConfig:
     metrics: MetricConfig = field(default_factory=MetricConfig)
     figure_dir: Path | None = None  # result figure per scan (first column) and grid.png of them here
     weights: Path | None = None  # learned segmenter weights (None: the shipped v2c/segment/weights/unet.pt)
+    executor: str = "local"  # "local": ``jobs`` processes; "ray": one Ray task per scan (docs/scale.md)
+    ray_address: str | None = None  # Ray cluster ("auto", "HOST:PORT"; None: $RAY_ADDRESS or a local instance)
+    ray_jobs: int | None = None  # most Ray tasks in flight (None: twice the cluster's CPUs)
+
+
+def executor_of(cfg: BenchConfig) -> ExecutorConfig:
+    """Where a run's per-scan tasks (generation and evaluation) go."""
+    if cfg.executor == "ray":
+        return ExecutorConfig(kind="ray", address=cfg.ray_address, jobs=cfg.ray_jobs)
+    return ExecutorConfig(kind="local", jobs=cfg.jobs)
 
 
 # ---------------------------------------------------------------------------------------------------- scans
@@ -144,7 +156,7 @@ def prepare_scans(cfg: BenchConfig, progress: bool = True) -> list[Path]:
         if progress:
             print(f"generating scans {start}..{cfg.n - 1} into {folder}", file=sys.stderr)
         generate_dataset(folder, cfg.n - start, cfg.seed, synth, jobs=max(1, cfg.jobs), progress=progress,
-                         start=start)
+                         start=start, executor=executor_of(cfg))
         (folder / "manifest.json").write_text(json.dumps(
             {"seed": cfg.seed, "noise": cfg.noise, "size": list(cfg.size), "cad": list(cads),
              "n": max(cfg.n, _manifest_n(folder))}, indent=1) + "\n")
@@ -390,29 +402,17 @@ def evaluate_dirs(cfg: BenchConfig, dirs: Sequence[Path], progress: bool = True,
     tasks = [(str(d), tuple(cfg.segmentations), tuple(cfg.ablations), cfg.metrics, cfg.step,
               str(f) if f else None, weights) for d, f in zip(dirs, figure_dirs, strict=True)]
     rows: list[dict[str, Any]] = []
-    bar = tqdm(total=len(tasks), unit="scan", desc=desc, disable=not progress)
-    if cfg.jobs <= 1:
+    where = executor_of(cfg)
+    # local jobs > 1: spawned processes, a clean interpreter per worker (no forked torch / OCCT state)
+    results = run_tasks(_worker, tasks, where, initializer=_worker_init,
+                        initargs=(tuple(cfg.segmentations), weights))
+    if where.kind == "local" and cfg.jobs <= 1:
         _worker_init(cfg.segmentations, weights)
-        for task in tasks:
-            try:
-                rows += _worker(task)
-            except Exception as exc:  # noqa: BLE001 - e.g. a scan that does not load: a result, not a crash
-                rows += _failed_rows(task, _error_text(exc))
-            bar.update()
-    else:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        ctx = mp.get_context("spawn")  # a clean interpreter per worker: no forked torch / OCCT state
-        with ProcessPoolExecutor(max_workers=cfg.jobs, mp_context=ctx, initializer=_worker_init,
-                                 initargs=(tuple(cfg.segmentations), weights)) as pool:
-            futures = {pool.submit(_worker, task): task for task in tasks}
-            for fut in as_completed(futures):
-                try:
-                    rows += fut.result()
-                except Exception as exc:  # noqa: BLE001 - a worker died (a crash inside OCCT) or the scan raised
-                    rows += _failed_rows(futures[fut], _error_text(exc))
-                bar.update()
+    bar = tqdm(total=len(tasks), unit="scan", desc=desc, disable=not progress)
+    for task, scan_rows, exc in results:
+        # a failed task (a worker that died, e.g. a crash inside OCCT; an unreadable scan): failed rows
+        rows += scan_rows if exc is None else _failed_rows(task, _error_text(exc))
+        bar.update()
     bar.close()
     order = {str(d): i for i, d in enumerate(dirs)}
     rows.sort(key=lambda r: order.get(r["path"], 0))

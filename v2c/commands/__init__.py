@@ -1,1 +1,44 @@
-"""Sub-commands of `v2c`; each module defines `command` (a click command). Heavy imports go inside the function."""
+"""Sub-commands of `v2c`; each module defines `command` (a click command). Heavy imports go inside the function.
+
+`executor_options` adds the options of the batch commands (to-step, synth, bench, train) that say where their
+one-task-per-scan work runs (`v2c.executors`, docs/scale.md)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import click
+
+
+def executor_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    """Add ``--executor local|ray`` and ``--ray-address`` (parameters ``executor`` and ``ray_address``)."""
+    f = click.option("--ray-address", "ray_address", default=None, metavar="auto|HOST:PORT",
+                     help="Ray cluster to run on with --executor ray: 'auto' = the one `ray start` runs on this "
+                          "machine, HOST:PORT = its head node [default: $RAY_ADDRESS, else a new local instance].")(f)
+    return click.option("--executor", type=click.Choice(["local", "ray"]), default="local", show_default=True,
+                        help="Where the per-scan tasks run: local processes, or a Ray cluster (needs "
+                             "`pip install 'v2c[ray]'`; docs/scale.md).")(f)
+
+
+def executor_config(executor: str, ray_address: str | None, jobs: int | None = 1,
+                    jobs_given: bool = True) -> Any:
+    """The `v2c.executors.ExecutorConfig` of the options; on Ray an unset --jobs means the whole cluster.
+
+    Raises click.UsageError for --ray-address without --executor ray, ClickException when Ray is missing."""
+    from v2c.executors import ExecutorConfig, ExecutorError, ray_module
+
+    if executor != "ray":
+        if ray_address is not None:
+            raise click.UsageError("--ray-address needs --executor ray")
+        return ExecutorConfig(kind="local", jobs=jobs)
+    try:
+        ray_module()  # fail before any work, with the install hint
+    except ExecutorError as e:
+        raise click.ClickException(str(e)) from None
+    return ExecutorConfig(kind="ray", address=ray_address, jobs=jobs if jobs_given else None)
+
+
+def jobs_given(ctx: click.Context, name: str = "jobs") -> bool:
+    """Whether the user set the option ``name`` (rather than leaving its default)."""
+    return ctx.get_parameter_source(name) not in (None, click.core.ParameterSource.DEFAULT)

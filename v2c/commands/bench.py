@@ -10,6 +10,8 @@ from pathlib import Path
 
 import click
 
+from v2c.commands import executor_config, executor_options, jobs_given
+
 
 def _csv(allowed: tuple[str, ...]):
     def parse(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, ...] | None:
@@ -53,7 +55,8 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the summary and every per-scan row here.")
 @click.option("--jobs", default=2, show_default=True, type=click.IntRange(1),
-              help="Worker processes (one thread each).")
+              help="Worker processes (one thread each); with --executor ray: most scans in flight "
+                   "[default there: the whole cluster].")
 @click.option("--scans", "scans_dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
               help="Use the scan folders in DIR (the first N) instead of generating scans.")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
@@ -97,19 +100,25 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
               help="Write the reliability diagram (PNG) of the first column's edge confidences here: share of "
                    "edges whose type is right against their confidence, raw and calibrated, ECE in the legend.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablation: tuple[str, ...],
-            cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
+@executor_options
+@click.pass_context
+def command(ctx: click.Context, n: int, seed: int, noise: str, segmentation: tuple[str, ...],
+            ablation: tuple[str, ...], cad_dir: Path | None, size: tuple[int, int], json_out: Path | None, jobs: int, scans_dir: Path | None,
             cache_dir: Path | None, no_step: bool, real_dir: Path | None, rois: Path | None,
             out_dir: Path | None, figure_dir: Path | None, weights: Path | None, seg_only: bool, suite: str,
             views: int, corpus_dir: Path | None, parts: str | None, unseen_families: str | None,
-            family_scans: int, appearance: str, reliability: Path | None, quiet: bool) -> None:
+            family_scans: int, appearance: str, reliability: Path | None, quiet: bool, executor: str,
+            ray_address: str | None) -> None:
     """Benchmark the pipeline on N synthetic scans per segmentation and ablation: Chamfer, primitive alignment,
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md). ``--suite unseen`` measures parts nothing
     is tuned on instead (the CAD corpus test split and the leave-out generator families), per source and size
     band; ``--suite corpus-val`` the corpus validation split."""
     from v2c.bench import run
+    from v2c.executors import ExecutorError
+    from v2c.synth.dataset import SynthError
 
+    where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
     if real_dir is not None:
         from v2c.bench import real
 
@@ -134,13 +143,15 @@ def command(n: int, seed: int, noise: str, segmentation: tuple[str, ...], ablati
                                "v2c synth --appearance random, then --scans DIR)")
     cfg = run.BenchConfig(n=n, seed=seed, noise=noise, size=size, cad_dir=cad_dir, segmentations=segmentation,
                           ablations=tuple(a for a in order if a in ablation), jobs=jobs, cache_dir=cache_dir,
-                          scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights)
+                          scans_dir=scans_dir, step=not no_step, figure_dir=figure_dir, weights=weights,
+                          executor=where.kind, ray_address=where.address, ray_jobs=where.jobs if
+                          where.kind == "ray" else None)
     if seg_only:
         _segmentation_only(cfg, json_out, quiet)
         return
     try:
         result = run.run_benchmark(cfg, progress=not quiet)
-    except ValueError as e:
+    except (ValueError, ExecutorError, SynthError) as e:
         raise click.ClickException(str(e)) from None
     what = f"{len(result['scans'])} {'CAD-part' if cad_dir else 'synthetic'} scans, {noise} noise, " \
            f"{size[0]}x{size[1]}, seed {seed}, segmentation {','.join(segmentation)}"
@@ -198,10 +209,12 @@ def _segmentation_only(cfg, json_out: Path | None, quiet: bool) -> None:
     """The segmenters of ``cfg`` on its scans, scored alone (`v2c.bench.segmentation`)."""
     from v2c.bench import run
     from v2c.bench import segmentation as S
+    from v2c.executors import ExecutorError
+    from v2c.synth.dataset import SynthError
 
     try:
         scans = run.prepare_scans(cfg, progress=not quiet)
-    except ValueError as e:
+    except (ValueError, ExecutorError, SynthError) as e:
         raise click.ClickException(str(e)) from None
     result = S.run(scans, list(cfg.segmentations), lambda scan, method: run.segment_scan(scan, method, cfg.weights),
                    log=(lambda *a: None) if quiet else (lambda m: click.echo(m, err=True)))

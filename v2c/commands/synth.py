@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from v2c.commands import executor_config, executor_options, jobs_given
 from v2c.synth.families import FAMILY_GROUPS, FEATURE_FAMILIES, PROCEDURAL_FAMILIES
 
 PROCEDURAL = PROCEDURAL_FAMILIES  # today's default mix
@@ -51,7 +52,8 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
                    "procedural (the six above), features (the feature-based training families), train (all "
                    "training families), leave-out (never for training: feat_hex, feat_knob, feat_block) "
                    "[default: the procedural ones, plus cad with --cad].")
-@click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Worker processes.")
+@click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes (with --executor ray: most scans in flight, default the whole cluster).")
 @click.option("--start", type=click.IntRange(min=0), default=0, show_default=True,
               help="Index of the first scan (extends a set: scans start..start+n-1).")
 @click.option("--png-compression", type=click.IntRange(0, 9), default=1, show_default=True,
@@ -68,11 +70,18 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
                    "30-70 % of the smaller image side (SCAN_FORMAT.md).  [default: extent with --appearance "
                    "random, else fill]")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
+@executor_options
+@click.pass_context
+def command(ctx: click.Context, out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
             families: tuple[str, ...] | None, jobs: int, start: int, png_compression: int, preview: Path | None,
-            print_share: float, appearance: str, framing: str | None, quiet: bool) -> None:
-    """Render N synthetic scans of random CAD parts into OUT/scan_XXXXX (color, depth, camera, mask, gt/)."""
-    from v2c.synth.dataset import SynthConfig, generate_dataset
+            print_share: float, appearance: str, framing: str | None, quiet: bool, executor: str,
+            ray_address: str | None) -> None:
+    """Render N synthetic scans of random CAD parts into OUT/scan_XXXXX (color, depth, camera, mask, gt/).
+
+    Each scan is written to a temporary folder and renamed into place. With --executor ray every scan is one Ray
+    task writing into OUT itself: OUT (and --cad) must be on a file system every node shares."""
+    from v2c.executors import ExecutorError
+    from v2c.synth.dataset import SynthConfig, SynthError, generate_dataset
     from v2c.synth.parts import list_cad_files
     from v2c.synth.scene import SceneConfig
 
@@ -89,7 +98,11 @@ def command(out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad
     cfg = SynthConfig(width=size[0], height=size[1], noise=noise, families=families, cad_files=cad_files,
                       png_compression=png_compression, scene=SceneConfig(print_share=print_share),
                       appearance=appearance, framing=framing or ("extent" if appearance == "random" else "fill"))
-    folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start)
+    where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
+    try:
+        folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start, executor=where)
+    except (ExecutorError, SynthError) as e:
+        raise click.ClickException(str(e)) from None
     if preview is not None:
         from v2c.synth.preview import write_preview
 

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import os
+from functools import partial
 from pathlib import Path
 
 import click
 
 from v2c.cli_support import max_pixels_option
+from v2c.commands import executor_config, executor_options
 
 
 def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
@@ -29,6 +31,16 @@ def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
     return out
 
 
+def _to_step_task(scan: Path, out: Path | None, batch: bool, frame: str, segmentation: str, extras: bool,
+                  roi: tuple[int, int, int, int] | None, force: bool = False):
+    """One scan's task (here, in a pool or on a Ray worker): reads SCAN, writes its outputs, returns the small
+    `v2c.api.ScanExport` record."""
+    from v2c.api import scan_to_step
+
+    return scan_to_step(scan, _output_for(scan, out, batch), frame=frame, segmentation=segmentation,
+                        extras=extras, roi=roi, force=force)
+
+
 @click.command("to-step")
 @max_pixels_option
 @click.argument("scans", nargs=-1, required=True, type=click.Path(path_type=Path))
@@ -44,17 +56,22 @@ def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
 @click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
 @click.option("--roi", callback=_roi_option, default=None, metavar="X0,Y0,X1,Y1",
               help="Restrict the reconstruction to this pixel box (x1/y1 exclusive).")
+@executor_options
 def command(scans: tuple[Path, ...], out: str | None, frame: str, segmentation: str, no_extras: bool,
-            roi: tuple[int, int, int, int] | None, force: bool) -> None:
+            roi: tuple[int, int, int, int] | None, force: bool, executor: str, ray_address: str | None) -> None:
     """Reconstruct each SCAN folder (or every scan folder inside a folder) and write its STEP.
 
-    One failing scan does not stop the others; the exit status is non-zero if any failed.
+    One failing scan does not stop the others; the exit status is non-zero if any failed. With --executor ray
+    each scan is one Ray task: workers read the scan folders (and write next to them or under -o) at the same
+    paths, so those must be on a file system every node shares.
     """
     from tqdm import tqdm
 
-    from v2c.api import expand_scans, scan_to_step
+    from v2c.api import expand_scans
     from v2c.cli_support import describe_error, log, was_interrupted
+    from v2c.executors import ExecutorError, run_tasks
 
+    where = executor_config(executor, ray_address)
     paths = expand_scans(list(scans))
     batch = len(paths) > 1
     # click's Path would drop a trailing separator: "-o new/" must still mean a folder
@@ -68,17 +85,24 @@ def command(scans: tuple[Path, ...], out: str | None, frame: str, segmentation: 
         if dup:
             raise click.ClickException(f"scans with the same folder name ({', '.join(dup)}) would write "
                                        f"the same {out}/<name>.step; give them separately")
+    task = partial(_to_step_task, out=out, batch=into_folder, frame=frame, segmentation=segmentation,
+                   extras=not no_extras, roi=roi, force=force)
+    try:
+        results = run_tasks(task, paths, where)
+    except ExecutorError as e:
+        raise click.ClickException(str(e)) from None
     done, failed = [], []
-    bar = tqdm(paths, desc="to-step", unit="scan", disable=not batch, leave=False)
-    for scan in bar:
-        bar.set_postfix_str(scan.name)
-        try:
-            res = scan_to_step(scan, _output_for(scan, out, into_folder), frame=frame, segmentation=segmentation,
-                               extras=not no_extras, roi=roi, force=force)
-        except Exception as exc:  # one failing scan must not stop the rest
+    bar = tqdm(total=len(paths), desc="to-step", unit="scan", disable=not batch, leave=False)
+    if where.kind == "local":  # one at a time, in order: name the scan being worked on
+        bar.set_postfix_str(paths[0].name)
+    for scan, res, exc in results:
+        bar.update()
+        if where.kind == "local" and bar.n < len(paths):
+            bar.set_postfix_str(paths[bar.n].name)
+        if exc is not None:  # one failing scan does not stop the rest
             if was_interrupted():  # Ctrl-C inside a C extension can surface as another exception
                 raise KeyboardInterrupt from exc
-            log.debug("%s failed:", scan, exc_info=True)
+            log.debug("%s failed: %s", scan, exc)
             msg = describe_error(exc, scan)
             failed.append((scan, msg))
             if batch:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from v2c.commands import executor_config, executor_options
 from v2c.segment.train_config import TrainConfig
 
 
@@ -34,17 +35,26 @@ from v2c.segment.train_config import TrainConfig
               help="Start from these weights (a second training stage with a fresh schedule).")
 @click.option("--threads", default=TrainConfig.threads, show_default=True, help="torch CPU threads.")
 @click.option("--fp32", is_flag=True, help="Disable bf16 autocast even where the CPU supports it.")
+@executor_options
 def command(data_dir: Path, recipe: str | None, out: Path, seed: int, steps: int, stop_step: int | None, minutes: float | None,
             warmup_steps: int, batch: int, crop_px: int, lr: float, cache_dir: Path | None, init: Path | None,
-            threads: int, fp32: bool) -> None:
-    """Train the segmentation network on the scans under DATA and write OUT (+ OUT.json, the training record)."""
+            threads: int, fp32: bool, executor: str, ray_address: str | None) -> None:
+    """Train the segmentation network on the scans under DATA and write OUT (+ OUT.json, the training record).
+
+    --executor / --ray-address say where --recipe generates its scans (the training itself runs here)."""
     from v2c.segment.train import train
 
+    where = executor_config(executor, ray_address, jobs=2, jobs_given=False)
     if recipe is not None:
+        from v2c.executors import ExecutorError
         from v2c.segment.train import RECIPES, generate_training_data
+        from v2c.synth.dataset import SynthError
 
         click.echo(f"generating the {recipe} training set under {data_dir} (missing scans only)")
-        generate_training_data(data_dir, jobs=2, recipe=RECIPES[recipe])
+        try:
+            generate_training_data(data_dir, jobs=2, recipe=RECIPES[recipe], executor=where)
+        except (ExecutorError, SynthError) as e:
+            raise click.ClickException(str(e)) from None
     if not data_dir.is_dir():
         raise click.ClickException(f"{data_dir}: no such folder (generate scans with `v2c synth` or --recipe)")
     cfg = TrainConfig(steps=steps, stop_step=stop_step, minutes=minutes, warmup_steps=warmup_steps, batch=batch,

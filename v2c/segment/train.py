@@ -20,6 +20,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from v2c.executors import ExecutorConfig
 from v2c.labels import IGNORE, NUM_CLASSES
 from v2c.segment.data import CachedScans, build_cache, dequantise, find_scans
 from v2c.segment.net import NetConfig, UNet, bf16_supported, load_weights, save_weights
@@ -58,10 +59,11 @@ RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RE
 
 
 def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
-                           recipe: tuple = TRAINING_RECIPE) -> list[Path]:
+                           recipe: tuple = TRAINING_RECIPE, executor: str | ExecutorConfig = "local") -> list[Path]:
     """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
 
-    Equivalent to one `v2c synth` run per recipe row. A row is (width, height, noise, scans, seed[, print share
+    Equivalent to one `v2c synth` run per recipe row; ``jobs`` local processes, or ``executor`` (e.g. a Ray
+    cluster, `v2c.executors.ExecutorConfig`). A row is (width, height, noise, scans, seed[, print share
     [, families[, appearance]]]); rows naming families go to DATA/<width>x<height>_<noise>[_print]_<tag>[_look]_s<seed>/
     (tag: the family group's name, or the families joined by '+'; _look: appearance "random", which also frames
     the part by its extent, like `v2c synth --appearance random`). A leave-out family
@@ -93,7 +95,8 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
             cfg = SynthConfig(width=w, height=h, noise=noise, scene=SceneConfig(print_share=share),
                               **({"families": families} if families is not None else {}),
                               **({"appearance": look, "framing": "extent"} if look != "plain" else {}))
-            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have)
+            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have,
+                                     executor=executor)
     return done
 
 

@@ -11,14 +11,14 @@ gt/depth_clean.png is quantised to that unit like depth.png; gt/depth_clean.npy 
 from __future__ import annotations
 
 import json
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from v2c.atomic import atomic_dir
+from v2c.executors import ExecutorConfig, run_tasks
 from v2c.labels import IGNORE, axis_class, label_of
 from v2c.synth import appearance as appearance_mod
 from v2c.synth import noise as noise_mod
@@ -29,6 +29,12 @@ from v2c.synth.scene import SceneConfig, sample_scene
 
 GENERATOR = "v2c.synth/1"
 DEPTH_SCALE = 1e-4  # metres per depth unit in depth.png and gt/depth_clean.png
+#: Written last into a scan folder: its presence marks a complete scan (resuming runs look for it).
+COMPLETE_MARKER = "gt/meta.json"
+
+
+class SynthError(RuntimeError):
+    """Scans of a run that could not be generated (the others were); the message names each and why."""
 
 
 @dataclass(frozen=True)
@@ -101,7 +107,16 @@ def _to_units(depth_m: np.ndarray) -> np.ndarray:
 
 
 def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = SynthConfig()) -> Path:
-    """Render scan `index` of run `seed` into out_dir/scan_XXXXX and return that folder."""
+    """Render scan `index` of run `seed` into out_dir/scan_XXXXX and return that folder.
+
+    The files are written into a temporary folder next to it (`v2c.atomic.atomic_dir`), renamed into place when
+    complete: a killed or retried generator leaves no half-written scan."""
+    with atomic_dir(Path(out_dir) / scan_name(index), last=(COMPLETE_MARKER,)) as folder:
+        _render_scan_into(folder, seed, index, cfg)
+    return Path(out_dir) / scan_name(index)
+
+
+def _render_scan_into(folder: Path, seed: int, index: int, cfg: SynthConfig) -> None:
     rng = np.random.default_rng([seed, index])
     rest = _pick_part(rng, cfg)
     lo, hi = rest.bbox
@@ -129,7 +144,6 @@ def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = Synth
     rest_to_cam_mm = 1000.0 * np.hstack([rot @ scene.rest_to_world[:, :3],
                                          (rot @ scene.rest_to_world[:, 3] + trans)[:, None]])
 
-    folder = Path(out_dir) / scan_name(index)
     gt = folder / "gt"
     gt.mkdir(parents=True, exist_ok=True)
     step_path = gt / "part.step"
@@ -178,8 +192,7 @@ def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = Synth
         "units": "camera frame (OpenCV), metres; part.step in millimetres",
         **extra_meta,  # only with appearance / framing other than the defaults (default files unchanged)
     }
-    _write_json(gt / "meta.json", _plain(meta))
-    return folder
+    _write_json(folder / COMPLETE_MARKER, _plain(meta))
 
 
 def _plain(obj):
@@ -205,27 +218,33 @@ def _job(args: tuple[Path, int, int, SynthConfig]) -> Path:
 
 
 def generate_dataset(out_dir: Path, n: int, seed: int, cfg: SynthConfig = SynthConfig(), jobs: int = 1,
-                     progress: bool = True, start: int = 0) -> list[Path]:
-    """Generate scans start..start+n-1 of run `seed` into `out_dir`, `jobs` processes in parallel."""
+                     progress: bool = True, start: int = 0,
+                     executor: str | ExecutorConfig = "local") -> list[Path]:
+    """Generate scans start..start+n-1 of run `seed` into `out_dir` and return their folders in index order.
+
+    executor: "local" (``jobs`` processes; 1 = this process) or an `v2c.executors.ExecutorConfig` (e.g. a Ray
+    cluster; its own jobs apply). A scan that fails does not stop the others: `SynthError` names every failed scan
+    once the rest are written. Raises `v2c.executors.ExecutorError` (nothing written) when the executor cannot
+    be used.
+    """
     from tqdm import tqdm
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    where = executor if isinstance(executor, ExecutorConfig) else ExecutorConfig(kind=executor, jobs=jobs)
     tasks = [(out_dir, seed, i, cfg) for i in range(start, start + n)]
-    done: list[Path] = []
-    if jobs <= 1:
+    results = run_tasks(_job, tasks, where, initializer=_worker_init)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if where.kind == "local" and (where.jobs or 1) <= 1:
         occ.silence_occt()
-        with tqdm(total=n, unit="scan", disable=not progress) as bar:
-            for t in tasks:
-                done.append(_job(t))
-                bar.update()
-        return done
-    # Spawned, not forked, workers: forking a process whose embree/OCCT thread pools already run deadlocks.
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init, mp_context=ctx) as pool:
-        results = pool.map(_job, tasks, chunksize=1)
-        with tqdm(total=n, unit="scan", disable=not progress) as bar:
-            for path in results:
-                done.append(path)
-                bar.update()
-    return done
+    done: dict[int, Path] = {}
+    failed: list[str] = []
+    with tqdm(total=n, unit="scan", disable=not progress) as bar:
+        for task, path, exc in results:
+            if exc is None:
+                done[task[2]] = path
+            else:
+                failed.append(f"{scan_name(task[2])}: {type(exc).__name__}: {exc}")
+            bar.update()
+    if failed:
+        raise SynthError(f"{len(failed)} of {n} scans failed ({out_dir}): " + "; ".join(sorted(failed)))
+    return [done[i] for i in sorted(done)]
