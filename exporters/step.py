@@ -18,6 +18,7 @@ frame.
 
 from __future__ import annotations
 
+import contextlib
 import re
 import time
 from collections.abc import Iterator
@@ -209,8 +210,10 @@ def write(
     frame: Frame | str = Frame.PART,
     product: str | None = None,
     config: BrepConfig | None = None,
+    atomic: bool = True,
 ) -> StepReport:
-    """Write a VB-Rep as STEP AP242 (millimetres) to ``path``, atomically (temporary file + rename).
+    """Write a VB-Rep as STEP AP242 (millimetres) to ``path``, atomically (temporary file + rename; with
+    ``atomic=False`` straight into ``path``, for a caller that passes its own exclusive temporary).
 
     frame: "part" (recovered axis frame, footprint origin) or "camera". product: the product name (default:
     the file stem). Returns a `StepReport`; faces that could not be built are reported there, not raised,
@@ -225,7 +228,8 @@ def write(
         # A product of edges alone is useless and crashes FreeCAD 0.20's import: refuse rather than write it.
         detail = "; ".join(built.warnings[:3]) or "the VB-Rep has no faces"
         raise StepExportError(f"{path}: no face could be built ({detail})")
-    with atomic_write(path) as tmp, quiet_occt():  # exclusive temporary in the folder, renamed into place
+    target = atomic_write(path) if atomic else contextlib.nullcontext(path)
+    with target as tmp, quiet_occt():  # exclusive temporary in the folder, renamed into place
         write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built),
                         originating_system=v2c_origin())
         # The file must hold what was built: OCCT's reader heals faces (and may split one, losing its name).

@@ -118,8 +118,14 @@ def _files(folder: Path) -> list[Path]:
     return sorted(p.relative_to(folder) for p in folder.rglob("*") if p.is_file())
 
 
+def _is_temporary(p: Path) -> bool:
+    """A temporary of `v2c.atomic` (synth scan folders) or `v2c.io_safe` (STEP, JSON, figure):
+    ``.<name>.v2c-tmp-...`` or ``.<stem>.<pid>.<random>.tmp<suffix>``."""
+    return TMP_TAG in p.name or (p.name.startswith(".") and ".tmp" in p.name)
+
+
 def _no_temporaries(folder: Path) -> list[str]:
-    return [str(p) for p in folder.rglob(f"*{TMP_TAG}*")]
+    return [str(p) for p in folder.rglob("*") if _is_temporary(p)]
 
 
 def _summary_lines(stdout: str, out: Path) -> list[str]:
@@ -201,7 +207,7 @@ def _to_step_killed_once(marker: Path, task, scan: Path):
 
         def write_then_die(path, *args, **kwargs):
             real(path, *args, **kwargs)
-            assert Path(path).stat().st_size > 0 and TMP_TAG in Path(path).name
+            assert Path(path).stat().st_size > 0 and _is_temporary(Path(path))
             os._exit(1)
 
         exporters.step.write_xcaf_step = write_then_die

@@ -124,7 +124,9 @@ def scan_to_step(
         t = time.perf_counter()
         tmp = files.temp(out)
         try:
-            report = step_export.write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem)
+            # straight into the set's own exclusive temporary (a nested one would outlive a killed worker)
+            report = step_export.write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem,
+                                       atomic=False)
         except step_export.StepExportError as exc:  # name the destination, not our temporary
             raise step_export.StepExportError(f"{str(exc).replace(str(tmp), str(out))}; nothing written") from None
         report.path = out
