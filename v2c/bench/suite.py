@@ -145,6 +145,8 @@ def corpus_parts(cfg: SuiteConfig) -> list[CorpusPart]:
         if bad:
             raise ValueError(f"{cfg.split_file}: {', '.join(bad)} not in the {split} split")
         rows = [p for p in rows if p.file in cfg.parts]
+    if not rows:  # no corpus part asked for (--parts none): the corpus folder is not needed
+        return []
     folder = Path(cfg.corpus_dir or default_corpus_dir())
     if not folder.is_dir():
         raise ValueError(f"{folder}: CAD corpus not found (expected ../shared/data/cad_corpus; --corpus DIR)")
