@@ -157,7 +157,7 @@ class EdgeBuilder:
             if fa not in self.surfaces or fb not in self.surfaces:
                 continue
             poly = subsample(self.fmap.points(e.polyline), self.cfg.branch_samples)
-            if getattr(e, "tangent", False):
+            if e.tangent:
                 # a tangent junction: the surfaces barely cross, so GeomAPI_IntSS finds no curve or a wandering
                 # one; the VB-Rep's line of contact is used when it lies within branch_tol of both surfaces
                 c = curve_from_dict(e.curve, self.fmap)

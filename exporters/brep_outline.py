@@ -132,7 +132,15 @@ def outline_polygons(
     return out, scale
 
 
-def _nearest_edges(midpoints: np.ndarray, candidates: list[tuple[int, np.ndarray]]) -> np.ndarray:
+def edge_candidates(vbrep: VBRep, fmap: FrameMap, face_id: int) -> list[tuple[int, np.ndarray]]:
+    """The VB-Rep edges an edge of face ``face_id`` that is no VB-Rep edge of its own (an outline segment, a
+    seam OCCT added) is named after, with their polylines in ``fmap``'s output frame (mm): the face's own edges,
+    else (a face without edges) every edge of the VB-Rep, so that no edge of the file goes untyped."""
+    own = [e for e in vbrep.edges if face_id in e.faces] or list(vbrep.edges)
+    return [(e.id, fmap.points(np.asarray(e.polyline, float).reshape(-1, 3))) for e in own]
+
+
+def nearest_edge_ids(midpoints: np.ndarray, candidates: list[tuple[int, np.ndarray]]) -> np.ndarray:
     """For each midpoint (K, 3) the id of the candidate edge (id, polyline (P, 3)) whose polyline passes
     nearest; -1 without candidates."""
     if not candidates:
@@ -212,12 +220,6 @@ class OutlineBuilder:
         self.max_stretch = max_stretch
         self.bb = BRep_Builder()
 
-    def _candidates(self, f: VFace) -> list[tuple[int, np.ndarray]]:
-        """The edges an outline segment may be named after: the face's own, else (a face without edges) every
-        edge of the VB-Rep, so that no edge of the file goes untyped."""
-        own = [e for e in self.vb.edges if f.id in e.faces] or list(self.vb.edges)
-        return [(e.id, self.fmap.points(np.asarray(e.polyline, float).reshape(-1, 3))) for e in own]
-
     def build(self, f: VFace, s: AnalyticSurface) -> list[OutlinePiece]:
         """The outline faces of ``f`` on surface ``s`` (empty when none can be built)."""
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
@@ -227,7 +229,7 @@ class OutlineBuilder:
             return []
         # A first pass at the cap finds the pieces; each is then simplified within its own area budget.
         polys, scale = outline_polygons(s, pts, tris, 0.0, self.min_piece_rel * total, self.max_stretch)
-        cands = self._candidates(f)
+        cands = edge_candidates(self.vb, self.fmap, f.id)
         out = []
         for poly in polys:
             simple = _simplify_keeping_area(poly, self.tol, self.tol_area_rel)
@@ -247,7 +249,7 @@ class OutlineBuilder:
             return None
         xyz = s.evaluate(uv)
         mids = s.evaluate((uv + np.roll(uv, -1, axis=0)) / 2)
-        names = _nearest_edges(mids, cands)
+        names = nearest_edge_ids(mids, cands)
         verts = []
         for q in xyz:
             vx = TopoDS_Vertex()

@@ -23,7 +23,7 @@ from OCP.TopoDS import TopoDS
 from exporters.brep import bounding_box, face_area
 from exporters.brep_outline import mesh_area
 from exporters.frames import FrameMap
-from exporters.step import _parse_edge, _parse_face, quiet_occt
+from exporters.step import _parse_edge, faces_by_id, quiet_occt
 from exporters.xcaf import read_xcaf_step
 from v2c.vbrep.model import VBRep, VEdge, VFace
 
@@ -51,8 +51,10 @@ class FaceArea:
 
     @property
     def ratio(self) -> float:
-        """written / reconstructed (1.0 for an empty mesh written empty)."""
-        return self.written / self.reconstructed if self.reconstructed > 0 else float(self.written == 0) or 1.0
+        """written / reconstructed (1.0 for an empty mesh written empty, infinite for one written non-empty)."""
+        if self.reconstructed > 0:
+            return self.written / self.reconstructed
+        return 1.0 if self.written == 0 else float("inf")
 
 
 @dataclass
@@ -147,15 +149,9 @@ def check_written(vbrep: VBRep, path: str | Path, fmap: FrameMap, config: Readba
         rs = read_xcaf_step(path)
     out = Readback(path=path, config=cfg)
     size = max(fmap.length(vbrep.scale), 1.0)
-    written: dict[int, float] = {}
-    meshes: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for f in rs.faces:
-        fid = _parse_face(f.name)[0]
-        if fid is None:
-            continue
-        face = TopoDS.Face_s(f.shape)
-        written[fid] = written.get(fid, 0.0) + face_area(face)
-        meshes.setdefault(fid, []).append(_face_mesh(face, cfg.deflection_rel * size))
+    by_id = faces_by_id(rs.faces)
+    written = {fid: sum(face_area(f) for f in fs) for fid, fs in by_id.items()}
+    meshes = {fid: [_face_mesh(f, cfg.deflection_rel * size) for f in fs] for fid, fs in by_id.items()}
     recon_pts = []
     for f in vbrep.faces:
         pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))

@@ -42,13 +42,14 @@ from OCP.GeomAbs import (
 from OCP.Message import Message, Message_Gravity
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE
 from OCP.TopExp import TopExp
-from OCP.TopoDS import TopoDS, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
 from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, face_area, translate_built
 from exporters.brep_faces import edges_of
+from exporters.brep_outline import edge_candidates, nearest_edge_ids
 from exporters.frames import Frame, FrameMap, frame_map
-from exporters.xcaf import RGB, SubShapeAttrs, read_xcaf_step, write_xcaf_step
+from exporters.xcaf import RGB, ReadSubShape, SubShapeAttrs, read_xcaf_step, write_xcaf_step
 from v2c.errors import V2cError
 from v2c.io_safe import atomic_write, v2c_origin
 from v2c.labels import PrimitiveType
@@ -85,7 +86,7 @@ _FACE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<axis>[XYZU-]):f(?P<id>\d+)$")
 def edge_name(edge: VEdge) -> str:
     """``"<type>:<confidence>:e<id>"``, confidence with two decimals; ``":tangent"`` appended for an
     intersection edge where its faces meet tangentially (G1)."""
-    tail = ":tangent" if getattr(edge, "tangent", False) else ""
+    tail = ":tangent" if edge.tangent else ""
     return f"{EdgeType(edge.type).value}:{float(edge.confidence):.2f}:e{int(edge.id)}{tail}"
 
 
@@ -181,20 +182,20 @@ def _attributes(vbrep: VBRep, built: BuiltBRep) -> list[SubShapeAttrs]:
             if eid in by_id:
                 subs.append(edge_attrs(shape, by_id[eid]))
     # Edges OCCT added itself (the seam ShapeFix puts on a face that closes around a cylinder): named after the
-    # nearest VB-Rep edge of their face, so that no edge of the file goes untyped.
+    # nearest VB-Rep edge of their face, as outline segments are, so that no edge of the file goes untyped.
     named = TopTools_IndexedMapOfShape()
     for sub in subs:
         named.Add(sub.shape)
     for f in vbrep.faces:
-        for face in built.face_parts.get(f.id, [built.faces[f.id]] if f.id in built.faces else []):
-            own = [e for e in vbrep.edges if f.id in e.faces] or list(vbrep.edges)
-            for edge in edges_of(face):
-                if named.Contains(edge) or not own or built.fmap is None:
-                    continue
-                mid = _edge_midpoint(edge)
-                near = min(own, key=lambda e: float(np.min(np.linalg.norm(
-                    built.fmap.points(np.asarray(e.polyline, float).reshape(-1, 3)) - mid, axis=1))))
-                subs.append(edge_attrs(edge, near))
+        parts = built.face_parts.get(f.id, [built.faces[f.id]] if f.id in built.faces else [])
+        extra = [edge for face in parts for edge in edges_of(face) if not named.Contains(edge)]
+        cands = edge_candidates(vbrep, built.fmap, f.id) if extra and built.fmap is not None else []
+        if not cands:
+            continue
+        for edge, eid in zip(extra, nearest_edge_ids(np.array([_edge_midpoint(e) for e in extra]), cands),
+                             strict=True):
+            if not named.Contains(edge):  # an edge two pieces share is named once
+                subs.append(edge_attrs(edge, by_id[int(eid)]))
                 named.Add(edge)
     return subs
 
@@ -266,15 +267,20 @@ def write(
 
 
 # ------------------------------------------------------------------------------------------------ reading
-def written_face_areas(path: str | Path) -> dict[int, float]:
-    """VFace id -> the area (mm²) of the faces named after it in a STEP written by `write` (all pieces)."""
-    rs = read_xcaf_step(path)
-    out: dict[int, float] = {}
-    for f in rs.faces:
+def faces_by_id(faces: list[ReadSubShape]) -> dict[int, list[TopoDS_Face]]:
+    """VFace id -> the faces (all pieces) named after it, of faces read back by `exporters.xcaf.read_xcaf_step`;
+    unnamed faces are left out."""
+    out: dict[int, list[TopoDS_Face]] = {}
+    for f in faces:
         fid = _parse_face(f.name)[0]
         if fid is not None:
-            out[fid] = out.get(fid, 0.0) + face_area(TopoDS.Face_s(f.shape))
+            out.setdefault(fid, []).append(TopoDS.Face_s(f.shape))
     return out
+
+
+def written_face_areas(path: str | Path) -> dict[int, float]:
+    """VFace id -> the area (mm²) of the faces named after it in a STEP written by `write` (all pieces)."""
+    return {fid: sum(face_area(f) for f in fs) for fid, fs in faces_by_id(read_xcaf_step(path).faces).items()}
 
 
 
