@@ -15,7 +15,8 @@ all: test
 setup:
 	bash scripts/setup.sh
 
-test: setup
+# The layer contract and the code style first (seconds), then the tests
+test: setup lint
 	$(PY) -m pytest -n $(JOBS) -q tests
 
 # The main job on a bundled sample: SCAN/reconstruction.step (+ .vbrep.json and the .png figure next to it).
@@ -26,6 +27,8 @@ demo: setup
 
 lint: setup
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/lint-imports
 
 clean:
 	rm -rf out .pytest_cache .ruff_cache samples/*/reconstruction.*

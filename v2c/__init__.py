@@ -5,27 +5,27 @@ Scripting entry points (imported lazily, so `import v2c` stays cheap):
     >>> import v2c
     >>> vbrep = v2c.reconstruct("samples/bracket_planes_cylinders")    # -> v2c.vbrep.model.VBRep
     >>> scan = v2c.load_scan("samples/bracket_planes_cylinders")
+
+`reconstruct` is `v2c.pipeline.reconstruct`, the one pipeline entry point; `v2c.pipeline.PipelineConfig` carries
+every stage's settings.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["__version__", "load_scan", "reconstruct"]
+__all__ = ["PipelineConfig", "__version__", "load_scan", "reconstruct"]
 
 
 def __getattr__(name: str) -> Any:
     if name == "__version__":  # the installed distribution's version, looked up on first use
-        from importlib import metadata
+        from v2c.version import version
 
-        try:
-            return metadata.version("v2c")
-        except metadata.PackageNotFoundError:  # a source tree on sys.path without an installed distribution
-            return "0.0.0+unknown"
-    if name == "reconstruct":
-        from v2c.pipeline import reconstruct
+        return version()
+    if name in ("reconstruct", "PipelineConfig"):
+        from v2c import pipeline
 
-        return reconstruct
+        return getattr(pipeline, name)
     if name == "load_scan":
         from v2c.scan import load_scan
 

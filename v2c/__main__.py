@@ -19,6 +19,6 @@ def _interrupted_early(signum: int, frame: object) -> None:
 
 signal.signal(signal.SIGINT, _interrupted_early)
 
-from v2c.cli import run  # after the handler, so that an early Ctrl-C is handled too
+from v2c.cli import run  # noqa: E402 - after the handler, so that an early Ctrl-C is handled too
 
 run()

@@ -4,7 +4,8 @@
     >>> result = scan_to_step("scans/part_01")          # writes scans/part_01/reconstruction.step
     >>> result.step, result.report.n_faces
 
-`scan_to_step` = `v2c.scan.load_scan` -> `v2c.pipeline.reconstruct` -> `exporters.step.write` (millimetres,
+`scan_to_step` = `v2c.scan.load_scan` -> `v2c.pipeline.reconstruct` (re-exported here as `reconstruct`, the
+one pipeline entry point) -> `exporters.step.write` (millimetres,
 part frame by default), then the extras next to the STEP: ``<stem>.vbrep.json`` (the VB-Rep) and
 ``<stem>.png`` (the result figure of `exporters.figure`). The files are one `v2c.io_safe.OutputSet`: written to
 exclusive temporaries in the output folder and committed together, so a failed or interrupted run leaves the
@@ -19,11 +20,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from v2c.choices import DEFAULT_ABLATION, DEFAULT_SEGMENTATION
+from v2c.pipeline import PipelineConfig, reconstruct
+
 if TYPE_CHECKING:
     from exporters.readback import Readback
     from exporters.step import StepReport
-    from v2c.scan import Scan
-    from v2c.vbrep.model import VBRep
+
+__all__ = ["DEFAULT_STEP_NAME", "PipelineConfig", "ScanExport", "expand_scans", "reconstruct", "scan_to_step"]
 
 log = logging.getLogger(__name__)
 
@@ -74,35 +78,25 @@ def extras_paths(step: Path) -> tuple[Path, Path]:
     return step.with_name(step.stem + ".vbrep.json"), step.with_name(step.stem + ".png")
 
 
-def reconstruct(scan: Scan | str | Path, segmentation: str = "learned", ablation: str = "full",
-                roi: str | tuple[int, int, int, int] | None = None) -> VBRep:
-    """The VB-Rep of a scan (a loaded `Scan` or a folder) by `v2c.pipeline.reconstruct`; camera frame, m."""
-    from v2c import pipeline
-    from v2c.scan import load_scan
-
-    if isinstance(scan, (str, Path)):
-        scan = load_scan(scan, roi=roi)
-    return pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation)
-
-
 def scan_to_step(
     scan_dir: str | Path,
     out: str | Path | None = None,
     frame: str = "part",
-    segmentation: str = "learned",
+    segmentation: str = DEFAULT_SEGMENTATION,
     extras: bool = True,
     roi: str | tuple[int, int, int, int] | None = None,
-    ablation: str = "full",
+    ablation: str = DEFAULT_ABLATION,
     force: bool = False,
+    config: PipelineConfig | None = None,
 ) -> ScanExport:
     """Reconstruct one scan folder and write its STEP (default ``SCAN/reconstruction.step``) and, unless
     ``extras`` is False, the VB-Rep JSON and figure next to it. Raises `v2c.scan.ScanError` for a bad scan and
     whatever the pipeline raises; on any error no STEP is written. force: replace existing files that v2c did
-    not write (otherwise `v2c.errors.OutputError`, checked before the pipeline runs)."""
+    not write (otherwise `v2c.errors.OutputError`, checked before the pipeline runs). config: every stage's
+    settings (`v2c.pipeline.PipelineConfig`; the shipped defaults when None)."""
     from exporters import step as step_export
     from exporters.figure import result_figure
     from exporters.readback import check_written
-    from v2c import pipeline
     from v2c.io_safe import OutputSet, check_replaceable
     from v2c.scan import load_scan
 
@@ -117,8 +111,8 @@ def scan_to_step(
     log.info("%s: %d x %d px, %d valid pixels, loaded in %.2f s", scan_dir, scan.width, scan.height,
              int(scan.valid.sum()), seconds["load"])
     t = time.perf_counter()
-    vbrep, seg, _ = pipeline.reconstruct(scan, segmentation=segmentation, ablation=ablation,
-                                         return_stages=True)
+    vbrep, seg, _ = reconstruct(scan, segmentation=segmentation, ablation=ablation, config=config,
+                                return_stages=True)
     seconds["reconstruct"] = time.perf_counter() - t
     with OutputSet(force=force) as files:  # committed together on leaving the block; nothing changed on an exception
         t = time.perf_counter()

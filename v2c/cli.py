@@ -14,7 +14,6 @@ from typing import Any
 
 import click
 
-from v2c import __version__
 from v2c import commands as _commands
 from v2c.cli_support import (
     EXIT_INTERRUPTED,
@@ -22,6 +21,7 @@ from v2c.cli_support import (
     ignore_sigint_from_now_on,
     run_with_error_policy,
 )
+from v2c.version import version
 
 
 class V2cGroup(click.Group):
@@ -29,6 +29,7 @@ class V2cGroup(click.Group):
 
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
+        """Run the command line like `click.Group.main`, with v2c's error policy in standalone mode."""
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         code = run_with_error_policy(
@@ -37,7 +38,7 @@ class V2cGroup(click.Group):
 
 
 @click.group(cls=V2cGroup, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, "-V", "--version", prog_name="v2c")
+@click.version_option(version(), "-V", "--version", prog_name="v2c")
 @click.option("-v", "--verbose", count=True, help="More messages on stderr (-v: progress, -vv: debug).")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
 def main(verbose: int, quiet: bool) -> None:

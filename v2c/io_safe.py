@@ -47,9 +47,9 @@ _HEAD_BYTES = 4096
 
 def v2c_origin() -> str:
     """The originating-system / generator text of this v2c: ``"v2c <version>"``."""
-    import v2c
+    from v2c.version import version
 
-    return f"{V2C_MARK} {v2c.__version__}"
+    return f"{V2C_MARK} {version()}"
 
 
 def written_by_v2c(path: str | Path) -> bool:
@@ -238,6 +238,7 @@ class OutputSet:
 
     @property
     def destinations(self) -> list[Path]:
+        """The destinations written so far (in the order their temporaries were made)."""
         return [d for _, d in self._pending]
 
     def discard(self) -> None:

@@ -10,6 +10,8 @@ from typing import Any
 
 import click
 
+from v2c.choices import ABLATIONS, DEFAULT_ABLATION, DEFAULT_SEGMENTATION, SEGMENTATION_METHODS
+
 
 def executor_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """Add ``--executor local|ray`` and ``--ray-address`` (parameters ``executor`` and ``ray_address``)."""
@@ -42,3 +44,18 @@ def executor_config(executor: str, ray_address: str | None, jobs: int | None = 1
 def jobs_given(ctx: click.Context, name: str = "jobs") -> bool:
     """Whether the user set the option ``name`` (rather than leaving its default)."""
     return ctx.get_parameter_source(name) not in (None, click.core.ParameterSource.DEFAULT)
+
+
+def segmentation_option(dest: str = "segmentation") -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """``--segmentation`` as every reconstructing command takes it: one list of methods, one default
+    (`v2c.choices`); the value reaches the command's ``dest`` parameter."""
+    return click.option("--segmentation", dest, default=DEFAULT_SEGMENTATION, show_default=True,
+                        type=click.Choice(SEGMENTATION_METHODS),
+                        help="Where the surface instances come from (oracle needs a synthetic scan's gt/).")
+
+
+def ablation_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--ablation``: the geometry stage's ablation of the paper's Table 2 (`v2c.choices.ABLATIONS`)."""
+    return click.option("--ablation", default=DEFAULT_ABLATION, show_default=True, type=click.Choice(ABLATIONS),
+                        help="full: shared axis frame + intersection refinement; no-axis / no-int drop one; "
+                             "fit-only both.")(f)

@@ -6,14 +6,20 @@ instances against the ground-truth faces, docs/segmentation.md)."""
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from v2c.choices import ABLATIONS, DEFAULT_ABLATION, DEFAULT_SEGMENTATION, SEGMENTATION_METHODS
 from v2c.commands import executor_config, executor_options, jobs_given
 
+if TYPE_CHECKING:
+    from v2c.bench.run import BenchConfig
 
-def _csv(allowed: tuple[str, ...]):
+
+def _csv(allowed: tuple[str, ...]) -> Callable[[click.Context, click.Parameter, str | None], tuple[str, ...] | None]:
     def parse(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, ...] | None:
         if value is None:  # an option whose default depends on another (e.g. --ablation on --suite)
             return None
@@ -42,10 +48,10 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option("--seed", default=0, show_default=True, help="Seed of the generated scans.")
 @click.option("--noise", default="sensor", show_default=True, type=click.Choice(["sensor", "paper"]),
               help="Noise profile of the generated scans (BENCHMARK.md).")
-@click.option("--segmentation", default="learned", show_default=True,
-              callback=_csv(("learned", "geometric", "oracle")),
+@click.option("--segmentation", default=DEFAULT_SEGMENTATION, show_default=True,
+              callback=_csv(SEGMENTATION_METHODS),
               help="Segmentation method(s), comma-separated: learned, geometric, oracle.")
-@click.option("--ablation", default=None, callback=_csv(("full", "no-axis", "no-int", "fit-only", "gt")),
+@click.option("--ablation", default=None, callback=_csv((*ABLATIONS, "gt")),
               help="Ablations, comma-separated; 'gt' adds the ideal VB-Rep built from the ground truth "
                    "(the metrics' floor).  [default: full,no-axis,no-int,fit-only; full with --suite unseen or "
                    "corpus-val]")
@@ -127,9 +133,9 @@ def command(ctx: click.Context, n: int, seed: int, noise: str, segmentation: tup
         click.echo(f"outputs in {report['out_dir']}")
         _write_json(json_out, report)
         return
-    order = ("full", "no-axis", "no-int", "fit-only", "gt")
+    order = (*ABLATIONS, "gt")
     if ablation is None:
-        ablation = ("full", "no-axis", "no-int", "fit-only") if suite == "family" else ("full",)
+        ablation = ABLATIONS if suite == "family" else (DEFAULT_ABLATION,)
     if suite != "family":
         _suite(suite, seed=seed, noise=noise, segmentation=segmentation,
                ablation=tuple(a for a in order if a in ablation), cad_dir=cad_dir, size=size, json_out=json_out,
@@ -205,7 +211,7 @@ def _suite(suite: str, *, seed: int, noise: str, segmentation: tuple[str, ...], 
     _write_json(json_out, result)
 
 
-def _segmentation_only(cfg, json_out: Path | None, quiet: bool) -> None:
+def _segmentation_only(cfg: BenchConfig, json_out: Path | None, quiet: bool) -> None:
     """The segmenters of ``cfg`` on its scans, scored alone (`v2c.bench.segmentation`)."""
     from v2c.bench import run
     from v2c.bench import segmentation as S

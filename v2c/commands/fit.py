@@ -8,16 +8,8 @@ from pathlib import Path
 
 import click
 
-from v2c.cli_support import max_pixels_option
-
-
-def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
-    from v2c.scan import ScanError, parse_roi
-
-    try:
-        return parse_roi(value)
-    except ScanError as e:
-        raise click.BadParameter(str(e), ctx=ctx, param=param) from None
+from v2c.cli_support import max_pixels_option, roi_option
+from v2c.commands import ablation_option, segmentation_option
 
 
 def _short_params(d: dict) -> str:
@@ -40,19 +32,14 @@ def _short_params(d: dict) -> str:
 @click.command("fit")
 @max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(path_type=str))
-@click.option("--segmentation", "method", default="learned", show_default=True,
-              type=click.Choice(["learned", "geometric", "oracle"]),
-              help="Where the surface instances come from (oracle needs a synthetic scan's gt/).")
-@click.option("--ablation", default="full", show_default=True,
-              type=click.Choice(["full", "no-axis", "no-int", "fit-only"]),
-              help="full: shared axis frame + intersection refinement; no-axis / no-int drop one; fit-only both.")
+@segmentation_option("method")
+@ablation_option
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="JSON file to write (default: SCAN/fit.json).")
-@click.option("--roi", callback=_roi_option, default=None, metavar="x0,y0,x1,y1",
-              help="Region of interest in pixels (x1, y1 exclusive).")
+@roi_option
 @click.option("--seed", default=0, show_default=True, help="Seed of the RANSAC sampling.")
 @click.option("--force", is_flag=True, help="Replace an existing file that v2c did not write.")
-def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi, seed: int, force: bool) -> None:
+def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi: tuple[int, int, int, int] | None, seed: int, force: bool) -> None:
     """Fit primitives to the scan folder SCAN: print type, axis class, parameters, inliers and RMS of each, and
     write them (camera frame, metres) as JSON."""
     from v2c.fit import FitConfig, fit_scan

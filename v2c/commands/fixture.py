@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option
+from v2c.commands import segmentation_option
 
 
 @click.command("fixture")
@@ -22,8 +23,7 @@ from v2c.cli_support import max_pixels_option, roi_option
                    "camera: the camera frame. Millimetres either way.")
 @click.option("--min-confidence", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
               help="Intersection edges under this confidence are never used as references.")
-@click.option("--segmentation", type=click.Choice(["learned", "geometric", "oracle"]), default="learned",
-              show_default=True, help="Segmentation used by the pipeline (oracle needs a synthetic scan's gt/).")
+@segmentation_option()
 @click.option("--clearance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
               help="Gap between fixture and part in millimetres (default: the fixture kind's, 0.1-0.2 mm). "
                    "Raise it to absorb reconstruction error.")

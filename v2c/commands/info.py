@@ -3,22 +3,17 @@
 from __future__ import annotations
 
 from collections import Counter
+from typing import TYPE_CHECKING
 
 import click
 
-from v2c.cli_support import max_pixels_option
+from v2c.cli_support import max_pixels_option, roi_option
+
+if TYPE_CHECKING:
+    from v2c.scan import Scan
 
 
-def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
-    from v2c.scan import ScanError, parse_roi
-
-    try:
-        return parse_roi(value)
-    except ScanError as e:
-        raise click.BadParameter(str(e), ctx=ctx, param=param) from None
-
-
-def describe_scan(scan) -> list[str]:
+def describe_scan(scan: Scan) -> list[str]:
     """Human-readable lines about a loaded :class:`v2c.scan.Scan` (units: pixels, metres)."""
     import numpy as np
 
@@ -90,9 +85,8 @@ def describe_scan(scan) -> list[str]:
 @click.command("info")
 @max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(file_okay=True, dir_okay=True, path_type=str))
-@click.option("--roi", callback=_roi_option, default=None, metavar="x0,y0,x1,y1",
-              help="Region of interest in pixels (x1, y1 exclusive); restricts the valid pixels.")
-def command(scan_dir: str, roi) -> None:
+@roi_option
+def command(scan_dir: str, roi: tuple[int, int, int, int] | None) -> None:
     """Load the scan folder SCAN, check it and print what it holds (resolution, depth, intrinsics, mask/ROI,
     ground truth). Writes nothing."""
     from v2c.scan import ScanError, load_scan

@@ -8,16 +8,14 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option
+from v2c.commands import ablation_option, segmentation_option
 
 
 @click.command("reconstruct")
 @max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(path_type=Path))
-@click.option("--segmentation", "method", default="learned", show_default=True,
-              type=click.Choice(["learned", "geometric", "oracle"]),
-              help="Where the surface instances come from (oracle needs a synthetic scan's gt/).")
-@click.option("--ablation", default="full", show_default=True,
-              type=click.Choice(["full", "no-axis", "no-int", "fit-only"]), help="Geometry-stage ablation.")
+@segmentation_option("method")
+@ablation_option
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Folder for reconstruction.vbrep.json and reconstruction.png (default: SCAN).")
 @click.option("--no-figure", is_flag=True, help="Write only the VB-Rep JSON.")

@@ -5,20 +5,15 @@ from __future__ import annotations
 import os
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from v2c.cli_support import max_pixels_option
-from v2c.commands import executor_config, executor_options
+from v2c.cli_support import max_pixels_option, roi_option
+from v2c.commands import executor_config, executor_options, segmentation_option
 
-
-def _roi_option(ctx: click.Context, param: click.Parameter, value: str | None):
-    from v2c.scan import ScanError, parse_roi
-
-    try:
-        return parse_roi(value)
-    except ScanError as e:
-        raise click.BadParameter(str(e), ctx=ctx, param=param) from None
+if TYPE_CHECKING:
+    from v2c.api import ScanExport
 
 
 def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
@@ -32,7 +27,7 @@ def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
 
 
 def _to_step_task(scan: Path, out: Path | None, batch: bool, frame: str, segmentation: str, extras: bool,
-                  roi: tuple[int, int, int, int] | None, force: bool = False):
+                  roi: tuple[int, int, int, int] | None, force: bool = False) -> ScanExport:
     """One scan's task (here, in a pool or on a Ray worker): reads SCAN, writes its outputs, returns the small
     `v2c.api.ScanExport` record."""
     from v2c.api import scan_to_step
@@ -51,11 +46,9 @@ def _to_step_task(scan: Path, out: Path | None, batch: bool, frame: str, segment
 @click.option("--frame", type=click.Choice(["part", "camera"]), default="part", show_default=True,
               help="part: recovered axes on X/Y/Z, origin at the bottom centre of the visible part; "
                    "camera: the camera frame. Millimetres either way.")
-@click.option("--segmentation", type=click.Choice(["learned", "geometric", "oracle"]), default="learned",
-              show_default=True, help="Segmentation of the pipeline (oracle needs a synthetic scan's gt/).")
+@segmentation_option()
 @click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
-@click.option("--roi", callback=_roi_option, default=None, metavar="X0,Y0,X1,Y1",
-              help="Restrict the reconstruction to this pixel box (x1/y1 exclusive).")
+@roi_option
 @executor_options
 def command(scans: tuple[Path, ...], out: str | None, frame: str, segmentation: str, no_extras: bool,
             roi: tuple[int, int, int, int] | None, force: bool, executor: str, ray_address: str | None) -> None:
