@@ -38,7 +38,7 @@ from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
 if TYPE_CHECKING:
-    from exporters.brep import BrepConfig
+    from exporters.brep_config import BrepConfig
     from v2c.vbrep.model import VBRep, VEdge
 
 

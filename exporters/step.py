@@ -45,7 +45,8 @@ from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
-from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, face_area, translate_built
+from exporters.brep import BuiltBRep, bounding_box, build_brep, face_area, translate_built
+from exporters.brep_config import BrepConfig
 from exporters.brep_faces import edges_of
 from exporters.brep_outline import edge_candidates, nearest_edge_ids
 from exporters.frames import Frame, FrameMap, frame_map
