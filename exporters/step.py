@@ -349,7 +349,7 @@ class TypedStep:
         return [e for e in self.edges if e.type is not None]
 
     def edge(self, edge_id: int) -> list[TypedEdge]:
-        """The edge(s) named with VB-Rep edge id ``edge_id``."""
+        """Every edge named with VB-Rep edge id ``edge_id`` (more than one where ShapeFix split it)."""
         return [e for e in self.edges if e.id == edge_id]
 
 
