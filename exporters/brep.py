@@ -43,6 +43,7 @@ from OCP.gp import gp_Trsf, gp_Vec
 from OCP.GProp import GProp_GProps
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Shell
 
+from exporters.brep_config import BrepConfig
 from exporters.brep_edges import EdgeBuilder
 from exporters.brep_faces import FaceBuilder, edges_of
 from exporters.brep_outline import OutlineBuilder, mesh_area
@@ -51,39 +52,6 @@ from exporters.polygons import connected_groups
 
 if TYPE_CHECKING:
     from v2c.vbrep.model import VBRep
-
-
-@dataclass(frozen=True)
-class BrepConfig:
-    """Tolerances of the topology build (millimetres unless said otherwise)."""
-
-    intss_tol: float = 1e-6  # GeomAPI_IntSS tolerance
-    branch_tol_abs: float = 2.0  # an intersection branch must pass within this of every polyline sample ...
-    branch_tol_rel: float = 0.03  # ... or within this fraction of the part size, whichever is larger
-    fit_tol_abs: float = 0.05  # B-spline fit tolerance of polylines ...
-    fit_tol_rel: float = 0.002  # ... or this fraction of the part size, whichever is larger
-    max_fit_points: int = 120  # polylines are subsampled to at most this many points before fitting
-    branch_samples: int = 16  # polyline samples used to pick and trim an intersection branch
-    vertex_iterations: int = 30  # alternating-projection steps placing a vertex on its curves/surfaces
-    min_tolerance: float = 1e-4  # smallest vertex tolerance set
-    fix_precision: float = 1e-4  # ShapeFix working precision
-    fix_max_tolerance: float = 5.0  # ShapeFix may raise tolerances up to this
-    analytic_tol: float = 1e-4  # a VB-Rep line/circle counts as the exact intersection within this
-    # The written face must be the reconstruction: a face bounded by its loops is kept only when its area is
-    # within this fraction of its VB-Rep mesh area and it lies inside the part's box; otherwise (and when its
-    # loops bound no valid face) it is bounded by its mesh outline (`exporters.brep_outline`). 0.5 catches
-    # wild loops (a 49 mm² face written as 5,265 mm², a 4,635 mm² cone as 0) and keeps the exact edges of
-    # faces whose loops and pixel mesh disagree moderately (on 16 tuning scans, seed 9600, oracle: 5 % of
-    # loop faces under 0.71 of their mesh area, thin fillet strips mostly; a 0.2 gate sent 13 % more faces
-    # to their outline).
-    area_tol_rel: float = 0.5
-    # The part's box: the span of every face's mesh (the measured, clipped part) plus this fraction of the part
-    # size on every side. No face or free edge of the file lies outside it.
-    box_margin_rel: float = 0.05
-    roundtrip_tol_rel: float = 0.02  # a face whose area read back from the file moves more: rewritten (outline)
-    outline_tol_area_rel: float = 0.005  # outline simplification moves a piece's area by at most this fraction
-    outline_min_piece_rel: float = 0.002  # outline pieces and holes under this share of the face's area: dropped
-    outline_max_stretch: float = 4.0  # mesh triangles this much larger in (u, v) than in space: not outline
 
 
 @dataclass

@@ -38,7 +38,7 @@ from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
 if TYPE_CHECKING:
-    from exporters.brep import BrepConfig
+    from exporters.brep_config import BrepConfig
     from v2c.vbrep.model import VBRep, VEdge
 
 
@@ -112,6 +112,8 @@ class EdgeBuilder:
         return self
 
     def build_surfaces(self) -> None:
+        """Step 1: every face's analytic OCCT surface (output frame, mm); a face without one is skipped (a
+        warning)."""
         for f in self.vb.faces:
             try:
                 self.surfaces[f.id] = make_surface(f.primitive, self.fmap, f.mesh_vertices)
@@ -150,6 +152,9 @@ class EdgeBuilder:
         self.vertex_alias = {v: find(v) for v in parent if find(v) != v}
 
     def build_intersection_curves(self) -> None:
+        """Step 2: each intersection edge's exact, untrimmed curve (``curves``): the GeomAPI_IntSS branch nearest
+        its polyline, the VB-Rep's own line/circle where that lies on both surfaces, or none (then ``fit_face``
+        names the face its geometry will be fitted on)."""
         for e in self.vb.edges:
             if EdgeType(e.type) is not EdgeType.INTERSECTION or len(e.faces) != 2 or e.id in self.degenerate:
                 continue
@@ -208,6 +213,8 @@ class EdgeBuilder:
         return c
 
     def place_vertices(self) -> None:
+        """Step 3: each vertex's position ``vpos`` (mm): alternating projection onto its incident intersection
+        curves (the exact corner where three surfaces meet), else onto its faces' surfaces."""
         inc_curves: dict[int, list[Geom_Curve]] = defaultdict(list)
         inc_surfs: dict[int, set[int]] = defaultdict(set)
         for e in self.vb.edges:
@@ -311,6 +318,8 @@ class EdgeBuilder:
         return EdgeGeom(curve=c, t0=t0, t1=t1, end0=ends[0], end1=ends[1])
 
     def build_edge_geometry(self) -> None:
+        """Step 4a: each edge's `EdgeGeom` (``geoms``): its intersection curve trimmed at its vertices, else a
+        pcurve fitted in a face's (u, v) space, else a free 3D B-spline; an edge with none is dropped (a warning)."""
         for e in self.vb.edges:
             if e.id in self.degenerate:
                 continue
@@ -336,6 +345,8 @@ class EdgeBuilder:
             self.geoms[e.id] = g
 
     def build_edges(self) -> dict[int, TopoDS_Edge]:
+        """Step 4b: VEdge id -> TopoDS_Edge oriented from v0 to v1, on shared TopoDS_Vertex objects whose
+        tolerance covers the gap to every edge end (mm)."""
         gap: dict[int, float] = defaultdict(float)
         for e in self.vb.edges:
             g = self.geoms.get(e.id)

@@ -160,6 +160,8 @@ class FaceBuilder:
         return all(ends[i][1] == ends[(i + 1) % len(ends)][0] for i in range(len(ends)))
 
     def orient_to_camera(self, face: TopoDS_Face, f: VFace) -> TopoDS_Face:
+        """``face``, reversed if needed so its normal at the mesh centroid faces the camera centre (every face of
+        one view is seen from its outside)."""
         s = self.surfaces[f.id]
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         if len(pts) == 0:

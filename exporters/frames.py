@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 MM_PER_M = 1000.0
 
 
-class Frame(str, Enum):
+class Frame(str, Enum):  # noqa: UP042 - StrEnum would change str() and format() of the members
     """Which frame the STEP geometry is written in (millimetres either way)."""
 
     PART = "part"

@@ -26,6 +26,13 @@ import math
 import os
 import re
 import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # aliases for annotations only: FreeCAD's Python (3.8) cannot subscript tuple at run time
+    #: A point or vector of the STEP file (millimetres).
+    Point = tuple[float, ...]
+    #: One curve of a named edge: end points (None when not computable), STEP curve kind, circle radius or None.
+    CurveItem = tuple[Point | None, Point | None, str, float | None]
 
 #: Largest distance between matched end points (millimetres; the file writes 1e-12-exact coordinates).
 MATCH_TOL_MM = 1e-4
@@ -51,15 +58,17 @@ class TypedEdgeRecord:
 
     __slots__ = ("confidence", "edge_id", "kind", "name", "p0", "p1", "radius", "type")
 
-    def __init__(self, name, type_, confidence, edge_id, p0, p1, kind, radius):
+    def __init__(self, name: str, type_: str, confidence: float, edge_id: int, p0: Point | None, p1: Point | None,
+                 kind: str, radius: float | None) -> None:
         self.name, self.type, self.confidence, self.edge_id = name, type_, confidence, edge_id
         self.p0, self.p1, self.kind, self.radius = p0, p1, kind, radius
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, Any]:
+        """The record as a plain dict (slot name -> value), e.g. for JSON."""
         return {s: getattr(self, s) for s in self.__slots__}
 
 
-def _args(body):
+def _args(body: str) -> tuple[str, list[str]]:
     """Top-level arguments of an entity body ``NAME(a,b,(c,d),'x,y')`` -> (NAME, [a, b, '(c,d)', "'x,y'"])."""
     head, _, rest = body.partition("(")
     rest = rest[: rest.rfind(")")]
@@ -81,22 +90,25 @@ def _args(body):
     return head.strip(), out
 
 
-def _ref(text):
+def _ref(text: str) -> int | None:
+    """The entity number of a ``#123`` reference, None when ``text`` is not one."""
     m = re.match(r"#(\d+)", text.strip())
     return int(m.group(1)) if m else None
 
 
-def _unquote(text):
+def _unquote(text: str) -> str:
+    """A STEP string literal's content (``'it''s'`` -> ``it's``); other text stripped only."""
     text = text.strip()
     return text[1:-1].replace("''", "'") if text.startswith("'") and text.endswith("'") else text
 
 
-def parse_typed_edges(text):
+def parse_typed_edges(text: str) -> list[TypedEdgeRecord]:
     """Every edge of a v2c STEP file that carries a typed name (``<type>:<confidence>:e<id>``), as
     `TypedEdgeRecord` objects in file order. ``text``: the STEP file's content."""
     ents = {int(m.group(1)): " ".join(m.group(2).split()) for m in _ENTITY.finditer(text)}
 
-    def point(ref):
+    def point(ref: int | None) -> Point | None:
+        """A CARTESIAN_POINT (or a VERTEX_POINT's point) -> its coordinates, mm; None for other entities."""
         name, args = _args(ents.get(ref, ""))
         if name == "VERTEX_POINT":
             return point(_ref(args[1]))
@@ -104,7 +116,7 @@ def parse_typed_edges(text):
             return None
         return tuple(float(x) for x in args[1].strip("()").split(","))
 
-    def vec(ref):
+    def vec(ref: int | None) -> Point | None:
         """DIRECTION -> its ratios; VECTOR -> direction x magnitude."""
         name, args = _args(ents.get(ref, ""))
         if name == "DIRECTION":
@@ -115,7 +127,7 @@ def parse_typed_edges(text):
             return tuple(x / n * mag for x in d)
         return None
 
-    def curve_point(ref, t):
+    def curve_point(ref: int | None, t: float) -> Point | None:
         """The point at parameter t of a LINE, CIRCLE or clamped B-spline end (None otherwise), mm."""
         name, args = _args(ents.get(ref, ""))
         if name == "LINE":
@@ -138,7 +150,7 @@ def parse_typed_edges(text):
                 return point(poles[-1])
         return None
 
-    def trim(sel, basis):
+    def trim(sel: str, basis: int | None) -> Point | None:
         """A trim select: the point at its PARAMETER_VALUE when computable, else its CARTESIAN_POINT (which
         OCCT writes at the edge's vertex, up to the vertex tolerance off the curve)."""
         m = re.search(r"PARAMETER_VALUE\(([-+0-9.eE]+)\)", sel)
@@ -148,7 +160,9 @@ def parse_typed_edges(text):
             p = point(refs[0]) if refs else None
         return p
 
-    def curve_info(ref):
+    def curve_info(ref: int | None) -> tuple[str, float | None]:
+        """The basis curve's STEP entity name (through SURFACE_CURVE, SEAM_CURVE, TRIMMED_CURVE) and a circle's
+        radius (mm; None for other curves)."""
         name, args = _args(ents.get(ref, ""))
         if name == "SURFACE_CURVE" or name == "SEAM_CURVE":
             return curve_info(_ref(args[1]))
@@ -157,7 +171,7 @@ def parse_typed_edges(text):
         radius = float(args[2]) if name == "CIRCLE" else None
         return name, radius
 
-    records = []
+    records: list[TypedEdgeRecord] = []
     for body in ents.values():
         kind, args = _args(body)
         if kind not in ("EDGE_CURVE", "GEOMETRIC_CURVE_SET") or not args:
@@ -168,7 +182,7 @@ def parse_typed_edges(text):
         if kind == "EDGE_CURVE":
             p0, p1 = point(_ref(args[1])), point(_ref(args[2]))
             ckind, radius = curve_info(_ref(args[3]))
-            items = [(p0, p1, ckind, radius)]
+            items: list[CurveItem] = [(p0, p1, ckind, radius)]
         else:  # a free edge: its curves (TRIMMED_CURVE with CARTESIAN_POINT trims, or a whole curve)
             items = []
             for r in re.findall(r"#(\d+)", args[1]):
@@ -185,17 +199,19 @@ def parse_typed_edges(text):
     return records
 
 
-def _close(a, b, tol=MATCH_TOL_MM):
+def _close(a: Point | None, b: Point | None, tol: float = MATCH_TOL_MM) -> bool:
+    """Both points known and within ``tol`` (mm) of each other."""
     return a is not None and b is not None and math.dist(a, b) <= tol
 
 
-def _kind_of(edge):
+def _kind_of(edge: Any) -> str:
     """The STEP curve kind a FreeCAD edge corresponds to (LINE, CIRCLE, ELLIPSE, or B_SPLINE_CURVE...)."""
     name = type(edge.Curve).__name__
     return {"Line": "LINE", "LineSegment": "LINE", "Circle": "CIRCLE", "Ellipse": "ELLIPSE"}.get(name, name)
 
 
-def match_edges(records, edges):
+def match_edges(records: list[TypedEdgeRecord], edges: list[Any]
+                ) -> tuple[list[tuple[TypedEdgeRecord, Any]], list[TypedEdgeRecord]]:
     """Pair every record with one FreeCAD edge: same end points (either direction), same curve kind, same
     radius for circles; each edge used once. Returns ([(record, edge)], [unmatched records])."""
     free = list(edges)
@@ -222,7 +238,7 @@ def match_edges(records, edges):
     return pairs, missing
 
 
-def open_typed_step(path, doc=None):
+def open_typed_step(path: str, doc: Any = None) -> dict[str, Any]:
     """Import the STEP file ``path`` into ``doc`` (a new document when None): the part, and one group per edge
     type of Part::Feature edges with their EdgeType, Confidence, EdgeId and StepName properties. Returns a summary
     dict: the document name, counts per type, and the names that matched no edge."""
@@ -266,8 +282,9 @@ def open_typed_step(path, doc=None):
             "groups": sorted(g.Label for g in groups.values())}
 
 
-def main():
-    """freecadcmd / GUI macro entry: V2C_STEP (or a file dialog in the GUI), optional V2C_FCSTD to save."""
+def main() -> None:
+    """Entry point of freecadcmd and of the GUI macro: opens V2C_STEP (or the file a dialog asks for in the GUI),
+    saves the document to V2C_FCSTD when set, prints one ``V2C_FREECAD_IMPORT {json}`` line."""
     import FreeCAD
 
     path = os.environ.get("V2C_STEP")
@@ -290,7 +307,8 @@ def main():
     print(MARK + json.dumps(out), flush=True)
 
 
-def _under_freecad():
+def _under_freecad() -> bool:
+    """Whether this runs under FreeCAD (its ``FreeCAD`` module imports)."""
     try:
         import FreeCAD  # noqa: F401
     except ImportError:

@@ -98,10 +98,12 @@ class AnalyticSurface:
 
     @property
     def u_periodic(self) -> bool:
+        """Whether u is periodic (an angle, period 2 pi): every surface but the plane."""
         return self.kind is not PrimitiveType.PLANE
 
     @property
     def v_periodic(self) -> bool:
+        """Whether v is periodic (an angle, period 2 pi): the torus only."""
         return self.kind is PrimitiveType.TORUS
 
     # ------------------------------------------------------------------ geometry

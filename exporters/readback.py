@@ -51,7 +51,7 @@ class FaceArea:
 
     @property
     def ratio(self) -> float:
-        """written / reconstructed (1.0 for an empty mesh written empty, infinite for one written non-empty)."""
+        """Written / reconstructed area (1.0 for an empty mesh written empty, infinite for one written non-empty)."""
         if self.reconstructed > 0:
             return self.written / self.reconstructed
         return 1.0 if self.written == 0 else float("inf")
@@ -180,8 +180,9 @@ def check_written(vbrep: VBRep, path: str | Path, fmap: FrameMap, config: Readba
             verts.append(_inverse_points(fmap, p))
             tris.append(t + base)
             base += len(p)
-        faces.append(VFace(id=f.id, instance=f.instance, primitive=f.primitive, axis_label=f.axis_label, confidence=f.confidence,
-                           loops=[], mesh_vertices=np.concatenate(verts) if verts else np.zeros((0, 3)),
+        faces.append(VFace(id=f.id, instance=f.instance, primitive=f.primitive, axis_label=f.axis_label,
+                           confidence=f.confidence, loops=[],
+                           mesh_vertices=np.concatenate(verts) if verts else np.zeros((0, 3)),
                            mesh_triangles=np.concatenate(tris) if tris else np.zeros((0, 3), int)))
     out.drawn = VBRep(faces=faces, edges=edges, vertices=list(vbrep.vertices), frame=vbrep.frame, K=vbrep.K,
                       image_size=vbrep.image_size, scale=vbrep.scale, meta=dict(vbrep.meta))

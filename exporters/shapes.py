@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from exporters.brep import BrepConfig
+from exporters.brep_config import BrepConfig
 from exporters.frames import Frame
 from exporters.step import build
 

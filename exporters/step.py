@@ -45,7 +45,8 @@ from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
-from exporters.brep import BrepConfig, BuiltBRep, bounding_box, build_brep, face_area, translate_built
+from exporters.brep import BuiltBRep, bounding_box, build_brep, face_area, translate_built
+from exporters.brep_config import BrepConfig
 from exporters.brep_faces import edges_of
 from exporters.brep_outline import edge_candidates, nearest_edge_ids
 from exporters.frames import Frame, FrameMap, frame_map
@@ -348,7 +349,7 @@ class TypedStep:
         return [e for e in self.edges if e.type is not None]
 
     def edge(self, edge_id: int) -> list[TypedEdge]:
-        """The edge(s) named with VB-Rep edge id ``edge_id``."""
+        """Every edge named with VB-Rep edge id ``edge_id`` (more than one where ShapeFix split it)."""
         return [e for e in self.edges if e.id == edge_id]
 
 

@@ -6,6 +6,8 @@
 
 References (`select_references`) come only from intersection edges; generators (`design_corner`, `design_pin`,
 `design_cradle`, `design_nest`) build build123d solids in millimetres in the part or camera frame.
+`fixture_for_scan` does the whole of ``v2c fixture``: scan folder (or VB-Rep JSON, or ``v2c to-step`` STEP) ->
+fixture files. Example scripts: `fixtures_design.examples` (on the bundled sample scans).
 """
 
 from fixtures_design.assembly import FixtureFiles, assembly, reconstructed_part, true_part, write_fixture
@@ -24,6 +26,7 @@ from fixtures_design.references import (
     explain_edges,
     select_references,
 )
+from fixtures_design.run import FixtureRun, fixture_for_scan, ground_height
 from fixtures_design.verify import check_mating, interference
 
 __all__ = [
@@ -34,6 +37,7 @@ __all__ = [
     "Fixture",
     "FixtureFiles",
     "FixtureKind",
+    "FixtureRun",
     "NestParams",
     "NoReferenceError",
     "PinParams",
@@ -47,7 +51,9 @@ __all__ = [
     "design_nest",
     "design_pin",
     "explain_edges",
+    "fixture_for_scan",
     "footprint",
+    "ground_height",
     "interference",
     "reconstructed_part",
     "select_references",

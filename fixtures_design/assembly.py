@@ -1,7 +1,7 @@
 """Writing fixtures: the fixture as STEP and STL, and an assembly STEP of part plus fixture.
 
 The part in the assembly is either the reconstructed part (the VB-Rep's faces as open shells, from
-`exporters.brep.build_brep`, or its face meshes when that fails) or the true part (e.g. a synthetic scan's
+`exporters.build_brep`, or its face meshes when that fails) or the true part (e.g. a synthetic scan's
 gt/part.step, camera frame, millimetres), moved into the fixture's output frame. The three files are one
 `v2c.io_safe.OutputSet`: exclusive temporaries in the output folder, committed together. Millimetres throughout.
 """
@@ -73,13 +73,13 @@ def _mesh_shells(vbrep: VBRep, fmap: FrameMap) -> TopoDS_Compound:
 def reconstructed_part(vbrep: VBRep, fmap: FrameMap) -> Shape:
     """The reconstructed part's faces (open shells, output frame of ``fmap``, mm), without free edges.
 
-    Uses the STEP exporter's topology (`exporters.brep.build_brep`); falls back to the face meshes if that fails.
+    Uses the STEP exporter's topology (`exporters.build_brep`); falls back to the face meshes if that fails.
     """
     comp = TopoDS_Compound()
     builder = BRep_Builder()
     builder.MakeCompound(comp)
     try:
-        from exporters.brep import build_brep
+        from exporters import build_brep
 
         built = build_brep(vbrep, fmap)
         it = TopoDS_Iterator(built.shape)

@@ -3,7 +3,7 @@
 - ``"camera"``: the camera frame (OpenCV: x right, y down, z forward), millimetres.
 - ``"part"``: the VB-Rep's recovered axis frame (``VBRep.frame`` rows X, Y, Z) on X / Y / Z, millimetres, origin at
   the footprint origin of ``v2c to-step``: the centre of the X/Y bounding box of the B-rep that
-  `exporters.step.build` makes of the VB-Rep, at its lowest Z (`exporters.frames.frame_map`'s estimate from the
+  `exporters.build` makes of the VB-Rep, at its lowest Z (`exporters.frame_map`'s estimate from the
   VB-Rep's points when that build fails).
 
 Fixtures, the reconstructed part and the true part are all placed in the same output frame, so a fixture's STEP
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from exporters.frames import Frame, FrameMap, frame_map, proper_rotation
+from exporters import Frame, FrameMap, frame_map, proper_rotation
 from v2c.vbrep.model import VBRep
 
 __all__ = ["Frame", "FrameMap", "camera_mm_matrix", "output_frame", "up_vector"]
@@ -27,7 +27,7 @@ def output_frame(vbrep: VBRep, frame: Frame | str = Frame.PART) -> FrameMap:
         return frame_map(vbrep, frame)
     fmap = None
     try:
-        from exporters.step import build, quiet_occt
+        from exporters import build, quiet_occt
 
         with quiet_occt():
             fmap = build(vbrep, frame).fmap

@@ -18,7 +18,7 @@ from OCP.gp import gp_Trsf
 from fixtures_design.frames import FrameMap
 
 
-class FixtureKind(str, Enum):
+class FixtureKind(str, Enum):  # noqa: UP042 - StrEnum would change str() and format() of the members
     """The fixtures the designer makes."""
 
     CORNER = "corner"
@@ -51,10 +51,12 @@ class Fixture:
 
     @property
     def volume_mm3(self) -> float:
+        """The fixture body's volume, mm^3."""
         return float(self.solid.volume)
 
 
 def unit(v: np.ndarray) -> np.ndarray:
+    """``v`` (any shape, last axis the vector) scaled to unit length."""
     v = np.asarray(v, float)
     return v / np.linalg.norm(v)
 

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from build123d import Face, Location, Solid, Vector, Wire
 
-from exporters.frames import proper_rotation
+from exporters import proper_rotation
 from fixtures_design.frames import FrameMap
 from fixtures_design.model import Fixture, FixtureKind, local_plane, place, sample_face
 from v2c.vbrep.model import VBRep

@@ -31,6 +31,8 @@ def occt_faces(shape: Shape) -> list:
 
 
 def face_mesh(face: object) -> tuple[np.ndarray, np.ndarray]:
+    """A meshed face's triangulation: (V, 3) vertices (its shape's units, mm for STEP parts) and (T, 3) vertex
+    indices, wound along the face's outward normal (reversed for a reversed face); empty when not meshed."""
     loc = TopLoc_Location()
     tri = BRep_Tool.Triangulation_s(face, loc)
     if tri is None:
@@ -61,6 +63,7 @@ def face_primitive(face: object) -> dict | None:
 
 
 def faces_the_camera(v_mm: np.ndarray, t: np.ndarray) -> bool:
+    """Whether any triangle of the mesh (camera frame, mm; outward winding) faces the camera at the origin."""
     if not len(t):
         return False
     a, b, c = v_mm[t[:, 0]], v_mm[t[:, 1]], v_mm[t[:, 2]]

@@ -27,7 +27,7 @@ import numpy as np
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VFace
 
 
-class ReferenceKind(str, Enum):
+class ReferenceKind(str, Enum):  # noqa: UP042 - StrEnum would change str() and format() of the members
     """What a mating reference is: a convex dihedral edge, a hole's rim or a boss's rim."""
 
     DIHEDRAL = "dihedral"
@@ -77,6 +77,7 @@ class DihedralReference:
 
     @property
     def direction(self) -> np.ndarray:
+        """(3,) unit vector from ``start`` to ``end`` (camera frame)."""
         d = self.end - self.start
         return d / np.linalg.norm(d)
 

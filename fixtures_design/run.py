@@ -43,7 +43,7 @@ def ground_height(scan: object, vbrep: VBRep, ring_px: int = 25) -> float | None
     """
     import cv2
 
-    from exporters.frames import proper_rotation
+    from exporters import proper_rotation
 
     mask = getattr(scan, "mask", None)
     if mask is None:

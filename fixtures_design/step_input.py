@@ -1,4 +1,4 @@
-"""A VB-Rep back from a STEP written by ``v2c to-step`` (`exporters.step.write`), for designing fixtures from it.
+"""A VB-Rep back from a STEP written by ``v2c to-step`` (`exporters.write`), for designing fixtures from it.
 
 The file's faces come back with their analytic surfaces and a mesh; its edges with the VB-Rep type and
 confidence carried in their names (``"<type>:<confidence>:e<id>"``, SCAN_FORMAT.md), or else their layer
@@ -52,7 +52,7 @@ def vbrep_from_step(path: str | Path, deflection_mm: float = 0.2) -> VBRep:
     Planar and cylindrical faces keep their primitive; other faces are left out (they take no part in the
     references). Edges without a VB-Rep type in their name or layer are left out.
     """
-    from exporters.xcaf import read_xcaf_step
+    from exporters import read_xcaf_step
 
     rs = read_xcaf_step(Path(path))
     shape = rs.shape

@@ -24,7 +24,7 @@ from v2c.vbrep.model import VFace
 @pytest.fixture(scope="module")
 def box():
     """Scan-like inputs of the analytic box scene (3 planes, 640 x 480) and its ideal VB-Rep."""
-    from v2c.vbrep.scenes import box_scene, scene_inputs
+    from scenes.raycast import box_scene, scene_inputs
 
     inp = scene_inputs(box_scene())
     return inp.scan, M.vbrep_from_gt(inp.scan)
@@ -159,7 +159,7 @@ def test_generated_scan_ideal_vbrep(generated):
 
 
 def test_box_angles_and_can_radius_on_hand_built_vbreps():
-    from v2c.vbrep.examples import box_corner, cylinder_upright
+    from scenes.vbrep import box_corner, cylinder_upright
 
     b = R.box_angles(box_corner())
     assert len(b["pairs"]) == 3

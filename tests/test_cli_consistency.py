@@ -127,9 +127,10 @@ def test_scan_commands_share_roi_max_pixels_and_force() -> None:
 def test_reconstruct_without_a_face_writes_nothing(scan: Path, tmp_path: Path,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """A pipeline that ends with no face (issue 20: `reconstruct` wrote a VB-Rep of 0 faces) is an error."""
+    from scenes.vbrep import box_corner
+
     import v2c.pipeline
     from v2c.segment.oracle import segment_oracle
-    from v2c.vbrep.examples import box_corner
 
     def no_faces(s, segmentation="learned", ablation="full", return_stages=False, **kw):
         v = box_corner()

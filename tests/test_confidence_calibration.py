@@ -241,10 +241,11 @@ def test_fixture_default_clearance_grows_with_injected_noise() -> None:
     noise (face-wide part off, so that the fit's covariance alone carries the noise): with clearance_k = 2 the
     corner's default clearance is max(0.2 mm, 2 sigma) and grows with the noise; an explicit clearance is kept as
     given; the default k (0) keeps the kind's clearance."""
+    from scenes.vbrep import box_corner
+
     from fixtures_design import CornerParams
     from fixtures_design.design import design_fixture
     from v2c.primitives import from_dict
-    from v2c.vbrep.examples import box_corner
 
     cfg = UncertaintyConfig(depth_sigma_coeff_per_m=0.0)
     clearances = []

@@ -2,7 +2,7 @@
 
 For each fixture: its mating faces lie within max(0.5 mm, 1 % of the part size) of the true face they reference
 (the true part as a whole for a nest's pocket walls), and it does not cut into the true part (OCCT common volume
-under 0.1 % of the fixture's volume). Ground-truth VB-Reps come from `fixtures_design.testing.vbrep_from_scan`;
+under 0.1 % of the fixture's volume). Ground-truth VB-Reps come from `scenes.truth.vbrep_from_scan` (tests/scenes);
 the last test uses the real reconstruction (`v2c.pipeline.reconstruct`, oracle segmentation).
 """
 
@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenes.truth import synthetic_scan, true_faces, vbrep_from_scan
 
 from fixtures_design import CradleParams, check_mating, design_fixture, interference
 from fixtures_design.frames import camera_mm_matrix, up_vector
 from fixtures_design.model import transformed
-from fixtures_design.testing import synthetic_scan, true_faces, vbrep_from_scan
 
 #: (family, seed) of the generated scans and the fixtures each one gets (seeds chosen for the needed feature).
 CASES = [("block", 0, "corner"), ("block", 0, "nest"), ("bracket", 0, "pin"), ("bracket", 1, "corner"),
@@ -99,8 +99,9 @@ def test_pin_fits_the_hole(scans):
 
 
 def test_cradle_refuses_an_upright_cylinder():
+    from scenes.vbrep import cylinder_upright
+
     from fixtures_design import NoReferenceError
-    from v2c.vbrep.examples import cylinder_upright
 
     with pytest.raises(NoReferenceError, match="90 deg off the horizontal"):
         design_fixture(cylinder_upright(), "cradle")

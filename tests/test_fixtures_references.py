@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scenes.truth import holed_block, lying_rod, posed_part, vbrep_from_shape
+from scenes.vbrep import box_corner, cylinder_upright
 
 from fixtures_design.references import (
     CircleReference,
@@ -15,8 +17,6 @@ from fixtures_design.references import (
     explain_edges,
     select_references,
 )
-from fixtures_design.testing import holed_block, lying_rod, posed_part, vbrep_from_shape
-from v2c.vbrep.examples import box_corner, cylinder_upright
 from v2c.vbrep.model import EdgeType
 
 
@@ -108,7 +108,7 @@ def test_hole_in_a_block_and_boss_of_a_rod_from_true_parts():
 
 def test_fillet_arcs_are_not_holes(tmp_path):
     """A block's rounded vertical corners meet its top in quarter circles: never a hole or a boss."""
-    from fixtures_design.testing import synthetic_scan, vbrep_from_scan
+    from scenes.truth import synthetic_scan, vbrep_from_scan
 
     vb, _ = vbrep_from_scan(synthetic_scan(tmp_path, "block", 0))
     text = explain_edges(vb)

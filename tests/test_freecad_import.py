@@ -13,11 +13,11 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+from scenes.revolved import revolved_all_types
+from scenes.vbrep import box_corner, cylinder_upright
 
 from exporters import freecad_import as fci
 from exporters import step
-from exporters.examples import revolved_all_types
-from v2c.vbrep.examples import box_corner, cylinder_upright
 from v2c.vbrep.model import EdgeType
 
 FREECADCMD = shutil.which("freecadcmd")

@@ -17,11 +17,11 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from conftest import write_tiny_scan
+from scenes.vbrep import box_corner, cylinder_upright
 
 from v2c.cli import main as v2c_main
 from v2c.errors import OutputError
 from v2c.io_safe import OutputSet, atomic_write, write_text_atomic
-from v2c.vbrep.examples import box_corner, cylinder_upright
 from v2c.vbrep.model import VBRep
 
 REPO = Path(__file__).resolve().parents[1]

@@ -16,10 +16,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from scenes.revolved import revolved_all_types
+from scenes.vbrep import box_corner, cylinder_upright
 
 from exporters import step
-from exporters.examples import revolved_all_types
-from v2c.vbrep.examples import box_corner, cylinder_upright
 
 FREECADCMD = shutil.which("freecadcmd")
 SCRIPT = Path(__file__).with_name("freecad_check.py")

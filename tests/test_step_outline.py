@@ -1,7 +1,7 @@
 """The STEP is the reconstruction: faces bounded by their mesh outline keep their full area (holes, pinches and
 separate pieces included), loops that bound far more than the mesh are not trusted, every edge of the file is
 typed, and nothing is written outside the part's box (exporters.brep_outline, exporters.brep, exporters.step,
-exporters.readback). Geometry: the hand-built box corner of v2c.vbrep.examples (face 0: a 100 x 80 mm plane)."""
+exporters.readback). Geometry: the hand-built box corner of scenes.vbrep (face 0: a 100 x 80 mm plane)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenes.vbrep import box_corner, grid_triangles
 
 from exporters import step
 from exporters.brep_outline import mesh_area
 from exporters.readback import check_written
-from v2c.vbrep.examples import box_corner, grid_triangles
 from v2c.vbrep.model import EdgeType, VEdge
 
 N = 21  # grid vertices per side of the test meshes

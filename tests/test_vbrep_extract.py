@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scenes.raycast import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
 
 from v2c.bench.vbrep import chamfer, edge_type_accuracy
 from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.model import EdgeType, VertexKind
 from v2c.vbrep.raycast import project
-from v2c.vbrep.scenes import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
 
 NOISE_M = 0.0004  # depth noise of the scenes (metres), about a RealSense at 0.45 m
 

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from scenes.raycast import box_scene, scene_inputs
 
 from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.mesh import face_mesh
 from v2c.vbrep.raycast import project
-from v2c.vbrep.scenes import box_scene, scene_inputs
 
 K = np.array([[600.0, 0, 160], [0, 600.0, 120], [0, 0, 1]])
 H, W = 240, 320

@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
+from scenes.vbrep import box_corner, cylinder_upright, project
 
-from v2c.vbrep.examples import box_corner, cylinder_upright, project
 from v2c.vbrep.model import FORMAT_VERSION, EdgeType, VBRep, VertexKind
 
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenes.raycast import box_scene, cylinder_scene, scene_inputs
 
 from exporters import step
 from v2c.primitives import Cone, Plane, Torus
 from v2c.vbrep.extract import _face_groups, extract_vbrep
-from v2c.vbrep.scenes import box_scene, cylinder_scene, scene_inputs
 from v2c.vbrep.topology import check_topology, solve_on_surfaces, valid_primitive
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"

@@ -1,4 +1,4 @@
-"""Ground-truth VB-Reps for tests and examples: a true part's B-rep as the reconstruction would see it.
+"""Ground-truth VB-Reps for the tests: a true part's B-rep as the reconstruction would see it.
 
 `vbrep_from_shape` turns a solid posed in the camera frame (millimetres, as gt/part.step) into a VB-Rep (metres):
 the faces the camera sees (the given face indices, e.g. those of gt/faces.png, or else the faces with a triangle
@@ -25,8 +25,8 @@ from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_Ind
 
 from fixtures_design.model import transformed
 from fixtures_design.occ import M_PER_MM, edge_curve, face_mesh, face_primitive, faces_the_camera, occt_faces
+from scenes.vbrep import K_DEFAULT, look_at, project
 from v2c.labels import axis_class
-from v2c.vbrep.examples import K_DEFAULT, look_at, project
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
 
 

@@ -5,7 +5,7 @@ A scene is a list of bounded faces (a primitive in the part frame plus a predica
 which part of the surface is material boundary); a pixel sees the nearest crossing that satisfies its face's
 predicate. Everything is then posed in the camera frame (OpenCV), metres. `scene_inputs` turns a render into the
 stage inputs of VB-Rep extraction (Scan-like object with ground truth, oracle Segmentation, FitResult-like object
-with the true or perturbed primitives and the 2D edge graph), for tests and examples.
+with the true or perturbed primitives and the 2D edge graph), for the tests.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from v2c.vbrep.examples import K_DEFAULT, look_at
+from scenes.vbrep import K_DEFAULT, look_at
 from v2c.vbrep.raycast import intersect, pixel_rays
 
 Bound = Callable[[np.ndarray], np.ndarray]

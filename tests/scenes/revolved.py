@@ -11,14 +11,14 @@
   bottom arc an occluded edge, the top disc's far arc a silhouette.
 
 The torus face runs over its outer equator, the seam of OCCT's torus parametrisation. Camera frame, metres,
-like `v2c.vbrep.examples`.
+like `scenes.vbrep`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from v2c.vbrep.examples import IMAGE_SIZE, K_DEFAULT, grid_triangles, look_at, project
+from scenes.vbrep import IMAGE_SIZE, K_DEFAULT, grid_triangles, look_at, project
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
 
 _MM = 1e-3

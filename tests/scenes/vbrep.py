@@ -1,4 +1,4 @@
-"""Hand-built analytic VB-Reps for tests of later stages (STEP export, fixtures, figures).
+"""Hand-built analytic VB-Reps for the tests of later stages (STEP export, fixtures, figures).
 
 `box_corner()`: a 0.10 x 0.08 x 0.06 m box seen from a corner: 3 planar faces, 3 intersection edges meeting in
 one corner vertex, 6 silhouette edges around.
