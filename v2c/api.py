@@ -24,8 +24,7 @@ from v2c.choices import DEFAULT_ABLATION, DEFAULT_SEGMENTATION
 from v2c.pipeline import PipelineConfig, reconstruct
 
 if TYPE_CHECKING:
-    from exporters.readback import Readback
-    from exporters.step import StepReport
+    from exporters import Readback, StepReport
 
 __all__ = ["DEFAULT_STEP_NAME", "PipelineConfig", "ScanExport", "expand_scans", "reconstruct", "scan_to_step"]
 
@@ -94,9 +93,7 @@ def scan_to_step(
     whatever the pipeline raises; on any error no STEP is written. force: replace existing files that v2c did
     not write (otherwise `v2c.errors.OutputError`, checked before the pipeline runs). config: every stage's
     settings (`v2c.pipeline.PipelineConfig`; the shipped defaults when None)."""
-    from exporters import step as step_export
-    from exporters.figure import result_figure
-    from exporters.readback import check_written
+    from exporters import StepExportError, check_written, result_figure, write
     from v2c.io_safe import OutputSet, check_replaceable
     from v2c.scan import load_scan
 
@@ -119,10 +116,10 @@ def scan_to_step(
         tmp = files.temp(out)
         try:
             # straight into the set's own exclusive temporary (a nested one would outlive a killed worker)
-            report = step_export.write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem,
+            report = write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem,
                                        atomic=False)
-        except step_export.StepExportError as exc:  # name the destination, not our temporary
-            raise step_export.StepExportError(f"{str(exc).replace(str(tmp), str(out))}; nothing written") from None
+        except StepExportError as exc:  # name the destination, not our temporary
+            raise StepExportError(f"{str(exc).replace(str(tmp), str(out))}; nothing written") from None
         report.path = out
         seconds["step"] = time.perf_counter() - t
         log.info("STEP: %d faces, %d edges, %.2f s", report.n_faces, report.n_edges, seconds["step"])

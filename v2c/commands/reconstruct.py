@@ -25,7 +25,7 @@ def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no
             force: bool, roi: tuple[int, int, int, int] | None) -> None:
     """Reconstruct the VB-Rep of the scan folder SCAN: write reconstruction.vbrep.json (camera frame, metres)
     and reconstruction.png (input, segmentation, VB-Rep from the camera and from a turned view)."""
-    from exporters.figure import result_figure
+    from exporters import result_figure
     from v2c.io_safe import check_replaceable
     from v2c.pipeline import reconstruct
     from v2c.scan import ScanError, load_scan
