@@ -1,8 +1,8 @@
 """The settings of a `v2c bench` run and of its metrics: `BenchConfig` (which scans, which columns, where the
 per-scan tasks run) and `MetricConfig` (the thresholds of BENCHMARK.md), with the names of the columns.
 
-The lowest module of `v2c.bench`: the scan cache, the workers, the tables, the metrics and the Chamfer helpers all
-read their settings from here and import nothing of the benchmark above it.
+It imports nothing of the benchmark: the scan cache, the workers, the tables, the metrics and `vbrep.chamfer` read
+their settings from here, so none of them needs the coordinator (`run`) or another of them for a setting.
 """
 
 from __future__ import annotations
