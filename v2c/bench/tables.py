@@ -35,6 +35,8 @@ STAGES = ("load", "segment", "fit", "vbrep", "step")
 ECE_BINS = 10  # equal-width confidence bins of the expected calibration error
 
 
+# ----------------------------------------------------------------------------------------------- summaries
+
 
 def _mean(values: list[float]) -> float:
     """Mean of the finite values (None, NaN and inf left out); NaN when none is left."""
