@@ -160,6 +160,7 @@ def test_generated_scan_ideal_vbrep(generated):
 
 def test_box_angles_and_can_radius_on_hand_built_vbreps():
     from scenes.vbrep import box_corner, cylinder_upright
+    from v2c.bench import real
 
     b = R.box_angles(box_corner())
     assert len(b["pairs"]) == 3
@@ -170,7 +171,7 @@ def test_box_angles_and_can_radius_on_hand_built_vbreps():
     from dataclasses import replace
 
     box = box_corner()
-    big = max(box.faces, key=R._face_area)
+    big = max(box.faces, key=real.face_area)
     n = np.asarray(big.primitive["params"]["normal"], float)
     t = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
     tilted = np.cos(np.deg2rad(5)) * n + np.sin(np.deg2rad(5)) * t / np.linalg.norm(t)
@@ -269,6 +270,7 @@ def test_vbrep_chamfer_is_the_exact_visible_chamfer(box):
     # v2c.bench.vbrep.chamfer used a pixel z-buffer with 0.5 % of the part size of slack: on faces inclined to the
     # view the depth range inside one pixel is larger, so it discarded about half of the visible points of the box
     # (42 % on scan_00000 of the sensor set). It now is the exact ray-cast Chamfer of this module.
+    from v2c.bench import surfaces as Su
     from v2c.bench.vbrep import chamfer
 
     scan, vb = box
@@ -279,9 +281,9 @@ def test_vbrep_chamfer_is_the_exact_visible_chamfer(box):
     assert chamfer(vb, scan, visible_only=False) == pytest.approx(m["chamfer_all"], abs=3e-4)
     # every point of the box's meshes is visible: the visible-R draw keeps all of its first candidates
     rng = np.random.default_rng(0)
-    V, T, _ = M.vbrep_mesh(vb)
-    R = M.sample_surface(V, T, 20000, rng)
-    assert M.visible_points(R, M.MeshCaster(V, T), 1e-4 * M.part_size(scan)).all()
+    V, T, _ = Su.vbrep_mesh(vb)
+    R = Su.sample_surface(V, T, 20000, rng)
+    assert Su.visible_points(R, Su.MeshCaster(V, T), 1e-4 * Su.part_size(scan)).all()
 
 
 def test_v2c_bench_segmentation_only(tmp_path):

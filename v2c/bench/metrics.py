@@ -4,7 +4,7 @@
 
 - ``chamfer`` / ``chamfer_all``: 0.5 * (mean over R of the distance to G + mean over G of the distance to R),
   divided by the ground-truth part size. G: 20,000 clean-depth points of the part's pixels (`gt_points` of
-  v2c.bench.vbrep, seeded); R: 20,000 points drawn area-uniformly on the face meshes, keeping (``chamfer``) those
+  v2c.bench.surfaces, seeded); R: 20,000 points drawn area-uniformly on the face meshes, keeping (``chamfer``) those
   the camera sees, i.e. whose camera ray meets no triangle of the reconstruction before the point (exact ray
   cast, `visible_points`), or (``chamfer_all``) all of them.
 - face matching: the reconstruction is rendered from the scan's camera with a z-buffer (`render_vbrep`: one ray
@@ -30,181 +30,37 @@ Units: metres and the camera frame (OpenCV) inside; lengths in the results are d
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from v2c.bench.config import MetricConfig
 from v2c.bench.segmentation import match_faces
-from v2c.bench.vbrep import edge_correctness, edge_type_accuracy, gt_points, part_size
+from v2c.bench.surfaces import (
+    MeshCaster,
+    Rendering,
+    chamfer_distance,
+    gt_points,
+    part_size,
+    reconstruction_points,
+    render_vbrep,
+    vbrep_mesh,
+)
+from v2c.bench.vbrep import edge_correctness, edge_type_accuracy
 from v2c.labels import AXIS_ALIGN_TOL_DEG, IGNORE, axis_class
-from v2c.vbrep.mesh import sample_surface
 from v2c.vbrep.model import EdgeType, VBRep, VFace
 from v2c.vbrep.raycast import intersect, pixel_rays
 
+if TYPE_CHECKING:
+    from v2c.scan import Scan
+
 ANALYTIC_TYPES = ("plane", "cylinder", "cone", "sphere", "torus")
-
-
-@dataclass(frozen=True)
-class MetricConfig:
-    """Thresholds of BENCHMARK.md and of this module's geometric tests."""
-
-    n_points: int = 20000  # points in G and in R (BENCHMARK.md)
-    seed: int = 0  # seeds G's and R's random draws
-    iou_thresholds: tuple[float, ...] = (0.5, 0.75)  # face-matching IoU; the first one feeds type/axis/alignment
-    min_gt_px: int = 50  # pixels: ground-truth faces under this count only in recall_all
-    axis_tol_deg: float = AXIS_ALIGN_TOL_DEG  # degrees: axis class tolerance against the part axes
-    ignore_share: float = 0.5  # predicted faces with more of their pixels on non-analytic gt faces are left out
-    visibility_eps_rel: float = 1e-4  # part sizes: a sample counts as seen when no triangle is nearer by more
-    max_draw_rounds: int = 8  # rounds of drawing R candidates until n_points visible ones are found
-    edge_tol_px: float = 3.0  # pixels: reach of an edge-type record (v2c.bench.vbrep.edge_type_accuracy)
-    edge_types: bool = True  # compute edge-type accuracy (needs the scan's exact primitives)
-
-
-# ----------------------------------------------------------------------------------------------- rendering
-
-
-def vbrep_mesh(vbrep: VBRep) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All face meshes in one: vertices (n, 3) camera metres, triangles (m, 3) int64, face index (m,) int64 (the
-    position in ``vbrep.faces``)."""
-    verts, tris, owner, off = [], [], [], 0
-    for k, f in enumerate(vbrep.faces):
-        t = np.asarray(f.mesh_triangles, np.int64).reshape(-1, 3)
-        if len(t) == 0:
-            continue
-        v = np.asarray(f.mesh_vertices, float).reshape(-1, 3)
-        verts.append(v)
-        tris.append(t + off)
-        owner.append(np.full(len(t), k, np.int64))
-        off += len(v)
-    if not verts:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-    return np.concatenate(verts), np.concatenate(tris), np.concatenate(owner)
-
-
-class MeshCaster:
-    """First-hit ray casts against a triangle mesh (trimesh + Embree), rays from the camera centre.
-
-    ``cast(directions)`` returns, per ray ``x(t) = t * d``, the hit triangle (-1 = none) and the ray parameter t
-    of the hit (inf = none): with ``d`` = a pixel ray of z component 1, t is the depth z (metres); with ``d`` =
-    a point p, t < 1 means something lies in front of p.
-    """
-
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
-        self.vertices = np.asarray(vertices, float)
-        self.triangles = np.asarray(triangles, np.int64)
-        self._intersector = None
-        if len(self.triangles):
-            import trimesh
-
-            mesh = trimesh.Trimesh(self.vertices, self.triangles, process=False, validate=False)
-            try:
-                from trimesh.ray.ray_pyembree import RayMeshIntersector
-            except ImportError:  # pure-numpy fallback (slow, same answers)
-                from trimesh.ray.ray_triangle import RayMeshIntersector
-            self._intersector = RayMeshIntersector(mesh)
-            p0, p1, p2 = (self.vertices[self.triangles[:, k]] for k in range(3))
-            self._normal = np.cross(p1 - p0, p2 - p0)
-            self._offset = np.einsum("ij,ij->i", self._normal, p0)
-
-    def cast(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        d = np.asarray(directions, float).reshape(-1, 3)
-        tri = np.full(len(d), -1, np.int64)
-        t = np.full(len(d), np.inf)
-        if self._intersector is None or len(d) == 0:
-            return tri, t
-        tri = np.asarray(self._intersector.intersects_first(np.zeros_like(d), d), np.int64)
-        hit = tri >= 0
-        nd = np.einsum("ij,ij->i", self._normal[tri[hit]], d[hit])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            th = self._offset[tri[hit]] / nd
-        th = np.where(np.isfinite(th) & (th > 0), th, np.inf)
-        t[hit] = th
-        tri[np.flatnonzero(hit)[~np.isfinite(th)]] = -1
-        return tri, t
-
-
-@dataclass
-class Rendering:
-    """The reconstruction seen from the scan's camera: face (H, W) int64 index into ``vbrep.faces`` of the nearest
-    triangle at each pixel centre (-1 = none); depth (H, W) float64 z depth in metres (0 = none)."""
-
-    face: np.ndarray
-    depth: np.ndarray
-
-    def pixel_counts(self, n_faces: int) -> np.ndarray:
-        """(n_faces,) pixels each face covers."""
-        f = self.face[self.face >= 0]
-        return np.bincount(f, minlength=n_faces)[:n_faces]
-
-
-def render_vbrep(vbrep: VBRep, caster: MeshCaster | None = None) -> Rendering:
-    """Render the VB-Rep's face meshes from its camera (``vbrep.K``, ``vbrep.image_size``) with a z-buffer: one
-    ray per pixel centre (u, v integers), the nearest triangle wins, whatever its orientation."""
-    w, h = (int(x) for x in vbrep.image_size)
-    if caster is None:
-        V, T, _ = vbrep_mesh(vbrep)
-        caster = MeshCaster(V, T)
-    owner = vbrep_mesh(vbrep)[2]
-    uu, vv = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    rays = pixel_rays(np.stack([uu.ravel(), vv.ravel()], 1), vbrep.K)
-    tri, t = caster.cast(rays)
-    face = np.where(tri >= 0, owner[np.maximum(tri, 0)] if len(owner) else -1, -1)
-    depth = np.where(tri >= 0, t, 0.0)
-    return Rendering(face.reshape(h, w), depth.reshape(h, w))
-
-
-def visible_points(points: np.ndarray, caster: MeshCaster, eps: float) -> np.ndarray:
-    """(N,) bool: the camera sees each camera-frame point, i.e. no triangle crosses its ray more than ``eps``
-    metres before it."""
-    p = np.asarray(points, float).reshape(-1, 3)
-    _, t = caster.cast(p)
-    dist = np.linalg.norm(p, axis=1)
-    return ~((t < 1.0) & ((1.0 - t) * dist > eps))
-
-
-# ------------------------------------------------------------------------------------------------- chamfer
-
-
-def reconstruction_points(vbrep: VBRep, n: int, rng: np.random.Generator, caster: MeshCaster | None = None,
-                          visible_only: bool = True, eps: float = 0.0, max_rounds: int = 8) -> np.ndarray:
-    """R: ``n`` points (camera metres) drawn area-uniformly on the face meshes; with ``visible_only`` only those
-    the camera sees (draws again until ``n`` are found or ``max_rounds`` rounds are spent)."""
-    V, T, _ = vbrep_mesh(vbrep)
-    if len(T) == 0:
-        return np.zeros((0, 3))
-    if not visible_only:
-        return sample_surface(V, T, n, rng)
-    caster = caster or MeshCaster(V, T)
-    found: list[np.ndarray] = []
-    have, share = 0, 1.0
-    for _ in range(max_rounds):
-        m = int(min(20 * n, max(256, 1.2 * (n - have) / max(share, 0.05))))
-        cand = sample_surface(V, T, m, rng)
-        vis = visible_points(cand, caster, eps)
-        share = max(float(vis.mean()), 1e-3)
-        found.append(cand[vis])
-        have += int(vis.sum())
-        if have >= n:
-            break
-    return np.concatenate(found)[:n]
-
-
-def chamfer_distance(R: np.ndarray, G: np.ndarray, size: float) -> float:
-    """0.5 * (mean over R of the distance to the nearest point of G + mean over G of the distance to R) / size;
-    inf when either set is empty."""
-    if len(R) == 0 or len(G) == 0:
-        return float("inf")
-    d_rg = cKDTree(G).query(R)[0]
-    d_gr = cKDTree(R).query(G)[0]
-    return float(0.5 * (d_rg.mean() + d_gr.mean()) / size)
 
 
 # --------------------------------------------------------------------------------------- face matching & co
 
 
-def _gt_tables(scan: Any) -> tuple[dict[int, dict], np.ndarray]:
+def _gt_tables(scan: Scan) -> tuple[dict[int, dict], np.ndarray]:
     """faces.png value -> primitives.json entry, and the faces.png map with non-analytic faces set to 0."""
     gt = scan.gt
     prims = {int(p.get("pixel_value", int(p.get("id", k)) + 1)): p for k, p in enumerate(gt.primitives)}
@@ -239,10 +95,12 @@ def predicted_axis_class(face: VFace, axes_cam: np.ndarray, tol_deg: float = AXI
     return None if a is None else axis_class(a, axes_cam, tol_deg).value
 
 
-def face_matching(vbrep: VBRep, scan: Any, rendering: Rendering, config: MetricConfig = MetricConfig()
+def face_matching(vbrep: VBRep, scan: Scan, rendering: Rendering, config: MetricConfig | None = None
                   ) -> dict[str, Any]:
     """Precision / recall at every IoU threshold of ``config``, and type accuracy, axis accuracy and primitive
-    alignment over the pairs at the first threshold (module docstring). Counts are returned too."""
+    alignment over the pairs at the first threshold (module docstring). Counts are returned too. ``config``:
+    None for the BENCHMARK.md defaults."""
+    config = config or MetricConfig()
     prims, gt_map = _gt_tables(scan)
     faces_png = np.asarray(scan.gt.faces).astype(np.int64)
     pred_map = rendering.face + 1  # 0 = nothing rendered
@@ -291,7 +149,7 @@ def face_matching(vbrep: VBRep, scan: Any, rendering: Rendering, config: MetricC
     return out
 
 
-def depth_error(rendering: Rendering, scan: Any) -> tuple[float, float]:
+def depth_error(rendering: Rendering, scan: Scan) -> tuple[float, float]:
     """Median |rendered depth - clean depth| over the part pixels (gt faces > 0, clean depth > 0) both cover,
     divided by the part size; and the share of part pixels the rendering covers."""
     clean = np.asarray(scan.gt.depth_clean, float)
@@ -315,10 +173,12 @@ def runtime_split(vbrep: VBRep, extra: dict[str, float] | None = None) -> dict[s
 # ------------------------------------------------------------------------------------------------- one scan
 
 
-def scan_metrics(vbrep: VBRep, scan: Any, config: MetricConfig = MetricConfig(),
+def scan_metrics(vbrep: VBRep, scan: Scan, config: MetricConfig | None = None,
                  timings: dict[str, float] | None = None) -> dict[str, Any]:
     """Every BENCHMARK.md metric of one VB-Rep against its synthetic scan's ground truth (module docstring).
-    Lengths are divided by the ground-truth part size. ValueError without ground truth."""
+    Lengths are divided by the ground-truth part size. ValueError without ground truth. ``config``: None for the
+    BENCHMARK.md defaults; ``timings``: seconds per stage measured by the caller (`runtime_split`)."""
+    config = config or MetricConfig()
     if getattr(scan, "gt", None) is None:
         raise ValueError(f"{getattr(scan, 'path', 'scan')}: metrics need gt/ (a synthetic scan)")
     size = part_size(scan)
@@ -399,7 +259,7 @@ def _corner_mesh(region: np.ndarray, depth: np.ndarray, prim: dict | None, K: np
     return rays * zc[:, None], tris
 
 
-def vbrep_from_gt(scan: Any, tilt: dict[int, tuple[np.ndarray, float]] | None = None) -> VBRep:
+def vbrep_from_gt(scan: Scan, tilt: dict[int, tuple[np.ndarray, float]] | None = None) -> VBRep:
     """The ideal VB-Rep of a synthetic scan: one face per analytic ground-truth face seen in gt/faces.png, its
     primitive the exact one of primitives.json, its mesh the pixel-corner mesh of its pixels on that surface
     (`_corner_mesh`). ``tilt`` = {faces.png value: (rotation axis, angle in radians)} rotates that face's

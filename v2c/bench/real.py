@@ -10,9 +10,9 @@ Per frame and segmentation method (``learned``, ``geometric``):
 - ``box``: ``largest_two_deg``, the angle (degrees) between the normals of the two largest planar faces (VB-Rep
   mesh area) of distinct directions (a plane within 20 degrees of a larger one is a piece of the same side: printed
   art splits sides into parallel pieces, which ``faces_per_side`` counts); ``largest_two_raw_deg`` the same for
-  the two largest planes whatever their direction; and `run.box_angles` (the three largest planes of distinct
+  the two largest planes whatever their direction; and `box_angles` (the three largest planes of distinct
   directions, their largest deviation from 90 degrees).
-- ``can``: the radius of the largest cylindrical face (`run.can_radius`) against the published size.
+- ``can``: the radius of the largest cylindrical face (`can_radius`) against the published size.
 - ``depth_rms_mm``: RMS distance (mm) from the points of the pixels the segmentation assigned to fitted faces to
   their own face's surface (the unbounded primitive); ``depth_median_mm`` the median of the same distances.
 - ``coverage_3mm``: the share of the object's depth pixels within ``near_mm`` (3 mm) of a face of the STEP file
@@ -24,8 +24,9 @@ Per frame and segmentation method (``learned``, ``geometric``):
   vertex (KD-tree) decides where it is clearly inside (< near) or clearly outside (> near + the longest triangle
   edge), and the exact point-to-triangle distance (trimesh) decides the rest.
 - ``seconds``: wall time of load + reconstruction + STEP write (the read-back, figure and metrics are not
-  counted), ``cpu_seconds`` the CPU time of this process over the same span (steadier on a shared machine); ``process_start_s`` (once per run): a fresh interpreter importing the pipeline and loading the model
-  (`run.process_start_seconds`), so a frame from the command line costs ``seconds + process_start_s``.
+  counted), ``cpu_seconds`` the CPU time of this process over the same span (steadier on a shared machine);
+  ``process_start_s`` (once per run): a fresh interpreter importing the pipeline and loading the model
+  (`v2c.bench.workers.process_start_seconds`), so a frame from the command line costs ``seconds + process_start_s``.
 """
 
 from __future__ import annotations
@@ -34,11 +35,19 @@ import json
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from v2c.bench.run import DEFAULT_ROIS, _error_text, _face_area, _jsonable, box_angles, can_radius
+from v2c.bench.tables import format_value, jsonable
+from v2c.bench.workers import error_text, process_start_seconds
+
+if TYPE_CHECKING:
+    from v2c.fit.result import FitResult
+    from v2c.vbrep.model import VBRep, VFace
+
+#: The frames of the real-data bench with their regions of interest and what is known of their objects.
+DEFAULT_ROIS = Path(__file__).with_name("real_rois.json")
 
 #: Distance (mm) within which an object pixel counts as explained by a STEP face.
 NEAR_MM = 3.0
@@ -47,14 +56,61 @@ DEFLECTION_MM = 0.2
 
 
 def load_frames(path: Path = DEFAULT_ROIS) -> dict[str, dict[str, Any]]:
-    """frame folder name -> {"roi", "object", "name", "expected", "visible_sides"} of ``path``."""
+    """Frame folder name -> {"roi": [x0, y0, x1, y1] pixels, "object": "box" | "can", "name", "expected",
+    "visible_sides"} of ``path``."""
     return json.loads(Path(path).read_text())["frames"]
+
+
+load_rois = load_frames  # the name `real_frames_report` (once in v2c.bench.run) reads them by
+
+
+def face_area(f: VFace) -> float:
+    """Area of a face's mesh (square metres for a camera-frame VB-Rep): the sum of its triangles' areas."""
+    V = np.asarray(f.mesh_vertices, float)
+    T = np.asarray(f.mesh_triangles, np.int64).reshape(-1, 3)
+    if len(T) == 0:
+        return 0.0
+    return float(0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1).sum())
+
+
+def box_angles(vbrep: VBRep, n_planes: int = 3, distinct_deg: float = 20.0) -> dict[str, Any]:
+    """Angles (degrees, in [0, 90]) between the normals of the ``n_planes`` largest planar faces (mesh area) of
+    distinct directions (a face within ``distinct_deg`` of a larger one kept is a piece of the same box face, or
+    parallel to it, and is skipped), and the largest deviation from 90 degrees over the pairs further than 45
+    degrees from parallel (faces of one box corner)."""
+    planes = sorted((f for f in vbrep.faces if f.primitive.get("type") == "plane"), key=face_area, reverse=True)
+    normals = [np.asarray(f.primitive["params"]["normal"], float) for f in planes]
+    normals = [n / np.linalg.norm(n) for n in normals]
+    kept: list[int] = []
+    for i, n in enumerate(normals):  # loop over planes, largest first
+        if all(abs(float(n @ normals[k])) < np.cos(np.deg2rad(distinct_deg)) for k in kept):
+            kept.append(i)
+        if len(kept) == n_planes:
+            break
+    pairs = []
+    for a in range(len(kept)):
+        for b in range(a + 1, len(kept)):
+            cos = abs(float(normals[kept[a]] @ normals[kept[b]]))
+            pairs.append({"faces": [planes[kept[a]].id, planes[kept[b]].id],
+                          "angle_deg": float(np.degrees(np.arccos(min(1.0, cos))))})
+    corner = [p["angle_deg"] for p in pairs if p["angle_deg"] > 45.0]
+    return {"plane_faces": len(planes), "pairs": pairs,
+            "max_error_deg": float(max(abs(90.0 - a) for a in corner)) if corner else float("nan")}
+
+
+def can_radius(vbrep: VBRep) -> dict[str, Any]:
+    """Radius (mm) of the largest cylindrical face (mesh area) and the number of cylindrical faces."""
+    cyl = sorted((f for f in vbrep.faces if f.primitive.get("type") == "cylinder"), key=face_area, reverse=True)
+    if not cyl:
+        return {"cylinder_faces": 0, "radius_mm": float("nan")}
+    return {"cylinder_faces": len(cyl), "radius_mm": 1000.0 * float(cyl[0].primitive["params"]["radius"]),
+            "face": cyl[0].id}
 
 
 def step_mesh(step_path: Path, deflection_mm: float = DEFLECTION_MM) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3) mm, triangles (m, 3)) of every face of the STEP at ``step_path`` read back through OCCT
     (`exporters.step.read_typed`), in the file's frame."""
-    from exporters.step import read_typed
+    from exporters import read_typed
     from v2c.synth.occ import faces_of, tessellate
 
     shape = read_typed(step_path).shape
@@ -87,7 +143,7 @@ def distances_to_mesh(points: np.ndarray, vertices: np.ndarray, triangles: np.nd
     return out
 
 
-def _surface_distances(points: np.ndarray, inst: np.ndarray, fit: Any) -> np.ndarray:
+def _surface_distances(points: np.ndarray, inst: np.ndarray, fit: FitResult) -> np.ndarray:
     """Distances (m) of the face pixels' points to their own fitted primitive (camera frame)."""
     out = []
     for i, prim in fit.primitives.items():
@@ -101,8 +157,7 @@ def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir
                   near_mm: float = NEAR_MM) -> dict[str, Any]:
     """Reconstruct one frame with its ROI, write its STEP (camera frame) and figure into ``out_dir``, read the STEP
     back and measure it (module docstring). Raises whatever the pipeline raises."""
-    from exporters import step as step_export
-    from exporters.figure import result_figure
+    from exporters import result_figure, write
     from v2c import pipeline
     from v2c.scan import backproject, load_scan
     from v2c.segment.geometric import GeometricConfig, part_region
@@ -113,7 +168,7 @@ def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir
     scan = load_scan(folder, roi=tuple(spec["roi"]))
     vbrep, seg, fit = pipeline.reconstruct(scan, segmentation=segmentation, return_stages=True)
     step_path = out_dir / f"{stem}.step"
-    report = step_export.write(vbrep, step_path, frame="camera", product=stem)
+    report = write(vbrep, step_path, frame="camera", product=stem)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     entry: dict[str, Any] = {"ok": True, "error": None, "seconds": seconds, "cpu_seconds": cpu,
                              "step": str(step_path),
@@ -123,9 +178,9 @@ def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir
         result_figure(scan, seg.instances, vbrep, figure)
         entry["figure"] = str(figure)
     except Exception as exc:  # noqa: BLE001 - a figure is a convenience: the measurement stands without it
-        entry["warnings"].append(f"figure not written ({_error_text(exc)})")
+        entry["warnings"].append(f"figure not written ({error_text(exc)})")
 
-    from exporters.step import read_typed
+    from exporters import read_typed
 
     typed = read_typed(step_path)
     n_sides = spec.get("visible_sides")
@@ -134,7 +189,7 @@ def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir
     entry["face_types"] = {t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
                            for t_ in ("plane", "cylinder", "cone", "sphere", "torus")}
     if spec["object"] == "box":
-        planes = sorted((f for f in vbrep.faces if f.primitive.get("type") == "plane"), key=_face_area,
+        planes = sorted((f for f in vbrep.faces if f.primitive.get("type") == "plane"), key=face_area,
                         reverse=True)
         box = box_angles(vbrep)
         # the two largest planes of distinct directions (box_angles' first pair): printed art splits a box side
@@ -179,8 +234,6 @@ def real_bench(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentations: tu
     frame that fails reported with its error. ``start``: also measure the process start once."""
     from tqdm import tqdm
 
-    from v2c.bench.run import process_start_seconds
-
     frames_spec = load_frames(rois_path)
     out_dir = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="v2c-real-"))
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -199,10 +252,10 @@ def real_bench(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentations: tu
         try:
             row.update(measure_frame(folder, spec, method, out_dir))
         except Exception as exc:  # noqa: BLE001 - the report says which frame failed and why
-            row.update(ok=False, error=_error_text(exc), seconds=time.perf_counter() - t)
+            row.update(ok=False, error=error_text(exc), seconds=time.perf_counter() - t)
     summary = {m: _summary([r for r in rows if r["segmentation"] == m]) for m in segmentations}
     start_s = process_start_seconds(list(segmentations)) if start else float("nan")
-    return _jsonable({"data_dir": str(data_dir), "segmentations": list(segmentations), "out_dir": str(out_dir),
+    return jsonable({"data_dir": str(data_dir), "segmentations": list(segmentations), "out_dir": str(out_dir),
                       "near_mm": NEAR_MM, "process_start_s": start_s, "frames": rows, "summary": summary})
 
 
@@ -259,4 +312,76 @@ def format_table(report: dict[str, Any]) -> str:
                      f"{_f(100 * s['coverage_3mm'])} %; depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
                      f"{_f(s['seconds_median'])} s ({_f(s['cpu_seconds_median'])} CPU s) per frame + "
                      f"{_f(report['process_start_s'])} s process start")
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------- the earlier report (`v2c.bench.run` had it)
+
+
+def real_frames_report(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentation: str = "learned",
+                       out_dir: Path | None = None, progress: bool = True) -> dict[str, Any]:
+    """Run `v2c to-step` (`v2c.api.scan_to_step`, camera frame, with the VB-Rep JSON and figure) on every frame of
+    ``rois_path`` found in ``data_dir`` with its region of interest; per frame: ok / error, seconds, faces, and the
+    box angles (`box_angles`) or can radius (`can_radius`) against the expected value."""
+    from tqdm import tqdm
+
+    from v2c.api import scan_to_step
+    from v2c.vbrep.model import VBRep
+
+    rois = load_rois(rois_path)
+    out_dir = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="v2c-real-"))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    frames: dict[str, Any] = {}
+    for name, spec in tqdm(rois.items(), desc="real", unit="frame", disable=not progress):
+        folder = Path(data_dir) / name
+        entry: dict[str, Any] = {"object": spec["object"], "name": spec.get("name"), "roi": spec["roi"],
+                                 "expected": spec.get("expected", {})}
+        frames[name] = entry
+        if not folder.is_dir():
+            entry.update(ok=False, error=f"{folder}: not found")
+            continue
+        t = time.perf_counter()
+        try:
+            res = scan_to_step(folder, out_dir / f"{name}.step", frame="camera", segmentation=segmentation,
+                               roi=tuple(spec["roi"]))
+            entry.update(ok=True, error=None, step=str(res.step), figure=str(res.figure) if res.figure else None,
+                         warnings=res.warnings, seconds=time.perf_counter() - t, stage_seconds=res.seconds,
+                         step_faces=res.report.n_faces)
+            vbrep = VBRep.load(res.vbrep_json)
+            entry["faces"] = {t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
+                              for t_ in ("plane", "cylinder", "cone", "sphere", "torus")}
+            if spec["object"] == "box":
+                entry["box"] = box_angles(vbrep)
+            else:
+                entry["can"] = can_radius(vbrep)
+                exp = spec.get("expected", {}).get("radius_mm")
+                if exp:
+                    entry["can"]["error_mm"] = entry["can"]["radius_mm"] - float(exp)
+        except Exception as exc:  # noqa: BLE001 - the report says which frame failed and why
+            entry.update(ok=False, error=error_text(exc), seconds=time.perf_counter() - t)
+    return jsonable({"data_dir": str(data_dir), "segmentation": segmentation, "out_dir": str(out_dir),
+                      "frames": frames})
+
+
+def format_real_table(report: dict[str, Any]) -> str:
+    """Markdown table of `real_frames_report`."""
+    lines = ["| frame | object | ROI | ok | s | faces (plane/cyl/other) | measured | expected |",
+             "| --- | --- | --- | --- | ---: | --- | --- | --- |"]
+    for name, e in report["frames"].items():
+        faces = e.get("faces") or {}
+        fc = (f"{faces.get('plane', 0)}/{faces.get('cylinder', 0)}/"
+              f"{sum(v for k, v in faces.items() if k not in ('plane', 'cylinder'))}") if faces else ""
+        if not e.get("ok"):
+            meas, exp = f"error: {e.get('error')}", ""
+        elif e["object"] == "box":
+            angles = ", ".join(f"{p['angle_deg']:.1f}" for p in e["box"]["pairs"])
+            meas = f"angles {angles} deg (max error {format_value(e['box']['max_error_deg'], 'f1')} deg)"
+            exp = "90 deg"
+        else:
+            meas = f"radius {format_value(e['can']['radius_mm'], 'f1')} mm"
+            r = e.get("expected", {}).get("radius_mm")
+            exp = f"{r:.1f} mm" if r else ""
+        secs = f"{e['seconds']:.1f}" if e.get("seconds") is not None else ""
+        lines.append(f"| {name} | {e.get('name') or e['object']} | {','.join(map(str, e['roi']))} | "
+                     f"{'yes' if e.get('ok') else 'no'} | {secs} | {fc} | {meas} | {exp} |")
     return "\n".join(lines)

@@ -19,14 +19,22 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from v2c.labels import AXIS_OF_LABEL, IGNORE, NUM_CLASSES, TYPE_OF_LABEL
 
+if TYPE_CHECKING:
+    from v2c.scan import Scan
+    from v2c.segment.types import Segmentation
+
 
 @dataclass(frozen=True)
 class SegMetricConfig:
+    """Thresholds of the segmentation metrics: the IoU of a match, the size of a counted ground-truth face (pixels)
+    and the share of a predicted instance on non-analytic faces that leaves it out."""
+
     iou_threshold: float = 0.5  # image IoU for a predicted instance to match a gt face
     min_gt_px: int = 50  # gt faces under this many pixels only count in recall_all (pixels)
     ignore_share: float = 0.5  # predicted instances with more than this share on non-analytic faces are left out
@@ -129,7 +137,7 @@ def evaluate_instances(instances: np.ndarray, inst_labels: np.ndarray, gt_faces:
     }
 
 
-def evaluate_segmentation(seg, scan, cfg: SegMetricConfig = SegMetricConfig()) -> dict:
+def evaluate_segmentation(seg: Segmentation, scan: Scan, cfg: SegMetricConfig = SegMetricConfig()) -> dict:
     """``evaluate_instances`` of a ``Segmentation`` against a scan's gt/ (ValueError without gt)."""
     if scan.gt is None:
         raise ValueError(f"{scan.path}: segmentation metrics need gt/ (a synthetic scan)")
@@ -155,8 +163,11 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def run(scan_dirs: list[Path], methods: list[str], segment_fn: Callable | None = None, log=print) -> dict:
-    """Segment every scan with every method, time it, and return {method: {"summary": ..., "scans": [...]}}."""
+def run(scan_dirs: list[Path], methods: list[str], segment_fn: Callable[[Scan, str], Segmentation] | None = None,
+        log: Callable[[str], None] = print) -> dict:
+    """Segment every scan with every method, time it (seconds), and return {method: {"summary": ..., "scans":
+    [...]}}. ``segment_fn(scan, method)``: the segmenter (default `v2c.segment.segment`); ``log`` gets a progress
+    line every 25 scans."""
     from v2c.scan import load_scan
     from v2c.segment import segment
 
@@ -194,6 +205,7 @@ def format_table(results: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """``python -m v2c.bench.segmentation --data DIR [--method M ...]``: the table of `run`, optionally its JSON."""
     import argparse
 
     from v2c.segment.data import find_scans

@@ -16,7 +16,7 @@ keyed by (seed, family name). Scans are cached under ``<cache>/suite_<noise>_<W>
 (``corpus/<file stem>_<sha1[:8]>/scan_0000v``, ``family/<name>/scan_0000i``; digest: generator version, noise,
 size, seed), so a repeated run renders nothing; the cache lives outside the repository.
 
-Report. Every scan is reconstructed and scored as in the family suite (`v2c.bench.run.evaluate_dirs`: the same
+Report. Every scan is reconstructed and scored as in the family suite (`v2c.bench.workers.evaluate_dirs`: the same
 metrics, the same to-step timing), then summarised per source (corpus split, every leave-out family, the families
 together) and, for the corpus, per part size band (`BandConfig`: the file's face count under 30, 30-100, over
 100). Two counts join the metrics: faces the STEP build bounded by their mesh outline
@@ -36,9 +36,15 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from v2c.bench import run as R
+from v2c.bench.cache import default_cache_dir, scan_complete
+from v2c.bench.config import GT, BenchConfig, columns_of
+from v2c.bench.tables import format_value, jsonable, summarise
+from v2c.bench.workers import error_text, evaluate_dirs, failed_rows, process_start_seconds
+
+if TYPE_CHECKING:
+    from v2c.synth.dataset import SynthConfig
 
 #: Suite name -> the corpus split it renders (None: the family suite of `v2c.bench.run`).
 SUITES: dict[str, str | None] = {"family": None, "unseen": "test", "corpus-val": "val"}
@@ -91,7 +97,7 @@ class SuiteConfig:
     weights); its ``n``, ``cad_dir`` and ``scans_dir`` are not used."""
 
     suite: str = "unseen"
-    bench: R.BenchConfig = field(default_factory=lambda: R.BenchConfig(ablations=("full",)))
+    bench: BenchConfig = field(default_factory=lambda: BenchConfig(ablations=("full",)))
     corpus_dir: Path | None = None  # None: default_corpus_dir()
     split_file: Path = SPLIT_FILE
     views: int = 2  # rendered views per corpus part
@@ -201,7 +207,7 @@ def suite_cache_dir(cfg: SuiteConfig) -> Path:
         key["appearance"] = cfg.appearance
         look = f"_{cfg.appearance}"
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
-    return (b.cache_dir or R.default_cache_dir()) / \
+    return (b.cache_dir or default_cache_dir()) / \
         f"suite_{b.noise}_{b.size[0]}x{b.size[1]}_s{b.seed}{look}_{digest}"
 
 
@@ -214,7 +220,7 @@ class SuiteScan:
     name: str  # corpus file name or family name
     view: int
     seed: int  # generator seed (`derived_seed`); the scan's index is ``view``
-    synth: Any  # v2c.synth.dataset.SynthConfig
+    synth: SynthConfig  # how the generator renders it
     n_faces: int | None = None  # corpus: faces of the file
     band: str | None = None  # corpus: size band
 
@@ -261,7 +267,7 @@ def plan_scans(cfg: SuiteConfig) -> tuple[list[SuiteScan], list[str]]:
     return scans, notes
 
 
-def _render(args: tuple[Path, int, int, Any]) -> str | None:
+def _render(args: tuple[Path, int, int, SynthConfig]) -> str | None:
     """Render one scan into its folder (`v2c.synth.dataset.generate_scan`); the error text if it raised."""
     from v2c.synth.dataset import generate_scan
 
@@ -270,7 +276,7 @@ def _render(args: tuple[Path, int, int, Any]) -> str | None:
         generate_scan(out_dir, seed, index, synth)
         return None
     except Exception as exc:  # noqa: BLE001 - a part that cannot be rendered is a named failure of the suite
-        return R._error_text(exc)
+        return error_text(exc)
 
 
 def render_missing(scans: Sequence[SuiteScan], jobs: int, progress: bool = True) -> dict[str, str]:
@@ -280,7 +286,7 @@ def render_missing(scans: Sequence[SuiteScan], jobs: int, progress: bool = True)
 
     from v2c.synth.dataset import _worker_init
 
-    todo = [s for s in scans if not R._complete(s.path)]
+    todo = [s for s in scans if not scan_complete(s.path)]
     errors: dict[str, str] = {}
     if not todo:
         return errors
@@ -306,7 +312,7 @@ def render_missing(scans: Sequence[SuiteScan], jobs: int, progress: bool = True)
                 try:
                     err = fut.result()
                 except Exception as exc:  # noqa: BLE001 - the worker died (a crash inside OCCT)
-                    err = R._error_text(exc)
+                    err = error_text(exc)
                 if err:
                     errors[futures[fut].label] = err
                 bar.update()
@@ -336,11 +342,11 @@ def run_suite(cfg: SuiteConfig, progress: bool = True) -> dict[str, Any]:
     render_errors = render_missing(scans, b.jobs, progress)
     ok = [s for s in scans if s.label not in render_errors]
     figure_dirs = [Path(b.figure_dir) / s.source / s.path.parent.name if b.figure_dir else None for s in ok]
-    rows = R.evaluate_dirs(b, [s.path for s in ok], progress, figure_dirs, desc=f"bench {cfg.suite}")
+    rows = evaluate_dirs(b, [s.path for s in ok], progress, figure_dirs, desc=f"bench {cfg.suite}")
     weights = str(b.weights) if b.weights else None
     for s in scans:
         if s.label in render_errors:
-            rows += R._failed_rows((str(s.path), tuple(b.segmentations), tuple(b.ablations)),
+            rows += failed_rows((str(s.path), tuple(b.segmentations), tuple(b.ablations)),
                                    f"render: {render_errors[s.label]}")
     by_path = {str(s.path): s for s in scans}
     order = {str(s.path): i for i, s in enumerate(scans)}
@@ -348,8 +354,8 @@ def run_suite(cfg: SuiteConfig, progress: bool = True) -> dict[str, Any]:
     for r in rows:
         s = by_path[r["path"]]
         r.update(source=s.source, part=s.name, view=s.view, band=s.band, n_faces=s.n_faces, label=s.label)
-    start = R.process_start_seconds([m for m in b.segmentations if m != R.GT], weights)
-    cols = [f"{s}/{a}" for s, a in R.columns_of(b)]
+    start = process_start_seconds([m for m in b.segmentations if m != GT], weights)
+    cols = [f"{s}/{a}" for s, a in columns_of(b)]
     groups = group_names(cfg, scans)
     summary = {c: {g: summarise_group([r for r in rows if _column(r) == c and in_group(r, g, cfg)], start)
                    for g in groups} for c in cols}
@@ -357,7 +363,7 @@ def run_suite(cfg: SuiteConfig, progress: bool = True) -> dict[str, Any]:
     conf["bench"].update(weights=weights, cache_dir=str(suite_root(scans)))
     conf["corpus_dir"] = str(cfg.corpus_dir or default_corpus_dir())
     conf["corpus_split"] = cfg.corpus_split
-    return R._jsonable({
+    return jsonable({
         "config": conf, "suite": cfg.suite, "notes": notes,
         "scans": [{"path": str(s.path), "source": s.source, "name": s.name, "view": s.view, "band": s.band,
                    "n_faces": s.n_faces} for s in scans],
@@ -399,7 +405,7 @@ def summarise_group(rows: list[dict[str, Any]], process_start_s: float = float("
     """`v2c.bench.run.summarise` of a group's rows, plus: ``parts`` (distinct parts or families),
     ``fallback_faces`` / ``step_faces`` (sums over the scans that wrote a STEP), ``fallback_per_scan`` (mean),
     ``chamfer_max`` (the worst scan), ``failures`` (every failed scan: label and error)."""
-    out = R.summarise(rows, process_start_s)
+    out = summarise(rows, process_start_s)
     ok = [r for r in rows if r.get("ok")]
     stepped = [r for r in ok if r.get("step_faces") is not None]
     out["parts"] = len({r["part"] for r in rows})
@@ -440,12 +446,12 @@ def format_suite_tables(result: dict[str, Any]) -> str:
     for col in result["columns"]:
         summ = result["summary"][col]
         seg, abl = col.split("/")
-        out.append(f"{seg} segmentation, {abl}" if seg != R.GT else "ideal (gt VB-Rep)")
+        out.append(f"{seg} segmentation, {abl}" if seg != GT else "ideal (gt VB-Rep)")
         out.append("")
         out.append("| metric | " + " | ".join(groups) + " |")
         out.append("| --- |" + " ---: |" * len(groups))
         for title, key, kind in SUITE_ROWS:
-            out.append(f"| {title} | " + " | ".join(R._fmt(summ[g].get(key), kind) for g in groups) + " |")
+            out.append(f"| {title} | " + " | ".join(format_value(summ[g].get(key), kind) for g in groups) + " |")
         out.append("| STEP faces bounded by their mesh outline / STEP faces | "
                    + " | ".join(f"{summ[g]['fallback_faces']} / {summ[g]['step_faces']}" for g in groups) + " |")
         out.append("| mesh-outline faces per scan (mean) | "
@@ -490,12 +496,13 @@ def format_suite_notes(result: dict[str, Any], worst: int = 8) -> str:
             for r in worst_scans(result, col, worst):
                 if not r.get("ok"):
                     continue
+                fv = format_value
                 out.append(f"  {r['label']}" + (f" [{r['band']}]" if r.get("band") else "")
-                           + f": precision {R._fmt(r.get('precision'), 'pct')}, recall "
-                           f"{R._fmt(r.get('recall'), 'pct')}, type {R._fmt(r.get('type_accuracy'), 'pct')}, "
-                           f"alignment {R._fmt(r.get('alignment'), 'f4')}, Chamfer {R._fmt(r.get('chamfer'), 'f4')}, "
+                           + f": precision {fv(r.get('precision'), 'pct')}, recall "
+                           f"{fv(r.get('recall'), 'pct')}, type {fv(r.get('type_accuracy'), 'pct')}, "
+                           f"alignment {fv(r.get('alignment'), 'f4')}, Chamfer {fv(r.get('chamfer'), 'f4')}, "
                            f"mesh-outline faces {r.get('step_fallback_faces', '')} of {r.get('step_faces', '')}, "
-                           f"{R._fmt(r.get('runtime', {}).get('to_step'), 's')} s")
+                           f"{fv(r.get('runtime', {}).get('to_step'), 's')} s")
     return "\n".join(out)
 
 

@@ -1,47 +1,32 @@
 """Metrics of a reconstructed VB-Rep against a synthetic scan's ground truth (BENCHMARK.md; docs/vbrep.md).
 
-- `chamfer(vbrep, scan, n=20000, seed=0)`: BENCHMARK.md's Chamfer distance, scaled by the part size.
+- `chamfer(vbrep, scan, n=20000, seed=0)`: BENCHMARK.md's Chamfer distance, scaled by the part size (the
+  surfaces and ray casts of `v2c.bench.surfaces`, as `v2c.bench.metrics.scan_metrics` measures it).
 - `edge_type_accuracy(vbrep, scan)`: the share of ground-truth boundary records (v2c.vbrep.gt_types) whose
   nearest predicted edge on the same face (within ``tol_px``) has the same type.
+- `edge_correctness(vbrep, scan)`: the same matching seen from each predicted edge (right or wrong).
+
+Edge positions are compared in pixels of the scan's image (edges projected with ``vbrep.K``).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from v2c.bench.config import MetricConfig
+from v2c.bench.surfaces import chamfer_distance, gt_points, part_size, reconstruction_points
 from v2c.vbrep.gt_types import GTEdgeSamples, GTTypeConfig, gt_edge_samples
 from v2c.vbrep.model import EdgeType, VBRep
 from v2c.vbrep.raycast import project
 
-
-def part_size(scan: Any) -> float:
-    """Ground-truth part size (metres): meta.json part_size_m, else the clean point cloud's largest extent."""
-    size = scan.gt.meta.get("part_size_m")
-    if size:
-        return float(size)
-    pts = gt_points(scan, None, 0)
-    return float(np.max(pts.max(0) - pts.min(0)))
+if TYPE_CHECKING:
+    from v2c.scan import Scan
 
 
-def gt_points(scan: Any, n: int | None = 20000, seed: int = 0) -> np.ndarray:
-    """Ground truth surface G: clean depth back-projected on the part's pixels (gt faces > 0), n drawn at random
-    (seeded; all if n is None). Camera frame, metres."""
-    gt = scan.gt
-    depth = np.asarray(gt.depth_clean, float)
-    vs, us = np.nonzero((np.asarray(gt.faces) > 0) & (depth > 0))
-    if n is not None and len(us) > n:
-        idx = np.random.default_rng(seed).choice(len(us), n, replace=False)
-        vs, us = vs[idx], us[idx]
-    z = depth[vs, us]
-    Kinv = np.linalg.inv(np.asarray(scan.K, float))
-    rays = np.stack([us, vs, np.ones_like(us)], 1).astype(float) @ Kinv.T
-    return rays / rays[:, 2:3] * z[:, None]
-
-
-def chamfer(vbrep: VBRep, scan: Any, n: int = 20000, seed: int = 0, visible_only: bool = True) -> float:
+def chamfer(vbrep: VBRep, scan: Scan, n: int = 20000, seed: int = 0, visible_only: bool = True) -> float:
     """BENCHMARK.md Chamfer distance, divided by the ground-truth part size: 0.5 * (mean over R of the distance
     to G + mean over G of the distance to R), G = ``n`` clean-depth points of the part, R = ``n`` points drawn
     area-uniformly on the reconstructed face meshes, keeping those the camera sees (``visible_only``; else all of
@@ -49,17 +34,15 @@ def chamfer(vbrep: VBRep, scan: Any, n: int = 20000, seed: int = 0, visible_only
 
     The exact implementation of v2c.bench.metrics (visibility by an exact ray cast against the meshes,
     `visible_points`): ``chamfer(v, scan)`` equals ``scan_metrics(v, scan)["chamfer"]`` for the same n and seed."""
-    from v2c.bench import metrics as M  # metrics imports this module
-
-    cfg = M.MetricConfig(n_points=n, seed=seed)
+    cfg = MetricConfig(n_points=n, seed=seed)
     size = part_size(scan)
     G = gt_points(scan, n, seed)
-    R = M.reconstruction_points(vbrep, n, np.random.default_rng(seed), visible_only=visible_only,
-                                eps=cfg.visibility_eps_rel * size, max_rounds=cfg.max_draw_rounds)
-    return M.chamfer_distance(R, G, size)
+    R = reconstruction_points(vbrep, n, np.random.default_rng(seed), visible_only=visible_only,
+                              eps=cfg.visibility_eps_rel * size, max_rounds=cfg.max_draw_rounds)
+    return chamfer_distance(R, G, size)
 
 
-def face_to_gt(vbrep: VBRep, scan: Any) -> dict[int, int]:
+def face_to_gt(vbrep: VBRep, scan: Scan) -> dict[int, int]:
     """Predicted face id -> ground-truth faces.png value it covers most (0 if none), from its projected mesh."""
     faces = np.asarray(scan.gt.faces)
     h, w = faces.shape
@@ -96,7 +79,7 @@ def _edge_points(vbrep: VBRep, step_px: float = 0.5) -> tuple[np.ndarray, np.nda
     return np.concatenate(pts), np.concatenate(eid), np.concatenate(typ)
 
 
-def edge_type_accuracy(vbrep: VBRep, scan: Any, tol_px: float = 3.0, gt: GTEdgeSamples | None = None,
+def edge_type_accuracy(vbrep: VBRep, scan: Scan, tol_px: float = 3.0, gt: GTEdgeSamples | None = None,
                        gt_config: GTTypeConfig | None = None) -> dict[str, Any]:
     """Edge-type accuracy against the ground-truth rule (v2c.vbrep.gt_types).
 
@@ -135,7 +118,7 @@ def edge_type_accuracy(vbrep: VBRep, scan: Any, tol_px: float = 3.0, gt: GTEdgeS
     return out
 
 
-def edge_correctness(vbrep: VBRep, scan: Any, tol_px: float = 3.0, min_share: float = 0.5,
+def edge_correctness(vbrep: VBRep, scan: Scan, tol_px: float = 3.0, min_share: float = 0.5,
                      gt: GTEdgeSamples | None = None, gt_config: GTTypeConfig | None = None) -> np.ndarray:
     """Per predicted edge, whether its type is right (bool array, one per ``vbrep.edges``).
 

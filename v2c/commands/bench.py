@@ -226,7 +226,7 @@ def _segmentation_only(cfg: BenchConfig, json_out: Path | None, quiet: bool) -> 
                    log=(lambda *a: None) if quiet else (lambda m: click.echo(m, err=True)))
     click.echo(f"{len(scans)} scans, segmentation alone")
     click.echo(S.format_table(result))
-    _write_json(json_out, run._jsonable(result))
+    _write_json(json_out, run.jsonable(result))
 
 
 def _write_json(path: Path | None, data: dict) -> None:

@@ -211,7 +211,11 @@ def sample_appearance(rng: np.random.Generator, scene: Scene, bbox_lo_mm: np.nda
     if art and rng.random() < cfg.world_print_share:  # world-space print as well (packaging-like)
         look = _sample_print(rng, size, material.albedo)
     rot = scene.world_to_cam[:, :3]
-    tint = lambda: np.clip(1.0 + rng.normal(0, cfg.light_tint_sigma, 3), 0.5, 1.5)
+
+    def tint() -> np.ndarray:
+        """A light's RGB tint: 1 + a normal draw per channel, clipped to [0.5, 1.5]."""
+        return np.clip(1.0 + rng.normal(0, cfg.light_tint_sigma, 3), 0.5, 1.5)
+
     key_el, key_az = np.deg2rad(rng.uniform(*cfg.key_elevation_deg)), rng.uniform(0, 2 * np.pi)
     key_dir = np.array([np.cos(key_el) * np.cos(key_az), np.cos(key_el) * np.sin(key_az), np.sin(key_el)])
     lights = [Light(rot @ key_dir, tint() * rng.uniform(*cfg.key_intensity), True)]

@@ -19,6 +19,7 @@ from v2c.synth.occ import silence_occt
 
 
 def main() -> None:
+    """Time `generate_scan` on ``--n`` scans (after a warm-up) and print the seconds per scan."""
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--size", default="256x256", help="WxH pixels")
     ap.add_argument("--n", type=int, default=40, help="timed scans")

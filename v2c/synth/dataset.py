@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -98,7 +99,8 @@ def _write_png(path: Path, image: np.ndarray, level: int) -> None:
         raise OSError(f"{path}: could not write the PNG")
 
 
-def _write_json(path: Path, obj) -> None:
+def _write_json(path: Path, obj: Any) -> None:
+    """Write ``obj`` as JSON (sorted keys, indented) to ``path``."""
     path.write_text(json.dumps(obj, sort_keys=True, indent=1) + "\n")
 
 
@@ -195,7 +197,7 @@ def _render_scan_into(folder: Path, seed: int, index: int, cfg: SynthConfig) -> 
     _write_json(folder / COMPLETE_MARKER, _plain(meta))
 
 
-def _plain(obj):
+def _plain(obj: Any) -> Any:
     """JSON-ready copy: numpy scalars/arrays to Python numbers/lists."""
     if isinstance(obj, dict):
         return {str(k): _plain(v) for k, v in obj.items()}

@@ -93,7 +93,7 @@ from OCP.GProp import GProp_GProps
 from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_IN, TopAbs_REVERSED, TopAbs_SOLID, TopAbs_WIRE
 from OCP.TopExp import TopExp, TopExp_Explorer
-from OCP.TopoDS import TopoDS, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape
 
 from v2c.synth.families import FEATURE_FAMILIES
@@ -200,20 +200,24 @@ class Work:
 
     @property
     def shape(self) -> TopoDS_Shape:
+        """The current solid as an OCCT shape (mm, Z up)."""
         return self.solid.wrapped
 
 
 def _as_solid(shape: Shape | TopoDS_Shape) -> Solid | None:
+    """The one solid of ``shape`` as a build123d Solid; None when it holds none or several."""
     raw = shape.wrapped if isinstance(shape, Shape) else shape
     solids = _solids(raw)
     return Solid(solids[0]) if len(solids) == 1 else None
 
 
 def _u(rng: np.random.Generator, lo: float, hi: float) -> float:
+    """One uniform draw in [lo, hi) as a Python float."""
     return float(rng.uniform(lo, hi))
 
 
-def _vec(v) -> np.ndarray:
+def _vec(v: gp_Pnt | gp_Dir) -> np.ndarray:
+    """(3,) array of an OCCT point or direction (mm for a point)."""
     return np.array([v.X(), v.Y(), v.Z()], float)
 
 
@@ -338,9 +342,11 @@ class CylSite:
 
     @property
     def full(self) -> bool:
+        """Whether the face goes all the way round (360 degrees)."""
         return self.u_range[1] - self.u_range[0] > 2 * math.pi - 1e-6
 
     def radial(self, u: float) -> np.ndarray:
+        """(3,) unit radial direction at angle ``u`` (radians) from `xdir` towards `ydir`."""
         return math.cos(u) * self.xdir + math.sin(u) * self.ydir
 
 
@@ -376,7 +382,7 @@ class DiscSite:
 def disc_sites(shape: TopoDS_Shape, min_nz: float = -0.5) -> list[DiscSite]:
     """Planar faces that are full discs (one wire of one circular edge), looking no further down than `min_nz`."""
     out = []
-    for face, surf, n, _, _ in _planar_faces(shape, min_nz):
+    for face, _surf, n, _, _ in _planar_faces(shape, min_nz):
         wires, exp = 0, TopExp_Explorer(face, TopAbs_WIRE)
         while exp.More():
             wires += 1
@@ -456,6 +462,8 @@ def _hole_radius(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> float
 
 
 def f_through_hole(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A through hole of radius 2.5-7 % of the part size (mm): along the normal of a planar face, or in
+    30 % of draws across an outer cylinder when the part has one (a cross hole)."""
     r = _hole_radius(w, rng, cfg)
     if rng.random() < 0.3:  # a cross hole through a cylinder
         rs = _radial_site(w, rng, r, cfg)
@@ -468,6 +476,9 @@ def f_through_hole(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> Fea
 
 
 def f_blind_hole(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A blind hole (radius as `f_through_hole`) 30-75 % of the material below the wall deep (less the
+    drill point), flat-bottomed or with a 118-degree drill point (cone); in 30 % of draws radial into an outer
+    cylinder when the part has one (a set-screw hole)."""
     r = _hole_radius(w, rng, cfg)
     drill_point = bool(rng.random() < 0.5)
     tip = r / math.tan(math.radians(59.0)) if drill_point else 0.0
@@ -492,6 +503,8 @@ def f_blind_hole(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> Featu
 
 
 def f_counterbore(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A through hole with a coaxial bore 1.5-2 times its radius, 20-50 % of the material depth deep
+    (two cylinders and the annular plane between them)."""
     r = _hole_radius(w, rng, cfg)
     rc = r * _u(rng, 1.5, 2.0)
     site = find_site(w, rng, rc, cfg)
@@ -505,6 +518,7 @@ def f_counterbore(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> Feat
 
 
 def f_countersink(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A through hole with a 90-degree conical sink whose rim radius is 1.5-2 times the hole's (cone)."""
     r = _hole_radius(w, rng, cfg)
     rs = r * _u(rng, 1.5, 2.0)
     site = find_site(w, rng, rs, cfg)
@@ -517,6 +531,7 @@ def f_countersink(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> Feat
 
 
 def f_boss(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A cylinder of radius 6-18 % and height 8-35 % of the part size standing on a planar face."""
     r = max(cfg.min_size_mm * 2, _u(rng, 0.06, 0.18) * w.size)
     h = max(cfg.min_size_mm, _u(rng, 0.08, 0.35) * w.size)
     site = find_site(w, rng, r, cfg)
@@ -526,6 +541,8 @@ def f_boss(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResu
 
 
 def f_pocket(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A rounded-rectangle pocket 15-40 % by 10-30 % of the part size, 20-60 % of the material below the
+    wall deep; turned by a multiple of 90 degrees (60 % of draws) or at random about the face normal."""
     a, b = _u(rng, 0.15, 0.4) * w.size, _u(rng, 0.1, 0.3) * w.size
     rc = _u(rng, 0.1, 0.4) * min(a, b)
     site = find_site(w, rng, 0.5 * math.hypot(a, b), cfg)
@@ -540,6 +557,7 @@ def f_pocket(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureRe
 
 
 def f_slot(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """An obround slot 5-15 % of the part size wide, through the part (30 % of draws) or blind."""
     width = max(2 * cfg.min_size_mm, _u(rng, 0.05, 0.15) * w.size)
     length = width + _u(rng, 0.1, 0.4) * w.size
     site = find_site(w, rng, 0.5 * length, cfg)
@@ -556,6 +574,7 @@ def f_slot(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResu
 
 
 def f_rib(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A thin wall (3-8 % of the part size thick, 10-30 % high) standing on a planar face."""
     length = _u(rng, 0.2, 0.5) * w.size
     thick = max(cfg.min_size_mm, _u(rng, 0.03, 0.08) * w.size)
     height = _u(rng, 0.1, 0.3) * w.size
@@ -568,6 +587,8 @@ def f_rib(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResul
 
 
 def f_step(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A box cut off one side of the part (along X or Y) from its top: 15-40 % of the width, 20-60 % of
+    the height (two planes)."""
     bb = w.solid.bounding_box()
     lo, hi = np.array([bb.min.X, bb.min.Y, bb.min.Z]), np.array([bb.max.X, bb.max.Y, bb.max.Z])
     k = int(rng.integers(2))  # cut along X or Y
@@ -588,6 +609,8 @@ def f_step(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResu
 
 
 def f_groove(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """An annular groove in a full outer cylinder: square (planes and a cylinder) or, in 35 % of draws,
+    round (a torus tube centred on the surface, an O-ring groove)."""
     cands = [c for c in cylinder_sites(w.shape) if c.full and c.radius > 3 * cfg.wall_mm]
     if not cands:
         return None
@@ -618,7 +641,7 @@ def _edge_faces(shape: TopoDS_Shape) -> TopTools_IndexedDataMapOfShapeListOfShap
     return m
 
 
-def _face_span(face) -> float:
+def _face_span(face: TopoDS_Face) -> float:
     """Second-largest side of the face's bounding box (mm): a rough width of the face."""
     from OCP.Bnd import Bnd_Box
     from OCP.BRepBndLib import BRepBndLib
@@ -682,10 +705,12 @@ def _blend(w: Work, rng: np.random.Generator, cfg: FeatureConfig, chamfer: bool)
 
 
 def f_fillet(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A constant-radius fillet of a line or circle edge of `blend_edges` (a cylinder or a torus)."""
     return _blend(w, rng, cfg, chamfer=False)
 
 
 def f_chamfer(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """An equal-distance chamfer of a line or circle edge of `blend_edges` (a plane or a cone)."""
     return _blend(w, rng, cfg, chamfer=True)
 
 
@@ -705,10 +730,13 @@ def _cap(w: Work, rng: np.random.Generator, cfg: FeatureConfig, ball: bool) -> F
 
 
 def f_dome(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A spherical cap on a disc face (the end of a cylinder), its sphere radius 1.15-2.5 times the
+    disc's: a sharp rim."""
     return _cap(w, rng, cfg, ball=False)
 
 
 def f_ball_end(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A hemisphere on a disc face with the disc's radius, tangent to its cylinder."""
     return _cap(w, rng, cfg, ball=True)
 
 
@@ -733,6 +761,8 @@ def _pattern_member(w: Work, rng: np.random.Generator, cfg: FeatureConfig
 
 
 def f_linear_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A row of 2-5 equal members (`_pattern_member`: through or blind holes, bosses, slots) on one planar
+    face, at a pitch of 2.6-5 times a member's clearance radius."""
     kind, rc, radius, build = _pattern_member(w, rng, cfg)
     n = int(rng.integers(2, 6))
     pitch = rc * 2 * _u(rng, 1.3, 2.5)
@@ -752,6 +782,9 @@ def f_linear_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> F
 
 
 def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """Holes, bosses or slots on a bolt circle of one planar face (3-8 members), or flutes around a
+    full outer cylinder when the part has one (6-18 concave cylinders; share ``w.data['flute_share']`` of draws,
+    default 40 %)."""
     cyls = [c for c in cylinder_sites(w.shape) if c.full and c.radius > 4 * cfg.wall_mm
             and c.v_range[1] - c.v_range[0] > 2 * cfg.wall_mm]
     if cyls and rng.random() < w.data.get("flute_share", 0.4):  # flutes around a cylinder (knurl-like when many)
@@ -787,6 +820,7 @@ def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) ->
 
 
 def f_union(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A box or a half-buried lying cylinder joined to a planar face (15-40 % of the part size long)."""
     a = _u(rng, 0.15, 0.4) * w.size
     site = find_site(w, rng, 0.5 * a, cfg)
     if site is None:
@@ -804,6 +838,8 @@ def f_union(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureRes
 
 
 def f_cut(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
+    """A tilted box (a bevelled notch), a lying cylinder (a channel) or a sphere (a dimple) cut 15-50 % of
+    the material below the wall deep into a planar face."""
     choice = str(rng.choice(["box", "cylinder", "sphere"]))
     a = _u(rng, 0.15, 0.4) * w.size
     site = find_site(w, rng, 0.5 * a, cfg)
@@ -844,9 +880,10 @@ def apply_feature(w: Work, kind: str, rng: np.random.Generator, cfg: FeatureConf
                   ) -> dict | None:
     """Try feature `kind` on `w`; on success replace `w.solid`, record it and return its parameters.
 
-    `op` replaces the kind's own operation (a family's fixed feature recorded under a standard kind). A feature that does not apply (no room), whose OCCT operation fails, or whose result is not an acceptable
-    part (`shape_problem`) or equals the input is skipped: `w` is unchanged, the reason is appended to
-    `w.skipped` and None returned.
+    `op` replaces the kind's own operation (a family's fixed feature recorded under a standard kind). A feature
+    that does not apply (no room), whose OCCT operation fails, or whose result is not an acceptable part
+    (`shape_problem`) or equals the input is skipped: `w` is unchanged, the reason is appended to `w.skipped` and
+    None returned.
     """
     if kind in BLEND_KINDS and w.blends >= cfg.max_blends:
         w.skipped.append(f"{kind}: blend budget used")

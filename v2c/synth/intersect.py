@@ -54,7 +54,8 @@ def intersect_primitive(kind: str, params: dict, dirs: np.ndarray, t0: np.ndarra
     elif kind == "sphere":
         r = float(params["radius"])
         q0 = -o
-        t = _nearest_quadratic_root(np.ones(len(dirs)), 2.0 * rows_dot(dirs, q0), np.full(len(dirs), q0 @ q0 - r * r), t0)
+        t = _nearest_quadratic_root(np.ones(len(dirs)), 2.0 * rows_dot(dirs, q0), np.full(len(dirs), q0 @ q0 - r * r),
+                                    t0)
         normals = dirs * t[:, None] - o
     elif kind == "cylinder":
         a, r = _axis(params), float(params["radius"])

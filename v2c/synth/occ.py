@@ -32,7 +32,7 @@ from OCP.GeomAbs import (
     GeomAbs_SurfaceOfRevolution,
     GeomAbs_Torus,
 )
-from OCP.gp import gp_Trsf
+from OCP.gp import gp_Dir, gp_Pnt, gp_Trsf
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.Interface import Interface_Static
 from OCP.Message import Message, Message_Gravity
@@ -41,7 +41,7 @@ from OCP.TCollection import TCollection_HAsciiString
 from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
-from OCP.TopoDS import TopoDS, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 
 #: Fixed STEP header values: OCCT writes the wall-clock time and a per-process write counter otherwise.
 STEP_TIMESTAMP = "2000-01-01T00:00:00"
@@ -179,11 +179,12 @@ def tessellate(shape: TopoDS_Shape, faces: list, linear_deflection: float, angul
     return FaceMesh(np.concatenate(verts), np.concatenate(tris), np.concatenate(owner))
 
 
-def _xyz(p) -> list[float]:
+def _xyz(p: gp_Pnt | gp_Dir) -> list[float]:
+    """[x, y, z] of an OCCT point or direction (the shape's units for a point)."""
     return [p.X(), p.Y(), p.Z()]
 
 
-def face_primitive(face, to_m: float) -> dict:
+def face_primitive(face: TopoDS_Face, to_m: float) -> dict:
     """SCAN_FORMAT.md primitives.json `type` and `params` of one face (params scaled by `to_m` to metres).
 
     Cone: origin = apex, axis from the apex towards growing radius, half_angle in radians. Plane normal points out
@@ -228,5 +229,6 @@ def face_primitive(face, to_m: float) -> dict:
     return {"type": _NON_ANALYTIC_NAMES.get(kind, "other"), "params": {}}
 
 
-def _scaled(p, to_m: float) -> list[float]:
+def _scaled(p: gp_Pnt, to_m: float) -> list[float]:
+    """[x, y, z] of an OCCT point times ``to_m`` (metres from the shape's millimetres)."""
     return [c * to_m for c in _xyz(p)]

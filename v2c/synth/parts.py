@@ -28,6 +28,7 @@ from build123d import (
     Box,
     Cone,
     Cylinder,
+    Edge,
     GeomType,
     Part,
     Pos,
@@ -62,7 +63,7 @@ def _turn_angle_deg(rng: np.random.Generator, margin_deg: float = 10.0) -> float
     return float(rng.uniform(margin_deg, 90.0 - margin_deg) + 90.0 * rng.integers(0, 4))
 
 
-def _circle_edges_at(part: Part, z: float, radius: float, tol: float = 1e-6):
+def _circle_edges_at(part: Part, z: float, radius: float, tol: float = 1e-6) -> list[Edge]:
     """Circular edges of `part` lying in the plane z with the given radius (mm)."""
     out = []
     for e in part.edges().filter_by(GeomType.CIRCLE):

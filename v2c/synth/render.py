@@ -21,6 +21,8 @@ from v2c.synth.intersect import intersect_primitive, rows_dot
 from v2c.synth.scene import GroundLook, PrintLook, Scene
 
 if TYPE_CHECKING:
+    from numpy.typing import DTypeLike
+
     from v2c.synth.appearance import Appearance
 
 ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
@@ -50,7 +52,7 @@ class Render:
 
 
 def pixel_rays(K: np.ndarray, width: int, height: int, index: np.ndarray | None = None,
-               dtype=np.float64) -> np.ndarray:
+               dtype: DTypeLike = np.float64) -> np.ndarray:
     """Unit ray directions (n, 3) through pixel centres (camera frame), for all pixels in row-major order or for
     the flat pixel indices `index`."""
     if index is None:
@@ -215,8 +217,8 @@ def _shadow_candidates(dirs: np.ndarray, t: np.ndarray, light: np.ndarray, spher
     return (m2 < r * r) | ((b > 0) & (b * b - (m2 - r * r) > 0))
 
 
-def _shade(scene: Scene, ebr, dirs: np.ndarray, t: np.ndarray, normals: np.ndarray, albedo: np.ndarray,
-           specular: float, shininess: float, sphere: tuple[np.ndarray, float], deflection_m: float,
+def _shade(scene: Scene, ebr: rtcore_scene.EmbreeScene, dirs: np.ndarray, t: np.ndarray, normals: np.ndarray,
+           albedo: np.ndarray, specular: float, shininess: float, sphere: tuple[np.ndarray, float], deflection_m: float,
            cfg: RenderConfig) -> np.ndarray:
     """Linear RGB (n, 3) float32 of surface points t * dirs (dirs (n, 3) float32, t metres): Lambert +
     Blinn-Phong; the key light's shadows are cast by the part.

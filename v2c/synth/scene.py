@@ -212,7 +212,11 @@ def sample_scene(rng: np.random.Generator, bbox_lo_mm: np.ndarray, bbox_hi_mm: n
     key_el = np.deg2rad(rng.uniform(*cfg.key_light_elevation_deg))
     key_az = rng.uniform(0, 2 * np.pi)
     key_dir = np.array([np.cos(key_el) * np.cos(key_az), np.cos(key_el) * np.sin(key_az), np.sin(key_el)])
-    tint = lambda: np.clip(1.0 + rng.normal(0, 0.06, 3), 0.8, 1.2)
+
+    def tint() -> np.ndarray:
+        """A light's RGB tint: 1 + a normal draw (sigma 0.06) per channel, clipped to [0.8, 1.2]."""
+        return np.clip(1.0 + rng.normal(0, 0.06, 3), 0.8, 1.2)
+
     lights = [Light(rot @ key_dir, tint() * rng.uniform(*cfg.key_intensity), True)]
     fill_dir = -key_dir * np.array([1, 1, -1]) + rng.normal(0, 0.3, 3)
     fill_dir[2] = abs(fill_dir[2]) + 0.2
