@@ -67,7 +67,7 @@ def _face_of_instances(seg_inst: np.ndarray, faces: np.ndarray) -> dict[int, int
 
 def scan_metrics(scan, seg, res) -> dict[str, Any]:
     """Per-scan geometry metrics of one FitResult against the scan's ground truth (see module docstring)."""
-    from v2c.fit.points import backproject
+    from v2c.camera import backproject
 
     gt = scan.gt
     size = float(gt.meta["part_size_m"])
