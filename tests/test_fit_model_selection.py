@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from v2c.camera import backproject
 from v2c.fit import fit_scan
 from v2c.fit.config import FitConfig
-from v2c.camera import backproject
 from v2c.geometry.points import estimate_part_size, instance_points
 from v2c.geometry.selection import curvature_support, fit_instance, supported
 from v2c.labels import label_of
