@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from v2c.fit.config import FitConfig
-from v2c.fit.ransac import ransac_fit
+from v2c.geometry import ransac_fit
 from v2c.primitives import Cylinder, Plane
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize._numdiff import approx_derivative
 
-from v2c.fit.align import Layout, Term, assemble, recon_jacobian_blocks, recon_residuals
+from v2c.geometry.residuals import Layout, Term, assemble, recon_jacobian_blocks, recon_residuals
 from v2c.primitives import Cone, Cylinder, Plane, Sphere, Torus
 from v2c.primitives.directions import rotation_exp, unit
 

@@ -2,7 +2,7 @@
 
 Patches are rendered as depth images (640x480, f = 600 px) and given the synthetic `sensor` profile's depth noise,
 sigma = 0.0015 z^2 m (`synth.noise.SensorNoise`), so points and depth-gradient normals come from
-`fit.points.instance_points` as in a scan; labelled patches go through the whole `fit_scan` (the check of a
+`geometry.points.instance_points` as in a scan; labelled patches go through the whole `fit_scan` (the check of a
 label runs after the part frame's axis test). Ground truth: the rendered primitive.
 """
 
@@ -14,10 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from v2c.camera import backproject
 from v2c.fit import fit_scan
 from v2c.fit.config import FitConfig
-from v2c.fit.points import backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import curvature_support, fit_instance, supported
+from v2c.geometry.points import estimate_part_size, instance_points
+from v2c.geometry.selection import curvature_support, fit_instance, supported
 from v2c.labels import label_of
 from v2c.primitives import Cylinder, Plane, Primitive, Sphere
 from v2c.primitives.directions import unit
@@ -70,7 +71,7 @@ def noisy_patch(depth: np.ndarray, seed: int, coeff: float = SIGMA_COEFF) -> tup
     pts = backproject(noisy, K)
     inst = valid.astype(np.int32)
     cfg = FitConfig()
-    ip = instance_points(pts, valid, inst, np.array([1]), cfg.normal_window_px, cfg.normal_sobel_px)[1]
+    ip = instance_points(pts, valid, inst, np.array([1]), cfg)[1]
     return ip.points, ip.normals, estimate_part_size(ip.points, cfg.scale_trim)
 
 

@@ -37,3 +37,27 @@ def test_named_missing_weights_are_an_error(tiny_scan_dir: Path, tmp_path: Path)
 def test_unknown_method_is_rejected(tiny_scan_dir: Path) -> None:
     with pytest.raises(ValueError, match="unknown segmentation method"):
         segment(load_scan(tiny_scan_dir), "magic")
+
+
+def test_default_method_is_learned() -> None:
+    import inspect
+
+    assert inspect.signature(segment).parameters["method"].default == "learned"
+
+
+def test_refine_and_ransac_settings_reach_the_refining_segmenter(tiny_scan_dir: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    from v2c.fit import FitConfig
+    from v2c.segment import geometric
+    from v2c.segment.refine import RefineConfig
+
+    seen: dict[str, dict] = {}
+    monkeypatch.setattr(learned, "weights_available", lambda path=None: True)
+    monkeypatch.setattr(learned, "segment_learned", lambda scan, **kw: seen.setdefault("learned", kw))
+    monkeypatch.setattr(geometric, "segment_geometric", lambda scan, **kw: seen.setdefault("geometric", kw))
+    scan = load_scan(tiny_scan_dir)
+    refine, fit = RefineConfig(merge=False), FitConfig(d_inlier=0.02)
+    segment(scan, "learned", refine=refine, ransac=fit)
+    assert seen["learned"]["refine"] is refine and seen["learned"]["ransac"] is fit
+    segment(scan, "geometric", refine=refine, ransac=fit)  # no geometric check there: nothing to hand down
+    assert seen["geometric"] == {}

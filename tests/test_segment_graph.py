@@ -58,7 +58,8 @@ def test_diagonal_boundary_is_simplified_within_tolerance() -> None:
     g = build_edge_graph(m, simplify_px=1.0)
     e = next(e for e in g.edges if e.instances == (1, 2))
     assert len(e.polyline) <= 3  # a staircase within 1 px of a straight line
-    assert np.allclose(sorted(map(tuple, g.vertices[[e.v0, e.v1]].tolist())), [(0.5, -0.5), (39.5, 38.5)])  # where u = v + 1 meets the border
+    # where u = v + 1 meets the border
+    assert np.allclose(sorted(map(tuple, g.vertices[[e.v0, e.v1]].tolist())), [(0.5, -0.5), (39.5, 38.5)])
 
 
 def test_douglas_peucker_keeps_corner() -> None:

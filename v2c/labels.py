@@ -19,7 +19,9 @@ NUM_CLASSES = 18
 AXIS_ALIGN_TOL_DEG = 1.5
 
 
-class PrimitiveType(str, Enum):
+class PrimitiveType(str, Enum):  # noqa: UP042 - StrEnum would change str() of a member (its value, not its name)
+    """The five analytic surface types; the value is the name used in primitives.json and labels."""
+
     PLANE = "plane"
     CYLINDER = "cylinder"
     CONE = "cone"
@@ -27,7 +29,9 @@ class PrimitiveType(str, Enum):
     SPHERE = "sphere"
 
 
-class AxisClass(str, Enum):
+class AxisClass(str, Enum):  # noqa: UP042 - as PrimitiveType
+    """Axis class of a primitive: aligned with the part's X, Y or Z axis, or U (unaligned)."""
+
     X = "X"
     Y = "Y"
     Z = "Z"

@@ -10,7 +10,8 @@ def rdp_indices(points: np.ndarray, tol: float, clamp: bool = False) -> np.ndarr
     pixels for image polylines, metres or millimetres for 3D ones); the first and last are always kept.
 
     Distances are to the chord's line, or with ``clamp`` to the chord as a segment (so a polyline that doubles
-    back beyond an end keeps its turning point: the STEP exporter's curve fitting needs that). The loop runs over kept segments; each step is vectorised over the points between them.
+    back beyond an end keeps its turning point: the STEP exporter's curve fitting needs that). The loop runs over
+    kept segments; each step is vectorised over the points between them.
     """
     points = np.asarray(points, float)
     n = len(points)

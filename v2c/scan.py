@@ -22,20 +22,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from v2c.camera import (  # noqa: F401 - re-exported: the loader's public names
-    BOP_DEFAULT_DEPTH_SCALE_MM,
-    DEFAULT_DEPTH_SCALE_M,
-    Camera,
-    check_intrinsics_plausible,
-    load_camera,
-    parse_camera,
-)
+from v2c.camera import DEFAULT_DEPTH_SCALE_M, Camera, backproject
 from v2c.errors import ScanError
 from v2c.scan_checks import (
     ScanLimits,
     check_depth_surface,
     check_depth_values,
+    check_intrinsics_plausible,
     current_limits,
+    load_camera,
+    parse_camera,
     read_image_bytes,
     read_json,
     read_npy,
@@ -108,26 +104,32 @@ class Scan:
 
     @property
     def height(self) -> int:
+        """Image height (pixels)."""
         return int(self.depth.shape[0])
 
     @property
     def width(self) -> int:
+        """Image width (pixels)."""
         return int(self.depth.shape[1])
 
     @property
     def fx(self) -> float:
+        """Focal length along u (pixels), K[0, 0]."""
         return float(self.K[0, 0])
 
     @property
     def fy(self) -> float:
+        """Focal length along v (pixels), K[1, 1]."""
         return float(self.K[1, 1])
 
     @property
     def cx(self) -> float:
+        """Principal point u (pixels), K[0, 2]."""
         return float(self.K[0, 2])
 
     @property
     def cy(self) -> float:
+        """Principal point v (pixels), K[1, 2]."""
         return float(self.K[1, 2])
 
     def roi_mask(self) -> np.ndarray:
@@ -155,34 +157,7 @@ class Scan:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# geometry
-
-
-def backproject(depth: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Back-project a depth map to camera-frame points.
-
-    depth: (H, W) z-depth in metres (0 = no reading gives the point (0, 0, 0)); K: (3, 3) intrinsics in pixels,
-    pixel centres at integer (u, v). Returns (H, W, 3) float64 points (x right, y down, z forward), metres.
-    Handles a skew term K[0, 1].
-    """
-    depth = np.asarray(depth, dtype=np.float64)
-    K = np.asarray(K, dtype=np.float64)
-    if depth.ndim != 2:
-        raise ValueError(f"depth must be (H, W), got shape {depth.shape}")
-    if K.shape != (3, 3):
-        raise ValueError(f"K must be 3x3, got shape {K.shape}")
-    h, w = depth.shape
-    fx, s, cx = K[0]
-    fy, cy = K[1, 1], K[1, 2]
-    v = np.arange(h, dtype=np.float64)[:, None]
-    u = np.arange(w, dtype=np.float64)[None, :]
-    yn = (v - cy) / fy  # (H, 1)
-    xn = (u - cx - s * yn) / fx  # (H, W) with skew, (1, W) without
-    out = np.empty((h, w, 3), dtype=np.float64)
-    out[..., 0] = xn * depth
-    out[..., 1] = yn * depth
-    out[..., 2] = depth
-    return out
+# region of interest
 
 
 def roi_to_mask(roi: tuple[int, int, int, int] | None, height: int, width: int) -> np.ndarray:

@@ -73,7 +73,7 @@ def _face_of_instances(seg_inst: np.ndarray, faces: np.ndarray) -> dict[int, int
 def scan_metrics(scan: Scan, seg: Segmentation, res: FitResult) -> dict[str, Any]:
     """Per-scan geometry metrics of one FitResult (``res``, fitted on ``seg``) against the scan's ground truth (see
     module docstring): lengths in camera-frame metres, divided by the part size where the name says so."""
-    from v2c.fit.points import backproject
+    from v2c.camera import backproject
 
     gt = scan.gt
     size = float(gt.meta["part_size_m"])

@@ -1,16 +1,17 @@
 """Fits with a known axis direction (the shared frame's), used to test and apply axis labels.
 
-Closed-form starts, then the robust refinement of `ransac.refine_primitive` with the axis held fixed:
+Closed-form starts, then the robust refinement of `v2c.geometry.ransac.refine_primitive` with the axis held fixed:
 - plane: offset = median of n . x.
 - cylinder: the axis line is the least-squares meeting point of the normal lines projected along the axis;
   radius = median distance to it.
 - cone: half angle from the median normal-axis angle, or (by points) from the slope of the radius over the height
   around a circle-fitted axis line; axis line as for the cylinder; apex height from the median of h - rho / tan(a)
-  (axis flipped if the radius shrinks along it). A refit wider than max_radius at its points (`ransac.cone_ok`, a
-  funnel through a small patch) is taken only when no other start gives a plausible cone.
+  (axis flipped if the radius shrinks along it). A refit wider than max_radius at its points
+  (`geometry.ransac.cone_ok`, a funnel through a small patch) is taken only when no other start gives a plausible
+  cone.
 - torus: axis line as for the cylinder; the tube's cross-section is a circle in the (rho, h) half-plane
   (algebraic circle fit) giving major radius, height of the centre and minor radius; also the free fit's torus
-  turned onto the axis. The refinement keeps the radii within `ransac.torus_limits`.
+  turned onto the axis. The refinement keeps the radii within `geometry.ransac.torus_limits`.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from v2c.fit.config import FitConfig
-from v2c.fit.ransac import circle_2d, cone_ok, refine_primitive, torus_msac
+from v2c.geometry.ransac import circle_2d, cone_ok, refine_primitive, torus_msac
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.directions import tangent_basis
 

@@ -24,9 +24,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 
-from v2c.fit.align import Layout, Term, assemble, recon_jacobian_blocks, recon_residuals, sparsity
+from v2c.camera import pixel_rays_closed_form
 from v2c.fit.config import FitConfig
-from v2c.fit.points import pixel_rays
+from v2c.geometry.residuals import Layout, Term, assemble, recon_jacobian_blocks, recon_residuals, sparsity
 from v2c.primitives import Primitive
 from v2c.segment.graph import EdgeGraph
 
@@ -62,7 +62,7 @@ def boundary_points(graph: EdgeGraph, term_of: dict[int, int], K: np.ndarray, sp
         cands += [tuple(sorted(term_of[i] for i in e.instances))] * len(pts)
         vert.append(np.full(len(pts), -1))
     u = np.concatenate(uv)
-    return Lifted(u, pixel_rays(u, K), cands, np.concatenate(vert), np.zeros(len(u)))
+    return Lifted(u, pixel_rays_closed_form(u, K), cands, np.concatenate(vert), np.zeros(len(u)))
 
 
 def _pairs(cands: Sequence[tuple[int, ...]]) -> tuple[np.ndarray, np.ndarray]:

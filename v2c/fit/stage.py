@@ -11,23 +11,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from v2c.fit.align import AXIS_NAMES, Term, align_fit, frame_from_axes, init_frame
+from v2c.camera import backproject
+from v2c.fit.align import AXIS_NAMES, align_fit, frame_from_axes, init_frame
 from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
-from v2c.fit.points import InstancePoints, backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import (
-    RansacFit,
-    cone_ok,
-    fit_instance,
-    inlier_mask,
-    plausible,
-    ransac_fit,
-    select_type,
-    supported,
-    torus_ok,
-)
 from v2c.fit.result import ABLATIONS, FitResult
+from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points
+from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, torus_ok
+from v2c.geometry.residuals import Term
+from v2c.geometry.selection import fit_instance, select_type, supported
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive
 from v2c.primitives.directions import unit
@@ -165,13 +158,13 @@ def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale:
 
 def _planes_where_unsupported(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[int, int | None],
                               frame: np.ndarray, use_frame: bool, scale: float, config: FitConfig) -> None:
-    """Curved labels their patch does not support (`ransac.supported`: a radius beyond support_extent_ratio
-    patch extents, or a sagitta under the sensor noise), or whose fit does not beat a plane's by GRIC with the
-    sensor's noise model (`ransac.select_type`: a loose RANSAC inlier band lets a bent fit through), become
-    planes, in place. Checked after the axis test, so
-    a true cylinder whose free RANSAC axis was off is judged with the part frame's axis. The plane joins the
-    frame only when its normal lies within snap_deg of a frame axis (the label's axis class named the
-    cylinder's axis, not a plane normal). Certain labels (score >= support_label_certain: the oracle's) stay."""
+    """Curved labels their patch does not support (`geometry.selection.supported`: a radius beyond
+    support_extent_ratio patch extents, or a sagitta under the sensor noise), or whose fit does not beat a plane's
+    by GRIC with the sensor's noise model (`geometry.selection.select_type`: a loose RANSAC inlier band lets a bent
+    fit through), become planes, in place. Checked after the axis test, so a true cylinder whose free RANSAC axis
+    was off is judged with the part frame's axis. The plane joins the frame only when its normal lies within
+    snap_deg of a frame axis (the label's axis class named the cylinder's axis, not a plane normal). Certain
+    labels (score >= support_label_certain: the oracle's) stay."""
     for i in sorted(fits.prims):  # loop over instances
         p, ip = fits.prims[i], ipts[i]
         if isinstance(p, Plane) or i in fits.searched or fits.scores.get(i, 0.0) >= config.support_label_certain:
@@ -229,8 +222,8 @@ def _keep_plausible(new: list[Primitive], old: list[Primitive], terms: list[Term
                     scale: float, config: FitConfig) -> list[Primitive]:
     """A joint solve has no bounds: a primitive it drove out of range (cone half angle beyond 90 degrees or a cone
     wider than max_radius at its points, negative radius, a torus outside its data-derived radius bounds
-    `ransac.torus_limits`, a curvature its points no longer support, `ransac.supported`) goes back to its value
-    before the solve, its axis re-set from the current frame when aligned."""
+    `geometry.ransac.torus_limits`, a curvature its points no longer support, `geometry.selection.supported`) goes
+    back to its value before the solve, its axis re-set from the current frame when aligned."""
     out = []
     for p, q, tm in zip(new, old, terms, strict=True):
         if (p.is_finite() and plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2)
@@ -277,7 +270,7 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     scale = estimate_part_size(pts[valid], config.scale_trim)
     counts = np.bincount(inst[valid], minlength=int(inst.max()) + 1)
     ids = np.flatnonzero(counts >= config.min_instance_px)
-    ipts = instance_points(pts, valid, inst, ids[ids > 0], config.normal_window_px, config.normal_sobel_px)
+    ipts = instance_points(pts, valid, inst, ids[ids > 0], config)
     t = perf_counter()
     timings["normals"] = t - t_start
 

@@ -37,6 +37,7 @@ class Cone(Primitive):
 
     @property
     def axis_vector(self) -> np.ndarray:
+        """The unit axis (camera frame), pointing from the apex into the nappe."""
         return self.axis
 
     def _split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -48,31 +49,38 @@ class Cone(Primitive):
         return p, h, t, m, -h * s + rho * c
 
     def signed_distance(self, x: np.ndarray) -> np.ndarray:
+        """Signed distance (metres) of points ``x`` (N, 3) to the nappe, or to the apex behind it."""
         p, _, t, _, d = self._split(x)
         return np.where(t >= 0, d, np.linalg.norm(p, axis=1))
 
     def normal(self, x: np.ndarray) -> np.ndarray:
+        """Unit outward normal (N, 3) of the nappe (the direction from the apex for points behind it)."""
         p, _, t, m, _ = self._split(x)
         return np.where((t >= 0)[:, None], m, unit(p))
 
     def closest_point(self, x: np.ndarray) -> np.ndarray:
+        """Closest point (N, 3) on the nappe, or the apex for points behind it (metres)."""
         x = as_points(x)
         _, _, t, m, d = self._split(x)
         return np.where((t >= 0)[:, None], x - d[:, None] * m, self.origin)
 
     def uv(self, x: np.ndarray) -> np.ndarray:
+        """(N, 2): angle around the axis (radians, from its first tangent vector), height from the apex (metres)."""
         p = as_points(x) - self.origin
         h, _, e = radial_frame(p, self.axis)
         t1, t2 = tangent_basis(self.axis)
         return np.stack([np.arctan2(e @ t2, e @ t1), h], axis=1)
 
     def from_local(self, x: np.ndarray, axis: np.ndarray | None) -> Cone:
+        """The cone with its apex shifted by [p1, p2, p3] (metres, reference tangent basis and axis), half
+        angle by [d_half_angle] (radians), and unit ``axis`` (None keeps it)."""
         t1, t2 = self.local_basis()
         a = self.axis if axis is None else axis
         apex = self.origin + x[0] * t1 + x[1] * t2 + x[2] * self.axis
         return Cone(apex, a, self.half_angle + float(x[3]))
 
     def local_jacobian(self, x: np.ndarray, ref: Primitive) -> np.ndarray:
+        """(N, 4) derivatives of the signed distance w.r.t. [p1, p2, p3, d_half_angle] of ``ref.from_local``."""
         t1, t2 = ref.local_basis()
         p, _, t, m, _ = self._split(x)
         n = np.where((t >= 0)[:, None], m, unit(p))
@@ -80,8 +88,10 @@ class Cone(Primitive):
         return np.stack([-(n @ t1), -(n @ t2), -(n @ ref.axis_vector), da], axis=1)
 
     def params(self) -> dict[str, Any]:
+        """primitives.json ``params``: origin (apex), axis, half_angle."""
         return {"origin": self.origin.tolist(), "axis": self.axis.tolist(), "half_angle": self.half_angle}
 
     @classmethod
     def from_params(cls, p: dict[str, Any]) -> Cone:
+        """A cone from primitives.json ``params`` (origin = apex, axis, half_angle)."""
         return cls(p["origin"], p["axis"], p["half_angle"])

@@ -5,8 +5,14 @@ from __future__ import annotations
 
 import importlib
 import warnings
+from typing import TYPE_CHECKING, Any
 
 from v2c.segment.types import Segmentation
+
+if TYPE_CHECKING:
+    from v2c.geometry.config import RansacConfig
+    from v2c.scan import Scan
+    from v2c.segment.refine import RefineConfig
 
 #: method name -> (module, function) of each segmenter; modules are imported on first use.
 SEGMENTERS: dict[str, tuple[str, str]] = {
@@ -14,10 +20,22 @@ SEGMENTERS: dict[str, tuple[str, str]] = {
     "learned": ("v2c.segment.learned", "segment_learned"),
     "geometric": ("v2c.segment.geometric", "segment_geometric"),
 }
+#: The segmenters that check their instances geometrically (`v2c.segment.refine`) and so take ``refine`` and
+#: ``ransac``.
+REFINING = ("learned",)
+#: The segmentation every entry point uses unless told otherwise.
+DEFAULT_METHOD = "learned"
 
 
-def segment(scan, method: str = "oracle", **kwargs) -> Segmentation:
-    """Segment ``scan`` with the named method ("oracle", "learned", "geometric").
+def segment(scan: Scan, method: str = DEFAULT_METHOD, *, refine: RefineConfig | None = None,
+            ransac: RansacConfig | None = None, **kwargs: Any) -> Segmentation:
+    """Segment ``scan`` with the named method ("learned", "geometric", "oracle").
+
+    refine: the geometric check of the instances (`v2c.segment.refine.RefineConfig`); ransac: the instance points,
+    RANSAC and type-selection settings it fits with (`v2c.geometry.RansacConfig`; a `v2c.fit.FitConfig` is one,
+    so the fit stage's settings can be handed down). Both reach the segmenters that refine (`REFINING`); None
+    keeps the segmenter's own (the defaults). Other keyword arguments go to the segmenter (``weights``,
+    ``config``).
 
     "learned" with no weights named and none shipped falls back to the geometric
     segmenter with a warning; the returned `Segmentation.method` says which one ran.
@@ -29,6 +47,8 @@ def segment(scan, method: str = "oracle", **kwargs) -> Segmentation:
         kwargs = {k: v for k, v in kwargs.items() if k not in ("config", "weights")}
     if method not in SEGMENTERS:
         raise ValueError(f"unknown segmentation method {method!r}; choose from {', '.join(SEGMENTERS)}")
+    if method in REFINING:
+        kwargs = kwargs | {"refine": refine, "ransac": ransac}
     mod_name, fn_name = SEGMENTERS[method]
     try:
         mod = importlib.import_module(mod_name)
@@ -42,13 +62,14 @@ def segment(scan, method: str = "oracle", **kwargs) -> Segmentation:
     return fn(scan, **kwargs)
 
 
-def _learned_weights_found(kwargs: dict) -> bool:
+def _learned_weights_found(kwargs: dict[str, Any]) -> bool:
     """True when the learned segmenter has a weights file: ``weights=``, ``config.weights`` or the shipped one."""
     from v2c.segment.learned import weights_available
 
-    given = kwargs.get("weights") or getattr(kwargs.get("config"), "weights", None)
+    config = kwargs.get("config")
+    given = kwargs.get("weights") or (config.weights if config is not None else None)
     # Weights named explicitly are never swapped for the fallback: a wrong path is an error the user must see.
     return given is not None or weights_available()
 
 
-__all__ = ["SEGMENTERS", "Segmentation", "segment"]
+__all__ = ["DEFAULT_METHOD", "REFINING", "SEGMENTERS", "Segmentation", "segment"]

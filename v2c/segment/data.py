@@ -30,7 +30,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from v2c.scan import Scan, backproject, load_scan
+from v2c.camera import backproject
+from v2c.scan import Scan, load_scan
 
 NUM_INPUTS = 9
 MIRROR_SIGN_CHANNEL = 4  # the "left" normal component: the only channel a horizontal mirror negates
@@ -280,7 +281,7 @@ def build_cache(scans: list[Path], cache_dir: str | Path, cfg: FeatureConfig = F
 class CachedScans:
     """Random crops from a cache written by ``build_cache`` (numpy; the training loop makes tensors)."""
 
-    def __init__(self, cache_dir: str | Path):
+    def __init__(self, cache_dir: str | Path) -> None:
         cache_dir = Path(cache_dir)
         idx = json.loads((cache_dir / "index.json").read_text())
         self.entries = idx["entries"]

@@ -22,15 +22,18 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from v2c.camera import backproject
 from v2c.labels import AxisClass, PrimitiveType, axis_class, label_of
-from v2c.scan import Scan, backproject
-from v2c.segment.data import FeatureConfig, estimate_ground, estimate_normals, gravity_frame
+from v2c.scan import Scan
+from v2c.segment.data import FeatureConfig, Ground, estimate_ground, estimate_normals, gravity_frame
 from v2c.segment.instances import _fill, _relabel_raster
 from v2c.segment.types import Segmentation
 
 
 @dataclass(frozen=True)
 class GeometricConfig:
+    """Thresholds of the geometric segmenter (module docstring; units in the comments)."""
+
     features: FeatureConfig = field(default_factory=lambda: FeatureConfig(smooth_sigma_px=2.0, diff_step_px=2))
     min_height_m: float = 0.003  # without a mask: part = points this far above the ground plane (metres)
     depth_jump_rel: float = 0.015  # relative depth jump between 4-neighbours that marks a step edge
@@ -279,7 +282,7 @@ def part_frame(fits: list[_Fit], view_frame: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------------------------
 
 
-def part_region(scan: Scan, cfg: GeometricConfig) -> tuple[np.ndarray, object]:
+def part_region(scan: Scan, cfg: GeometricConfig) -> tuple[np.ndarray, Ground | None]:
     """(part pixels (H, W) bool, ground plane or None)."""
     ground = estimate_ground(scan.depth, scan.K, scan.mask, cfg.features)
     valid = scan.depth > 0

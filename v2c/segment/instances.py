@@ -48,6 +48,8 @@ from v2c.segment.types import Segmentation
 
 @dataclass(frozen=True)
 class InstanceConfig:
+    """Thresholds of instance extraction from the network's boundary and label maps (units in the comments)."""
+
     boundary_threshold: float = 0.25  # boundary probability above which a pixel is on a face boundary
     core_erode_px: int = 0  # core pixels are eroded by this much before the components are taken (pixels)
     min_area_px: int = 50  # markers smaller than this are dissolved into their neighbours (pixels)

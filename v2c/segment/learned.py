@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from v2c.geometry.config import RansacConfig
 from v2c.scan import Scan
 from v2c.segment.data import MIRROR_SIGN_CHANNEL, FeatureConfig, scan_features
 from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
@@ -28,6 +29,8 @@ DEFAULT_WEIGHTS = WEIGHTS_DIR / "unet.pt"
 
 @dataclass(frozen=True)
 class LearnedConfig:
+    """Settings of the learned segmenter: weights, inference, instance extraction and the geometric check."""
+
     weights: Path | None = None  # None = DEFAULT_WEIGHTS
     bf16: bool | None = None  # None = where the CPU supports it
     features: FeatureConfig = field(default_factory=FeatureConfig)
@@ -103,15 +106,19 @@ def _box(scan: Scan, context_px: int, shape: tuple[int, int]) -> tuple[int, int,
             max(int(xs.min()) - context_px, 0), min(int(xs.max()) + context_px + 1, w))
 
 
-def segment_learned(scan: Scan, weights: str | Path | None = None, config: LearnedConfig | None = None
-                    ) -> Segmentation:
+def segment_learned(scan: Scan, weights: str | Path | None = None, config: LearnedConfig | None = None, *,
+                    refine: RefineConfig | None = None, ransac: RansacConfig | None = None) -> Segmentation:
     """Segment a scan with the U-Net. Pixels outside mask.png / the ROI (when given) stay background.
 
     weights: a weights file (default the shipped one). Raises FileNotFoundError when it does not exist.
+    refine: replaces ``config.refine`` when given; ransac: the instance points, RANSAC and type-selection
+    settings of the geometric check (`refine.refine_instances`; default `RansacConfig()`).
     """
     cfg = config or LearnedConfig()
     if weights is not None:
         cfg = replace(cfg, weights=Path(weights))
+    if refine is not None:
+        cfg = replace(cfg, refine=refine)
     probs, bnd, feat = predict_with_features(scan, cfg)
     region = None
     if cfg.ground_region and scan.mask is None and scan.roi is not None:
@@ -119,7 +126,7 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
 
         region = part_region(scan, GeometricConfig())[0]
     seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat, part=region)
-    return refine_instances(seg, scan.depth, scan.K, probs, cfg.refine, normals=feat[3:6])
+    return refine_instances(seg, scan.depth, scan.K, probs, cfg.refine, normals=feat[3:6], ransac=ransac)
 
 
 def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig,

@@ -20,6 +20,8 @@ from v2c.segment.data import NUM_INPUTS
 
 @dataclass(frozen=True)
 class NetConfig:
+    """U-Net architecture: input channels, channels per level and output classes."""
+
     in_channels: int = NUM_INPUTS
     widths: tuple[int, ...] = (16, 32, 64, 128, 128)  # channels per level; level k works at 1 / 2^k resolution
     num_classes: int = NUM_CLASSES
@@ -35,7 +37,7 @@ def _block(cin: int, cout: int) -> nn.Sequential:
 class UNet(nn.Module):
     """U-Net: encoder of ``len(widths)`` levels (max-pool 2x between), bilinear-upsampling decoder, two heads."""
 
-    def __init__(self, cfg: NetConfig = NetConfig()):
+    def __init__(self, cfg: NetConfig = NetConfig()) -> None:
         super().__init__()
         self.cfg = cfg
         w = cfg.widths
@@ -46,6 +48,7 @@ class UNet(nn.Module):
 
     @property
     def stride(self) -> int:
+        """Total downsampling of the encoder (pixels); `forward` pads the input to multiples of it."""
         return 2 ** (len(self.cfg.widths) - 1)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

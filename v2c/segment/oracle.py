@@ -6,10 +6,11 @@ import numpy as np
 
 from v2c.errors import ScanError
 from v2c.labels import IGNORE
+from v2c.scan import Scan
 from v2c.segment.types import Segmentation
 
 
-def segment_oracle(scan) -> Segmentation:
+def segment_oracle(scan: Scan) -> Segmentation:
     """Instances = ground-truth faces relabelled 1..N consecutively (in increasing faces.png value); faces labelled
     255 (non-analytic) are dropped to 0. Each instance's label is the most frequent labels.png value over its pixels;
     scores are 1. Pixels outside ``scan.mask`` (when given) stay as in faces.png: the gt faces are the part.

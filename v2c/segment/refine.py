@@ -26,9 +26,11 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from v2c.fit.config import FitConfig
-from v2c.fit.points import backproject, estimate_part_size, instance_points
-from v2c.fit.ransac import RansacFit, ransac_fit, select_type, supported
+from v2c.camera import backproject
+from v2c.geometry.config import RansacConfig
+from v2c.geometry.points import estimate_part_size, instance_points
+from v2c.geometry.ransac import RansacFit, ransac_fit
+from v2c.geometry.selection import select_type, supported
 from v2c.groups import groups_sharing_keys
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
 from v2c.primitives import Cylinder, Plane
@@ -72,7 +74,7 @@ class RefineConfig:
     flat_sigma: float = 1.5  # ... robust residual sigma (1.4826 MAD) of their plane within this many sensor sigmas
     # (ratio) ...
     flat_min_px: int = 30  # ... and at least this many valid pixels (pixels)
-    noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): FitConfig's, the
+    noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
     # synthetic `sensor` profile's D4xx model
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
     sample_points: int = 800  # points scoring them (count)
@@ -88,23 +90,29 @@ def _is_plane(labels: np.ndarray) -> np.ndarray:
     return TYPE_OF_LABEL[np.asarray(labels, np.int64)] == _PLANE
 
 
-def scan_geometry(depth: np.ndarray, K: np.ndarray, inst: np.ndarray) -> tuple[np.ndarray, float]:
-    """(H, W, 3) camera-frame points and the part size (metres) from the valid pixels of the instances: what both
-    steps measure distances in. Neither step moves a pixel into or out of the part, so one computation serves both."""
+def scan_geometry(depth: np.ndarray, K: np.ndarray, inst: np.ndarray, ransac: RansacConfig | None = None
+                  ) -> tuple[np.ndarray, float]:
+    """(H, W, 3) camera-frame points and the part size (metres; `estimate_part_size` with ``ransac.scale_trim``)
+    from the valid pixels of the instances: what every step measures distances in. No step moves a pixel into or
+    out of the part, so one computation serves them all."""
+    ransac = ransac or RansacConfig()
     pts = backproject(np.asarray(depth, float), np.asarray(K, float))
-    return pts, estimate_part_size(pts[(np.asarray(depth) > 0) & (np.asarray(inst) > 0)])
+    return pts, estimate_part_size(pts[(np.asarray(depth) > 0) & (np.asarray(inst) > 0)], ransac.scale_trim)
 
 
 def refine_instances(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
-                     cfg: RefineConfig = RefineConfig(), normals: np.ndarray | None = None) -> Segmentation:
+                     cfg: RefineConfig = RefineConfig(), normals: np.ndarray | None = None,
+                     ransac: RansacConfig | None = None) -> Segmentation:
     """`split_plane_outliers`, `split_coaxial_steps`, then `merge_coplanar`, on one point map (normals: see
-    `split_plane_outliers`)."""
+    `split_plane_outliers`; ransac: the instance points, RANSAC and type-selection settings of the cylinder and
+    curvature tests, default `RansacConfig()`; a `v2c.fit.FitConfig` is one)."""
     if not cfg.enabled:
         return seg
-    geometry = scan_geometry(depth, K, seg.instances)
+    ransac = ransac or RansacConfig()
+    geometry = scan_geometry(depth, K, seg.instances, ransac)
     seg = split_plane_outliers(seg, depth, K, probs, cfg, geometry, normals)
-    seg = split_coaxial_steps(seg, depth, K, cfg, geometry)
-    return merge_coplanar(seg, depth, K, cfg, geometry)
+    seg = split_coaxial_steps(seg, depth, K, cfg, geometry, ransac)
+    return merge_coplanar(seg, depth, K, cfg, geometry, ransac)
 
 
 def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.Generator
@@ -229,16 +237,18 @@ def _coaxial_step(x: np.ndarray, side: np.ndarray, cyl: Cylinder, size: float, c
 
 
 def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
-                        geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
+                        geometry: tuple[np.ndarray, float] | None = None,
+                        ransac: RansacConfig | None = None) -> Segmentation:
     """``seg`` with each cylinder instance split where its radius steps (module docstring); the new instance keeps
-    the label and score. depth: (H, W) metres (0 = no reading); geometry: `scan_geometry` when already computed."""
+    the label and score. depth: (H, W) metres (0 = no reading); geometry: `scan_geometry` when already computed;
+    ransac: the instance points and cylinder RANSAC settings (default `RansacConfig()`)."""
     inst = np.asarray(seg.instances).astype(np.int32).copy()
     valid = (np.asarray(depth) > 0) & (inst > 0)
     if not (cfg.enabled and cfg.coax) or not valid.any():
         return seg
-    pts, size = geometry or scan_geometry(depth, K, inst)
+    ransac = ransac or RansacConfig()
+    pts, size = geometry or scan_geometry(depth, K, inst, ransac)
     labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores))
-    fit_cfg = FitConfig()
     rng = np.random.default_rng(cfg.seed)
     todo = [(i, 0) for i in range(1, len(labels)) if TYPE_OF_LABEL[int(labels[i])] == _CYLINDER]
     changed = False
@@ -246,11 +256,10 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
         i, depth_level = todo.pop(0)
         if depth_level >= cfg.coax_max_splits:
             continue
-        ip = instance_points(pts, valid, inst, np.array([i]), fit_cfg.normal_window_px,
-                             fit_cfg.normal_sobel_px).get(i)
+        ip = instance_points(pts, valid, inst, np.array([i]), ransac).get(i)
         if ip is None or len(ip.points) < cfg.coax_min_px:
             continue
-        got = ransac_fit("cylinder", ip.points, ip.normals, size, fit_cfg, rng)
+        got = ransac_fit("cylinder", ip.points, ip.normals, size, ransac, rng)
         if got is None:
             continue
         cyl = got.primitive
@@ -286,19 +295,19 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
 
 
 def _flat(i: int, x: np.ndarray, nrm: np.ndarray, off: float, labels: np.ndarray, size: float, cfg: RefineConfig,
-          rng: np.random.Generator, normals: np.ndarray) -> bool:
+          rng: np.random.Generator, normals: np.ndarray, ransac: RansacConfig) -> bool:
     """True when instance ``i`` (points ``x``, metres; its plane n.x = off), whose label is not a plane, is flat:
     its plane explains it within flat_sigma sensor sigmas (robust residual sigma), and a fit of its label's type
-    does not earn its curvature (`fit.ransac.supported` and GRIC against the plane, with the sensor's noise
-    model; ``normals`` (N, 3) the points' depth-gradient normals): a true shallow cone or a wide fillet keeps
-    its own face."""
+    does not earn its curvature (`geometry.selection.supported` and GRIC against the plane, with the sensor's
+    noise model cfg.noise_sigma_coeff and the other settings of ``ransac``; ``normals`` (N, 3) the points'
+    depth-gradient normals): a true shallow cone or a wide fillet keeps its own face."""
     sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
     if 1.4826 * np.median(np.abs(x @ nrm - off)) > cfg.flat_sigma * sigma:
         return False
     ptype = TYPE_NAMES[int(TYPE_OF_LABEL[int(labels[i])])]
     if ptype not in ("cylinder", "cone", "sphere", "torus") or len(x) < 6:
         return True
-    fit_cfg = replace(FitConfig(), noise_sigma_coeff=cfg.noise_sigma_coeff)
+    fit_cfg = replace(ransac, noise_sigma_coeff=cfg.noise_sigma_coeff)
     got = ransac_fit(ptype, x, normals, size, fit_cfg, rng)
     if got is None or not supported(got.primitive, x[got.inliers] if got.inliers.sum() >= 3 else x, fit_cfg):
         return True
@@ -307,19 +316,22 @@ def _flat(i: int, x: np.ndarray, nrm: np.ndarray, off: float, labels: np.ndarray
 
 
 def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
-                   geometry: tuple[np.ndarray, float] | None = None) -> Segmentation:
+                   geometry: tuple[np.ndarray, float] | None = None,
+                   ransac: RansacConfig | None = None) -> Segmentation:
     """``seg`` with adjacent plane instances merged where they lie on one plane (normals within merge_angle_deg,
     each one's points within merge_tol_part part sizes of the other's plane, median): the network cut a face where
     it saw a print edge, a shadow or noise, sometimes with two axis classes. With merge_flat, instances of other
     labels take part too where they are flat (`_flat`: their own plane explains them within flat_sigma sensor
     sigmas and their label's type does not earn its curvature; printed art: on real frames the network calls
     pieces of a box side cylinders and cones). The merged instance keeps the
-    largest plane-labelled piece's label and score. Only touching instances (4-neighbour pixel pairs)."""
+    largest plane-labelled piece's label and score. Only touching instances (4-neighbour pixel pairs). ransac:
+    the instance points, RANSAC and type-selection settings of `_flat` (default `RansacConfig()`)."""
     inst = np.asarray(seg.instances).astype(np.int32)
     valid = (np.asarray(depth) > 0) & (inst > 0)
     if not (cfg.enabled and cfg.merge) or not valid.any():
         return seg
-    pts, size = geometry or scan_geometry(depth, K, inst)
+    ransac = ransac or RansacConfig()
+    pts, size = geometry or scan_geometry(depth, K, inst, ransac)
     tol = cfg.merge_tol_part * size
     labels = np.asarray(seg.labels)
     is_plane = _is_plane(labels)
@@ -338,9 +350,8 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
         if len(x) >= max(cfg.merge_min_px, 3) and (is_plane[i] or len(x) >= cfg.flat_min_px):
             nrm, off = _plane_ransac(x, 0.5 * cfg.tol_part * size, cfg, rng)
             if not is_plane[i]:
-                fc = FitConfig()
-                ip = instance_points(pts, valid, inst, np.array([i]), fc.normal_window_px, fc.normal_sobel_px)[int(i)]
-                if not _flat(i, ip.points, nrm, off, labels, size, cfg, rng, ip.normals):
+                ip = instance_points(pts, valid, inst, np.array([i]), ransac)[int(i)]
+                if not _flat(i, ip.points, nrm, off, labels, size, cfg, rng, ip.normals, ransac):
                     continue
             planes[int(i)] = (nrm, off, x)
     cos_min = np.cos(np.deg2rad(cfg.merge_angle_deg))

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
@@ -85,7 +86,8 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
                                  "(families.LEAVE_OUT_FAMILIES), never used for training")
             named = [k for k, v in FAMILY_GROUPS.items() if v == families]
             tag = "_" + (named[0] if named else "+".join(families))
-        sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}{tag}{'_look' if look != 'plain' else ''}_s{seed}"
+        look_tag = "_look" if look != "plain" else ""
+        sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}{tag}{look_tag}_s{seed}"
         n = max(1, round(n * scale))
         have = 0  # resume: scans are pure functions of (seed, index) and meta.json is written last
         while have < n and (sub / scan_name(have) / "gt" / "meta.json").is_file():
@@ -175,7 +177,8 @@ def evaluate(model: UNet, data: CachedScans, ids: list[int], bf16: bool) -> dict
 
 
 def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig | None = None, cache_dir: str | Path | None = None,
-          net_cfg: NetConfig | None = None, init: str | Path | None = None, log=print) -> dict:
+          net_cfg: NetConfig | None = None, init: str | Path | None = None,
+          log: Callable[[str], object] = print) -> dict:
     """Train on the scans under ``data_dir``; write the best checkpoint (by validation mIoU) to ``out``.
 
     init: optional weights file to start from (a second stage: a fresh schedule over trained weights; its network

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class TrainConfig:
+    """Training schedule, augmentation and validation of the segmentation U-Net (units in the comments)."""
+
     steps: int = 1800  # optimiser steps (the schedule length)
     stop_step: int | None = None  # stop after this many steps (a reproducible prefix of the schedule)
     minutes: float | None = None  # wall-clock cap (minutes); the best checkpoint so far is kept

@@ -25,7 +25,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from v2c.fit.ransac import circle_2d
+from v2c.geometry import circle_2d
 from v2c.groups import groups_sharing_keys
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Sphere

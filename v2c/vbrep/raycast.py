@@ -1,9 +1,10 @@
 """Rays from the camera through pixels, intersected with analytic primitives (camera frame, metres).
 
 A pixel (u, v) defines the ray ``x(z) = z * d`` with ``d = K^-1 (u, v, 1)`` (so ``d[2] = 1`` and the ray
-parameter z is the depth along the camera z axis, metres). Every primitive's intersections are returned as
-up to four depths per ray, sorted, NaN where absent: the "sheets" of the surface along the ray (for a cylinder,
-sheet 0 is the near wall seen from outside (a boss), sheet 1 the far wall seen from inside (a hole)).
+parameter z is the depth along the camera z axis, metres; `v2c.camera.pixel_rays`). Every primitive's
+intersections are returned as up to four depths per ray, sorted, NaN where absent: the "sheets" of the surface
+along the ray (for a cylinder, sheet 0 is the near wall seen from outside (a boss), sheet 1 the far wall seen from
+inside (a hole)).
 """
 
 from __future__ import annotations
@@ -12,8 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from v2c.camera import pixel_rays, project
 from v2c.primitives import from_dict
 from v2c.primitives.base import Primitive
+
+#: `pixel_rays` and `project` are `v2c.camera`'s, re-exported for the VB-Rep stage's modules that import them here.
+__all__ = ["MAX_SHEETS", "RayHits", "as_primitive", "intersect", "pixel_rays", "project", "sheet_depth"]
 
 MAX_SHEETS = 4
 
@@ -21,20 +26,6 @@ MAX_SHEETS = 4
 def as_primitive(p: Primitive | dict) -> Primitive:
     """A `v2c.primitives` object from a Primitive or its to_dict form."""
     return p if isinstance(p, Primitive) else from_dict(p)
-
-
-def pixel_rays(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """(N, 2) pixel coordinates (u, v) -> (N, 3) ray directions with z component 1 (camera frame)."""
-    uv = np.asarray(uv, float).reshape(-1, 2)
-    Kinv = np.linalg.inv(np.asarray(K, float))
-    h = np.concatenate([uv, np.ones((len(uv), 1))], 1) @ Kinv.T
-    return h / h[:, 2:3]
-
-
-def project(points: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """(N, 3) camera-frame points -> (N, 2) pixel (u, v)."""
-    p = np.asarray(points, float).reshape(-1, 3) @ np.asarray(K, float).T
-    return p[:, :2] / np.where(np.abs(p[:, 2:3]) > 1e-12, p[:, 2:3], 1e-12)
 
 
 @dataclass
@@ -51,6 +42,7 @@ class RayHits:
 
     @property
     def count(self) -> np.ndarray:
+        """(N,) number of surface crossings of each ray (0 .. MAX_SHEETS)."""
         return np.isfinite(self.depths).sum(1)
 
 

@@ -1,4 +1,7 @@
-"""Per-instance point sets of a scan: camera-frame points, normals from the depth gradient, part size."""
+"""Per-instance point sets of a scan: camera-frame points, normals from the depth gradient, part size.
+
+The point map they are taken from is `v2c.camera.backproject` of the scan's depth (camera frame, metres).
+"""
 
 from __future__ import annotations
 
@@ -7,6 +10,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from v2c.geometry.config import RansacConfig
 from v2c.primitives.directions import unit
 
 
@@ -18,20 +22,6 @@ class InstancePoints:
     pixels: np.ndarray
     points: np.ndarray
     normals: np.ndarray
-
-
-def backproject(depth: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """(H, W, 3) camera-frame points (metres) of a z-depth map (metres) with intrinsics K (pixels)."""
-    h, w = depth.shape
-    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    z = depth.astype(float)
-    return np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=-1)
-
-
-def pixel_rays(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Rays (N, 3) with z = 1 through pixel coords ``uv`` (N, 2): the point at z-depth s is s * ray."""
-    uv = np.asarray(uv, float).reshape(-1, 2)
-    return np.stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(uv))], axis=1)
 
 
 def estimate_part_size(points: np.ndarray, trim: float = 0.01) -> float:
@@ -49,13 +39,16 @@ def estimate_part_size(points: np.ndarray, trim: float = 0.01) -> float:
 
 
 def instance_points(points: np.ndarray, valid: np.ndarray, instances: np.ndarray, ids: np.ndarray,
-                    window_px: int, sobel_px: int) -> dict[int, InstancePoints]:
+                    config: RansacConfig) -> dict[int, InstancePoints]:
     """Points and depth-gradient normals of each instance in ``ids``.
 
-    The point map is smoothed inside the instance only (normalised box filter of ``window_px`` over the instance's
-    valid pixels, on its bounding box), so normals near a boundary are one-sided rather than mixed with a
-    neighbour; the normal is the cross product of the Sobel (``sobel_px``) derivatives along u and v.
+    points: (H, W, 3) camera-frame point map (metres); valid: (H, W) bool pixels to use; instances: (H, W) ids.
+    The point map is smoothed inside the instance only (normalised box filter of ``config.normal_window_px``
+    pixels over the instance's valid pixels, on its bounding box), so normals near a boundary are one-sided
+    rather than mixed with a neighbour; the normal is the cross product of the Sobel (``config.normal_sobel_px``)
+    derivatives along u and v.
     """
+    window_px, sobel_px = config.normal_window_px, config.normal_sobel_px
     h, w = instances.shape
     pad = window_px + sobel_px
     out: dict[int, InstancePoints] = {}

@@ -21,10 +21,10 @@ points, the cross-section from the points' (rho, h) cloud) join the minimal-set 
 
 Torus bounds (`torus_limits`): a small fillet's tube is a few pixels wide and its cross-section is an arc barely
 above the noise, so an unconstrained fit can trade a tilted axis or a giant tube for the same distances (a
-1.9 mm fillet came back as r = 11.6 mm, a 2.9 mm one as r = 1116 mm on R = 910 mm). The data do fix the patch's cross-section
-*span* (its extent in the torus' own (rho, h) half-plane) and its radial range: the minor radius is held within
-`torus_minor_span` times the span and the tube centre circle within the points' radial range widened by the
-largest allowed r. Hypotheses outside are dropped, the refinement is bounded, and `torus_ok` lets the joint
+1.9 mm fillet came back as r = 11.6 mm, a 2.9 mm one as r = 1116 mm on R = 910 mm). The data do fix the patch's
+cross-section *span* (its extent in the torus' own (rho, h) half-plane) and its radial range: the minor radius is
+held within `torus_minor_span` times the span and the tube centre circle within the points' radial range widened
+by the largest allowed r. Hypotheses outside are dropped, the refinement is bounded, and `torus_ok` lets the joint
 solves reject a torus that ran away. Within those bounds a thin tube's cross-section is still a flat valley (a
 90-degree arc of a 2 mm tube with 0.3 mm noise is matched as well by a 3.7 mm tube centred further in), so the
 local refinement adds a weak prior residual pulling r towards `torus_minor_prior` times the span (a fillet's
@@ -40,14 +40,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from v2c.fit.config import FitConfig
+from v2c.geometry.config import RansacConfig
+from v2c.geometry.residuals import Layout, Term, recon_jacobian_blocks, recon_residuals
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.base import radial_frame
 from v2c.primitives.directions import unit
-
-#: Degrees of freedom of each type (for the complexity penalty of the type search).
-TYPE_DOF = {"plane": 3, "sphere": 4, "cylinder": 5, "cone": 6, "torus": 7}
-TYPES = tuple(TYPE_DOF)
 
 
 @dataclass
@@ -128,7 +125,7 @@ def _hyp_cones(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, amin:
 
 
 def _hyp_tori(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, extent: float,
-              config: FitConfig) -> list[Primitive]:
+              config: RansacConfig) -> list[Primitive]:
     radii = extent * np.geomspace(*config.torus_minor_range, config.torus_radius_steps)
     max_off = np.sin(np.deg2rad(config.torus_normal_axis_deg))
     out: list[Primitive] = []
@@ -165,7 +162,7 @@ def circle_2d(p: np.ndarray) -> tuple[np.ndarray, float]:
     return sol[:2], float(np.sqrt(max(sol[2] + sol[:2] @ sol[:2], 0.0)))
 
 
-def torus_from_axis_line(c: np.ndarray, a: np.ndarray, x: np.ndarray, config: FitConfig) -> Torus | None:
+def torus_from_axis_line(c: np.ndarray, a: np.ndarray, x: np.ndarray, config: RansacConfig) -> Torus | None:
     """Torus with axis line (point ``c``, unit direction ``a``) whose tube cross-section is the circle fitted to
     the points' (rho, h) cloud, its radius held within `torus_limits` (the circle then keeps its direction from
     the cloud's median point); None where degenerate."""
@@ -184,7 +181,7 @@ def torus_from_axis_line(c: np.ndarray, a: np.ndarray, x: np.ndarray, config: Fi
     return Torus(c + cc[1] * a, a, float(cc[0]), r)
 
 
-def _hyp_torus_rings(x: np.ndarray, idx: np.ndarray, m: int, config: FitConfig) -> list[Primitive]:
+def _hyp_torus_rings(x: np.ndarray, idx: np.ndarray, m: int, config: RansacConfig) -> list[Primitive]:
     """Normal-free torus hypotheses for thin tubes (a small fillet's normals are tens of degrees off): the circle
     through three sample points gives the axis line (its centre and normal), the first ``m`` points' (rho, h)
     cloud the tube's cross-section; plus one from the whole patch (best-fit plane normal as the axis, circle
@@ -207,7 +204,7 @@ def _hyp_torus_rings(x: np.ndarray, idx: np.ndarray, m: int, config: FitConfig) 
     return out
 
 
-def torus_limits(prim: Torus, x: np.ndarray, config: FitConfig) -> tuple[float, float, float, float]:
+def torus_limits(prim: Torus, x: np.ndarray, config: RansacConfig) -> tuple[float, float, float, float]:
     """(r_lo, r_hi, R_lo, R_hi) (metres) for a torus with ``prim``'s centre and axis on points ``x`` (N, 3): the
     minor radius within config.torus_minor_span times the cross-section span (the robust extent of the points'
     (rho, h) cloud along its principal direction), the major radius within the points' radial range widened by
@@ -227,7 +224,7 @@ def torus_limits(prim: Torus, x: np.ndarray, config: FitConfig) -> tuple[float, 
     return r_lo, r_hi, big_lo, max(float(rho_hi) + r_hi, big_lo * (1 + 1e-6))
 
 
-def torus_ok(prim: Primitive, x: np.ndarray, config: FitConfig, slack: float = 1.0) -> bool:
+def torus_ok(prim: Primitive, x: np.ndarray, config: RansacConfig, slack: float = 1.0) -> bool:
     """True unless ``prim`` is a torus outside `torus_limits` on its points ``x`` (``slack`` >= 1 widens them)."""
     if not isinstance(prim, Torus) or len(x) < 3:
         return True
@@ -236,7 +233,7 @@ def torus_ok(prim: Primitive, x: np.ndarray, config: FitConfig, slack: float = 1
             and prim.radius > config.torus_min_ratio * prim.minor_radius / slack and prim.radius > 0)
 
 
-def cone_ok(prim: Primitive, x: np.ndarray, scale: float, config: FitConfig) -> bool:
+def cone_ok(prim: Primitive, x: np.ndarray, scale: float, config: RansacConfig) -> bool:
     """True unless ``prim`` is a cone whose radius at its points ``x`` (median over them) is not within
     (0, max_radius * scale): a near-cylinder cone's apex is far away, and an unbounded solve can trade its half
     angle against the apex distance until the surface is a wide, almost flat funnel through the points."""
@@ -246,7 +243,7 @@ def cone_ok(prim: Primitive, x: np.ndarray, scale: float, config: FitConfig) -> 
     return 0 < rho < config.max_radius * scale
 
 
-def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: FitConfig) -> float:
+def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: RansacConfig) -> float:
     """Comparable score of torus candidates on the same points ``x`` (lower is better): the truncated squared
     distance (MSAC, in part-size units) plus the refinement's weak prior on the minor radius."""
     eps = config.d_inlier * scale
@@ -256,11 +253,12 @@ def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: FitConfig) -> f
     span = r_lo / config.torus_minor_span[0]
     cost = float(np.sum(d * d))
     if span < config.torus_prior_max_span * eps:  # a thin tube only (module docstring)
-        cost += len(x) * (config.torus_prior_weight * (prim.minor_radius - config.torus_minor_prior * span) / scale) ** 2
+        prior = config.torus_prior_weight * (prim.minor_radius - config.torus_minor_prior * span) / scale
+        cost += len(x) * prior**2
     return cost
 
 
-def clamp_torus(prim: Torus, x: np.ndarray, config: FitConfig) -> Torus:
+def clamp_torus(prim: Torus, x: np.ndarray, config: RansacConfig) -> Torus:
     """``prim`` with its radii clamped into `torus_limits` on ``x`` (slightly inside the bounds)."""
     r_lo, r_hi, big_lo, big_hi = torus_limits(prim, x, config)
     if not np.isfinite(r_hi + big_hi):  # too few points to bound anything
@@ -270,7 +268,7 @@ def clamp_torus(prim: Torus, x: np.ndarray, config: FitConfig) -> Torus:
     return Torus(prim.origin, prim.axis, big, r)
 
 
-def hypotheses(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: FitConfig,
+def hypotheses(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: RansacConfig,
                rng: np.random.Generator) -> list[Primitive]:
     """Candidate primitives of type ``ptype`` from minimal samples of points ``x`` / normals ``n`` (N, 3)."""
     k = config.ransac_hypotheses
@@ -293,14 +291,12 @@ def hypotheses(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: F
     return _hyp_tori(x, n, idx, rmax, extent, config) + [t for t in rings if plausible(t, scale, config)]
 
 
-def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: FitConfig,
+def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: RansacConfig,
                      axis: np.ndarray | None = None) -> Primitive:
     """Robust least-squares refinement of ``prim`` on points ``x`` (N, 3): point-to-surface distances in part-size
     units, 'trf' with the soft-l1 loss (robust to the few outliers left after the inlier test) and the analytic
-    Jacobian of `align.Layout`. The axis moves by two tangent coefficients (supplement's reparameterisation)
+    Jacobian of `residuals.Layout`. The axis moves by two tangent coefficients (supplement's reparameterisation)
     unless fixed by ``axis`` (unit, camera frame)."""
-    from v2c.fit.align import Layout, Term, recon_jacobian_blocks, recon_residuals
-
     if len(x) < prim.local_size + 2:
         return prim
     if axis is not None and prim.axis_vector is not None:
@@ -343,7 +339,7 @@ def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: FitCo
     return out if plausible(out, scale, config) and torus_ok(out, x, config, 1.2) else prim
 
 
-def plausible(prim: Primitive, scale: float, config: FitConfig) -> bool:
+def plausible(prim: Primitive, scale: float, config: RansacConfig) -> bool:
     """Finite parameters, radii in (0, max_radius * scale), cone half angle within its limits."""
     rmax = config.max_radius * scale
     p = prim.params()
@@ -359,7 +355,7 @@ def plausible(prim: Primitive, scale: float, config: FitConfig) -> bool:
     return True
 
 
-def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: FitConfig,
+def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: RansacConfig,
                rng: np.random.Generator) -> RansacFit | None:
     """Best primitive of type ``ptype`` for points ``x`` and normals ``n`` (N, 3, camera frame, metres).
 
@@ -405,114 +401,3 @@ def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: F
         best = refined
     inl = inlier_mask(best, x, n, eps, cos_min)
     return RansacFit(best, inl, float(np.count_nonzero(inl)) / max(len(x), 1))
-
-
-def inlier_points(fit: RansacFit, x: np.ndarray) -> np.ndarray:
-    """The points of ``x`` that are ``fit``'s inliers (all of them when fewer than 3 are)."""
-    return x[fit.inliers] if np.count_nonzero(fit.inliers) >= 3 else x
-
-
-def noise_sigma(x: np.ndarray, config: FitConfig) -> np.ndarray:
-    """(N,) depth noise sigma (metres) of camera-frame points ``x`` (N, 3) by the sensor model: noise_sigma_coeff
-    * z^2 (stereo depth noise grows with the square of the depth)."""
-    z = np.asarray(x, float)[:, 2]
-    return config.noise_sigma_coeff * z * z
-
-
-def curvature_support(prim: Primitive, x: np.ndarray, config: FitConfig) -> tuple[float, float]:
-    """(turn, sagitta) of ``prim`` over its patch ``x`` (N, 3, camera frame, metres): how far the fitted surface's
-    normals turn over the points (radians: twice the trimmed largest angle from their mean normal; a cylinder
-    arc of angle a turns by a) and how far the surface itself departs from a plane there (metres: the trimmed
-    peak-to-peak distance of the points projected onto ``prim`` from the least-squares plane through them; a
-    cylinder arc's sagitta). Both are properties of the fitted surface on the patch, not of the noisy points, so
-    a radius the data cannot pin down shows up as a small turn and a small sagitta."""
-    x = np.asarray(x, float)
-    if len(x) < 3 or isinstance(prim, Plane):
-        return 0.0, 0.0
-    nrm = prim.normal(x)
-    q = x - prim.signed_distance(x)[:, None] * nrm  # the points' closest points on the surface
-    mean = unit(nrm.mean(axis=0))
-    ang = np.arccos(np.clip(nrm @ mean, -1.0, 1.0))
-    lo_pct, hi_pct = config.support_trim_pct, 100.0 - config.support_trim_pct
-    turn = 2.0 * float(np.percentile(ang, hi_pct))
-    c = q.mean(axis=0)
-    pn = np.linalg.eigh((q - c).T @ (q - c))[1][:, 0]
-    lo, hi = np.percentile((q - c) @ pn, [lo_pct, hi_pct])
-    return turn, float(hi - lo)
-
-
-def patch_extent(x: np.ndarray, config: FitConfig) -> float:
-    """Robust largest extent (metres) of points ``x`` (N, 3): the trimmed (support_trim_pct) range along their
-    principal direction."""
-    c = x.mean(axis=0)
-    u = np.linalg.eigh((x - c).T @ (x - c))[1][:, -1]
-    lo, hi = np.percentile((x - c) @ u, [config.support_trim_pct, 100.0 - config.support_trim_pct])
-    return float(hi - lo)
-
-
-def patch_radii(prim: Primitive, x: np.ndarray) -> list[float]:
-    """The radii (metres) of ``prim`` that its patch ``x`` has to support: a cylinder's or sphere's radius, both
-    radii of a torus, a cone's median radius at the points."""
-    if isinstance(prim, (Cylinder, Sphere)):
-        return [float(prim.radius)]
-    if isinstance(prim, Torus):
-        return [float(prim.radius), float(prim.minor_radius)]
-    if isinstance(prim, Cone):
-        return [float(np.median(np.abs((x - prim.origin) @ prim.axis)) * np.tan(prim.half_angle))]
-    return [0.0]
-
-
-def supported(prim: Primitive, x: np.ndarray, config: FitConfig) -> bool:
-    """True when the patch ``x`` supports ``prim``'s curvature (planes always): no radius (`patch_radii`) exceeds
-    support_extent_ratio times the patch's extent (`patch_extent`), its normals turn by at least
-    2 asin(1 / (2 support_extent_ratio)) over the patch (a radius within that many times the patch's extent
-    across the curvature), and its sagitta is at least support_sagitta_sigma depth-noise sigmas
-    (`noise_sigma` at the patch's median point) unless the normals turn by support_sagitta_turn_deg or more."""
-    if isinstance(prim, Plane) or len(x) < 3:
-        return True
-    if max(patch_radii(prim, x)) > config.support_extent_ratio * patch_extent(x, config):
-        return False
-    turn, sag = curvature_support(prim, x, config)
-    if turn < 2.0 * np.arcsin(min(1.0, 0.5 / config.support_extent_ratio)):
-        return False
-    sigma = float(np.median(noise_sigma(x, config)))
-    return sag >= config.support_sagitta_sigma * sigma or turn >= np.deg2rad(config.support_sagitta_turn_deg)
-
-
-def fit_instance(x: np.ndarray, n: np.ndarray, ptype: str | None, scale: float, config: FitConfig,
-                 rng: np.random.Generator) -> tuple[str, RansacFit | None]:
-    """RANSAC with a known type, or (ptype None: missing/weak label) every type, chosen by `select_type`.
-    The type search drops curved candidates their patch does not support (`supported`); a labelled type is
-    checked later, once the part frame's axis has had its say (`fit.stage`, `supported` again).
-    Returns (type, fit)."""
-    if ptype is not None:
-        return ptype, ransac_fit(ptype, x, n, scale, config, rng)
-    fits = {t: f for t in TYPES if (f := ransac_fit(t, x, n, scale, config, rng)) is not None}
-    fits = {t: f for t, f in fits.items() if t == "plane" or supported(f.primitive, inlier_points(f, x), config)}
-    if not fits:
-        return "plane", None
-    t = select_type(fits, x, scale, config)
-    return t, fits[t]
-
-
-def select_type(fits: dict[str, RansacFit], x: np.ndarray, scale: float, config: FitConfig) -> str:
-    """Model selection among fitted candidates of several types on points ``x``: Torr's GRIC,
-    sum_i min(d_i^2 / sigma_i^2, gric_trunc) + log(3 N) * (degrees of freedom), lowest wins; sigma_i is the
-    robust noise level (1.4826 * median |d|) of the best-fitting candidate, floored at gric_min_sigma part sizes
-    and at the sensor model's depth sigma of point i (`noise_sigma`: a surface that beats a plane by less than
-    the sensor's own noise is not a better explanation).
-
-    An inlier count with a per-parameter penalty (the previous rule) cannot separate a short cylinder patch from
-    a sphere: both pass the inlier test (d_inlier is many times the noise) and the sphere is cheaper. The
-    truncated squared residual in noise units sees the sphere's systematic error, while the log(3N) per
-    parameter keeps a flexible type (cone, torus) from winning on noise alone."""
-    if config.type_selection == "inliers":  # the old rule: inlier fraction minus a penalty per parameter
-        return max(fits, key=lambda t: fits[t].score - config.complexity_penalty * (TYPE_DOF[t] - TYPE_DOF["plane"]))
-    d = {t: np.abs(f.primitive.signed_distance(x)) for t, f in fits.items()}
-    # per point: the sensor model's depth sigma, at least the best candidate's robust residual level
-    sigma = np.maximum(max(1.4826 * min(float(np.median(v)) for v in d.values()), config.gric_min_sigma * scale),
-                       noise_sigma(x, config))
-    lam = np.log(3 * max(len(x), 1))
-    gric = {t: float(np.sum(np.minimum((v / sigma) ** 2, config.gric_trunc))) + lam * TYPE_DOF[t]
-            for t, v in d.items()}
-    return min(fits, key=lambda t: (gric[t], TYPE_DOF[t]))
