@@ -30,11 +30,12 @@ class SheetChoice:
 
 
 def choose_sheet(prim: object, pixels: np.ndarray, depth: np.ndarray, K: np.ndarray,
-                 window: tuple[float, float], rng: np.random.Generator, max_pixels: int = 4000) -> SheetChoice:
+                 window: tuple[float, float], rng: np.random.Generator, max_pixels: int) -> SheetChoice:
     """Pick the sheet of ``prim`` that agrees best with observed depths.
 
-    pixels: (N, 2) (u, v) of the face; depth: (N,) observed depth (metres, 0 = none). A sheet present on fewer than
-    half the pixels counts as absent (its error is inf).
+    pixels: (N, 2) (u, v) of the face; depth: (N,) observed depth (metres, 0 = none); at most ``max_pixels`` of
+    those with a reading are scored (a sample drawn with ``rng``). A sheet present on fewer than half the pixels
+    counts as absent (its error is inf).
     """
     ok = depth > 0
     pixels, depth = pixels[ok], depth[ok]

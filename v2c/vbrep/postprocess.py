@@ -45,6 +45,8 @@ class ProtoEdge:
 
 @dataclass
 class ProtoVertex:
+    """A vertex under construction: position (3,) camera metres, pixel (2,) its image point."""
+
     kind: VertexKind
     position: np.ndarray
     pixel: np.ndarray
@@ -160,7 +162,7 @@ def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplif
 
 
 def postprocess(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, cfg: VBRepConfig,
-                same_m: float = 1e-4) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
+                same_m: float) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
     """Apply the rules of the module docstring; returns edges and vertices with compact vertex ids.
     same_m: vertices of one kind closer than this (metres) are merged first."""
     protos = _labelling(protos)
