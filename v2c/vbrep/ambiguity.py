@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from v2c.primitives.base import Primitive
 from v2c.vbrep.raycast import MAX_SHEETS, intersect, pixel_rays
 
 
@@ -29,7 +30,7 @@ class SheetChoice:
         return self.sheet % 2 == 1
 
 
-def choose_sheet(prim: object, pixels: np.ndarray, depth: np.ndarray, K: np.ndarray,
+def choose_sheet(prim: Primitive, pixels: np.ndarray, depth: np.ndarray, K: np.ndarray,
                  window: tuple[float, float], rng: np.random.Generator, max_pixels: int) -> SheetChoice:
     """Pick the sheet of ``prim`` that agrees best with observed depths.
 

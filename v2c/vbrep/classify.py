@@ -52,6 +52,7 @@ class TypingRule:
     ground truth from `GTTypeConfig`."""
 
     band_px: float  # pixels: half-width of the band across the boundary where the two surfaces may meet
+    band_step_px: float  # pixels: spacing of the rays across that band
     gap_m: float  # metres: surfaces closer than this in depth within the band meet
     vis_px: float  # pixels: how far along the image normal a contour generator is searched
     vis_step_px: float  # pixels: step of that search
@@ -128,7 +129,7 @@ def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, view: S
     angle = np.full(n, np.nan)
     p_int = nan3.copy()
     if fa and fb:
-        offs = np.arange(-band_px, band_px + 1e-9, 0.5)
+        offs = np.arange(-band_px, band_px + 1e-9, rule.band_step_px)
         q = (uv[:, None, :] + offs[None, :, None] * normal[:, None, :]).reshape(-1, 2)
         g = (_depths(fa, q, K, window) - _depths(fb, q, K, window)).reshape(n, len(offs))
         cross = (np.signbit(g[:, :-1]) != np.signbit(g[:, 1:])).any(1)

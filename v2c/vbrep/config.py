@@ -33,6 +33,7 @@ class VBRepConfig:
     sample_step_px: float = 1.0  # pixels: spacing of the samples along each 2D edge
     side_probe_px: float = 2.0  # pixels: how far to each side of an edge the instance map is read
     int_band_px: float = 3.0  # pixels: two surfaces meeting within this of the 2D edge make it an intersection
+    int_band_step_px: float = 0.5  # pixels: spacing of the rays across that band
     int_gap: float = 0.005  # scale units: ... or coming closer than this (in depth) within the band
     int_gap_min_m: float = 0.0007  # metres: floor of the depth-gap threshold (sensor noise)
     vis_px: float = 5.0  # pixels: a curved near face whose contour generator lies within this is a visibility edge
@@ -88,6 +89,7 @@ class VBRepConfig:
     #                                    twice as long (arcs turn in proportion to the arm, corners do not)
     polyline_px: float = 0.5  # pixels: Ramer-Douglas-Peucker tolerance of non-analytic edge polylines in the image
     min_edge_px: float = 5.0  # pixels: edges shorter than this in the image are dropped
+    min_loop_edges: float = 4.0  # ratio: closed edges shorter than this times min_edge_px are dropped
 
     # --- ambiguity (which sheet of a surface the face is: boss or hole)
     sheet_max_pixels: int = 4000  # pixels: at most this many (seeded sample) per face to score the sheets

@@ -49,9 +49,10 @@ _N_CODES = 5
 
 def typing_rule(cfg: VBRepConfig, gap_thr: float) -> TypingRule:
     """The extraction's tolerances of the edge-type rule; ``gap_thr``: the depth-gap threshold (metres)."""
-    return TypingRule(band_px=cfg.int_band_px, gap_m=gap_thr, vis_px=cfg.vis_px, vis_step_px=cfg.vis_step_px,
-                      vis_bisect=cfg.vis_bisect, vis_angle_deg=cfg.vis_angle_deg, vis_face_px=cfg.vis_face_px,
-                      curve_iters=cfg.curve_iters, curve_slack_px=cfg.curve_slack_px)
+    return TypingRule(band_px=cfg.int_band_px, band_step_px=cfg.int_band_step_px, gap_m=gap_thr,
+                      vis_px=cfg.vis_px, vis_step_px=cfg.vis_step_px, vis_bisect=cfg.vis_bisect,
+                      vis_angle_deg=cfg.vis_angle_deg, vis_face_px=cfg.vis_face_px, curve_iters=cfg.curve_iters,
+                      curve_slack_px=cfg.curve_slack_px)
 
 
 @dataclass

@@ -41,6 +41,7 @@ class GTTypeConfig:
     """Tolerances of the ground-truth rule on exact data (the extraction's own are in `VBRepConfig`)."""
 
     band_px: float = 1.5  # pixels: surfaces meeting within this of the crack make an intersection
+    band_step_px: float = 0.5  # pixels: spacing of the rays across that band
     gap_m: float = 0.0003  # metres: ... or coming closer than this in depth (tangent-continuous faces)
     vis_px: float = 2.0  # pixels: a contour generator within this of the crack makes a visibility edge
     vis_angle_deg: float = 90.0  # degrees: no tangent test (a crack's own normal is axis-aligned, not the
@@ -59,10 +60,10 @@ class GTTypeConfig:
 
     def rule(self) -> TypingRule:
         """These tolerances as the edge-type rule's (`v2c.vbrep.classify`); ``gap_m`` is the depth-gap threshold."""
-        return TypingRule(band_px=self.band_px, gap_m=self.gap_m, vis_px=self.vis_px, vis_step_px=self.vis_step_px,
-                          vis_bisect=self.vis_bisect, vis_angle_deg=self.vis_angle_deg,
-                          vis_face_px=self.vis_face_px, curve_iters=self.curve_iters,
-                          curve_slack_px=self.curve_slack_px)
+        return TypingRule(band_px=self.band_px, band_step_px=self.band_step_px, gap_m=self.gap_m,
+                          vis_px=self.vis_px, vis_step_px=self.vis_step_px, vis_bisect=self.vis_bisect,
+                          vis_angle_deg=self.vis_angle_deg, vis_face_px=self.vis_face_px,
+                          curve_iters=self.curve_iters, curve_slack_px=self.curve_slack_px)
 
 
 @dataclass

@@ -135,7 +135,7 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
 
 def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int,
                    rng: np.random.Generator) -> np.ndarray:
-    """n points drawn area-uniformly on a triangle mesh (metres, same frame as the vertices)."""
+    """Draw n points area-uniformly on a triangle mesh (metres, same frame as the vertices)."""
     if len(triangles) == 0 or n <= 0:
         return np.zeros((0, 3))
     p0, p1, p2 = (vertices[triangles[:, k]] for k in range(3))
