@@ -160,6 +160,7 @@ def test_generated_scan_ideal_vbrep(generated):
 
 def test_box_angles_and_can_radius_on_hand_built_vbreps():
     from scenes.vbrep import box_corner, cylinder_upright
+
     from v2c.bench import real
 
     b = R.box_angles(box_corner())

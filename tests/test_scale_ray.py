@@ -21,14 +21,15 @@ from click.testing import CliRunner
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'v2c[ray]'): the Ray executor tests "
                                         "need it")
 
-from conftest import write_tiny_scan
+# the imports below come after the skip on purpose: without Ray, none of this module runs
+from conftest import write_tiny_scan  # noqa: E402
 
-from v2c.atomic import TMP_TAG
-from v2c.commands.synth import command as synth_command
-from v2c.commands.to_step import _to_step_task
-from v2c.commands.to_step import command as to_step_command
-from v2c.executors import ExecutorConfig, run_tasks
-from v2c.synth.dataset import SynthConfig, generate_scan, scan_name
+from v2c.atomic import TMP_TAG  # noqa: E402
+from v2c.commands.synth import command as synth_command  # noqa: E402
+from v2c.commands.to_step import _to_step_task  # noqa: E402
+from v2c.commands.to_step import command as to_step_command  # noqa: E402
+from v2c.executors import ExecutorConfig, run_tasks  # noqa: E402
+from v2c.synth.dataset import SynthConfig, generate_scan, scan_name  # noqa: E402
 
 # One Ray instance for the whole file: with pytest-xdist (--dist loadgroup) these tests share one worker.
 pytestmark = pytest.mark.xdist_group("ray")

@@ -1,4 +1,4 @@
-"""VB-Rep extraction on analytic scenes ray-cast in numpy (v2c.vbrep.scenes), with exact and perturbed fits."""
+"""VB-Rep extraction on analytic scenes ray-cast in numpy (tests/scenes/raycast.py), with exact and perturbed fits."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import pytest
 from scenes.raycast import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
 
 from v2c.bench.vbrep import chamfer, edge_type_accuracy
+from v2c.camera import project
 from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.model import EdgeType, VertexKind
-from v2c.vbrep.raycast import project
 
 NOISE_M = 0.0004  # depth noise of the scenes (metres), about a RealSense at 0.45 m
 
@@ -154,7 +154,8 @@ def test_edges_and_vertices_are_consistent(box, cylinder, hole_and_boss):
 def test_axis_cylinder_fallback_recovers_a_small_arc() -> None:
     # a 40-degree arc of a 12 mm hole wall, 0.2 mm noise: the fallback for a labelled but unfitted cylinder keeps
     # the type and gets the radius and axis line from the frame axis alone
-    from v2c.vbrep.extract import fit_axis_cylinder_points
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.pointfit import fit_axis_cylinder_points
 
     rng = np.random.default_rng(0)
     axis = np.array([0.0, -0.6, 0.8])
@@ -165,11 +166,11 @@ def test_axis_cylinder_fallback_recovers_a_small_arc() -> None:
     centre = np.array([0.02, 0.01, 0.5])
     X = centre + 0.012 * (np.cos(ang)[:, None] * t1 + np.sin(ang)[:, None] * t2) + h[:, None] * axis
     X += rng.normal(0, 2e-4, X.shape)
-    cyl, rms = fit_axis_cylinder_points(X, axis)
+    cyl, rms = fit_axis_cylinder_points(X, axis, VBRepConfig().fallback_fit_iters)
     assert abs(cyl.radius - 0.012) < 1e-3 and rms < 3e-4
     off = (cyl.origin - centre) - ((cyl.origin - centre) @ axis) * axis  # axis-line offset
     assert np.linalg.norm(off) < 1e-3
-    assert fit_axis_cylinder_points(X[:4], axis) is None
+    assert fit_axis_cylinder_points(X[:4], axis, VBRepConfig().fallback_fit_iters) is None
 
 
 def test_labelled_plane_fallback_uses_the_frame_axis() -> None:
@@ -180,7 +181,8 @@ def test_labelled_plane_fallback_uses_the_frame_axis() -> None:
 
     from v2c.labels import label_of
     from v2c.vbrep.config import VBRepConfig
-    from v2c.vbrep.extract import _labelled_fallback, fit_axis_plane_points
+    from v2c.vbrep.faces import labelled_fallback
+    from v2c.vbrep.pointfit import fit_axis_plane_points
 
     rng = np.random.default_rng(1)
     c, s = np.cos(0.3), np.sin(0.3)
@@ -191,14 +193,14 @@ def test_labelled_plane_fallback_uses_the_frame_axis() -> None:
     X = np.concatenate([on_plane + t[0][:, None] * frame[0], on_plane + 0.01 * frame[2] + t[1][:, None] * frame[0]])
     X += rng.normal(0, 2e-4, X.shape)
     cfg = VBRepConfig()
-    fit = SimpleNamespace(frame=frame)
+    fit = SimpleNamespace(frame=frame, axis_labels={})
     seg = SimpleNamespace(labels=np.array([0, label_of("plane", "Y"), label_of("plane", "U")], np.uint8))
-    plane, rms, axl = _labelled_fallback(1, seg, fit, X, 0.1, cfg)
+    plane, rms, axl = labelled_fallback(1, seg, fit, X, 0.1, cfg)
     assert axl == "Y" and abs(abs(plane.axis_vector @ y) - 1.0) < 1e-12 and rms < 5e-4
     assert abs(plane.signed_distance(on_plane[None])[0]) < 2e-4
-    assert _labelled_fallback(2, seg, fit, X, 0.1, cfg) is None
+    assert labelled_fallback(2, seg, fit, X, 0.1, cfg) is None
     scattered = X + rng.normal(0, 0.01, X.shape)
-    assert _labelled_fallback(1, seg, fit, scattered, 0.1, cfg) is None
+    assert labelled_fallback(1, seg, fit, scattered, 0.1, cfg) is None
     assert fit_axis_plane_points(X[:2], y) is None
 
 
@@ -211,7 +213,8 @@ def test_labelled_plane_fallback_when_the_frame_has_one_found_axis() -> None:
 
     from v2c.labels import label_of
     from v2c.vbrep.config import VBRepConfig
-    from v2c.vbrep.extract import _labelled_fallback, fit_plane_normal_across
+    from v2c.vbrep.faces import labelled_fallback
+    from v2c.vbrep.pointfit import fit_plane_normal_across
 
     rng = np.random.default_rng(2)
     frame = np.eye(3)
@@ -225,17 +228,17 @@ def test_labelled_plane_fallback_when_the_frame_has_one_found_axis() -> None:
     cfg = VBRepConfig()
     seg = SimpleNamespace(labels=np.array([0, label_of("plane", "X"), label_of("cylinder", "X")], np.uint8))
     fit = SimpleNamespace(frame=frame, axis_labels={5: "Z", 6: "Z", 7: "U"})
-    plane, rms, axl = _labelled_fallback(1, seg, fit, X, 0.1, cfg)
+    plane, rms, axl = labelled_fallback(1, seg, fit, X, 0.1, cfg)
     assert axl is None and rms < 5e-4
     assert abs(abs(plane.axis_vector @ n) - 1.0) < 1e-4
     assert abs(plane.signed_distance(base[None])[0]) < 2e-4
-    assert _labelled_fallback(2, seg, fit, X, 0.1, cfg) is None
+    assert labelled_fallback(2, seg, fit, X, 0.1, cfg) is None
     # with X faces found too, the frame's X is measured and the label's axis is used as before: these points,
     # spread 6 cm along a line 35 degrees off X's plane, fit no plane normal to X
     fit_xz = SimpleNamespace(frame=frame, axis_labels={5: "Z", 6: "X"})
-    assert _labelled_fallback(1, seg, fit_xz, X, 0.1, cfg) is None
+    assert labelled_fallback(1, seg, fit_xz, X, 0.1, cfg) is None
     on_x = np.concatenate([base + t[0][:, None] * frame[1], base + 0.02 * frame[2] + t[1][:, None] * frame[1]])
-    plane_x, _, axl_x = _labelled_fallback(1, seg, fit_xz, on_x, 0.1, cfg)
+    plane_x, _, axl_x = labelled_fallback(1, seg, fit_xz, on_x, 0.1, cfg)
     assert axl_x == "X" and abs(abs(plane_x.axis_vector[0]) - 1.0) < 1e-12
     assert fit_plane_normal_across(X[:2], frame[2]) is None
 
@@ -249,7 +252,7 @@ def test_labelled_fallback_from_one_edge() -> None:
     from v2c.labels import label_of
     from v2c.primitives import Plane
     from v2c.vbrep.config import VBRepConfig
-    from v2c.vbrep.extract import _face_geoms
+    from v2c.vbrep.faces import face_geoms
 
     K = np.array([[600.0, 0.0, 160.0], [0.0, 600.0, 120.0], [0.0, 0.0, 1.0]])
     inst = np.zeros((240, 320), np.int32)
@@ -261,7 +264,7 @@ def test_labelled_fallback_from_one_edge() -> None:
     edge_y = (139.5 - 120.0) / 600.0 * 0.5  # metres: where the ledge meets the plane (between rows 139 and 140)
     for label, drawn in ((label_of("plane", "Y"), True), (label_of("plane", "U"), False)):
         seg = SimpleNamespace(instances=inst, labels=np.array([0, label_of("plane", "Z"), label], np.uint8))
-        faces, _ = _face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig())
+        faces, _ = face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig(), {})
         assert (2 in faces) == drawn
         if drawn:
             ledge = faces[2].prim

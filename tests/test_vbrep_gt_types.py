@@ -22,7 +22,7 @@ def test_box_ground_truth_is_intersections_and_silhouettes():
     inp = scene_inputs(box_scene())
     gt = gt_edge_samples(inp.scan)
     pairs = _types_by_pair(gt)
-    for (f, o), types in pairs.items():
+    for (_f, o), types in pairs.items():
         if o == 0:
             assert types == {"silhouette"}
         else:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scenes.raycast import box_scene, scene_inputs
 
+from v2c.camera import project
 from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.mesh import face_mesh
-from v2c.vbrep.raycast import project
 
 K = np.array([[600.0, 0, 160], [0, 600.0, 120], [0, 0, 1]])
 H, W = 240, 320
@@ -29,7 +29,7 @@ def test_plane_through_the_camera_centre_gives_no_vertex_at_the_camera():
     plane = from_dict({"type": "plane", "params": {"origin": (0.78 * np.array([-n[2], 0, n[0]])).tolist(),
                                                    "normal": n.tolist()}})
     region = _region(150, 60, 170, 180)
-    verts, tris = face_mesh(plane, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02)
+    verts, tris = face_mesh(plane, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02, np.inf)
     assert len(verts) == 0 or verts[:, 2].min() >= WINDOW[0]
     assert len(tris) == 0 or tris.max() < len(verts)
 
@@ -57,7 +57,7 @@ def test_plane_mesh_is_unchanged_by_the_guards():
     plane = from_dict({"type": "plane", "params": {"origin": [0.0, 0.0, 0.8], "normal": [0.0, 0.3, -1.0]}})
     region = _region(100, 80, 200, 160)
     args = (plane, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02)
-    v0, t0 = face_mesh(*args)
+    v0, t0 = face_mesh(*args, np.inf)
     v1, t1 = face_mesh(*args, 1e-4)
     np.testing.assert_array_equal(t0, t1)
     np.testing.assert_allclose(v0, v1)
@@ -91,7 +91,7 @@ def test_plane_mesh_leaves_a_small_hole_open():
     # set: four walls drawn at 0-2 px). The face around the hole stays covered.
     region = _region(100, 80, 200, 160)
     region[118:123, 146:155] = False
-    verts, tris = face_mesh(from_dict(PLANE), 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02)
+    verts, tris = face_mesh(from_dict(PLANE), 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02, np.inf)
     box = _region(100, 80, 200, 160)
     assert _covered(verts, tris, _pixels(box & ~region)).mean() < 0.05
     assert _covered(verts, tris, np.array([[131.3, 101.7], [171.3, 141.7]])).all()
@@ -107,7 +107,7 @@ def test_plane_mesh_leaves_a_narrow_notch_open():
     notch = np.zeros_like(region)
     notch[148:160, 151:154] = True
     region &= ~notch
-    verts, tris = face_mesh(from_dict(PLANE), 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02)
+    verts, tris = face_mesh(from_dict(PLANE), 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02, np.inf)
     assert _covered(verts, tris, _pixels(notch)).mean() < 0.1
     assert _covered(verts, tris, _pixels(region, 0.3)[::5]).mean() > 0.99
 
@@ -133,7 +133,7 @@ def test_edge_on_plane_keeps_long_triangles_inside_the_part_box_only():
     inner = _pixels(_region(100, 147, 200, 179), 0.3)[::3]
     z_of = 0.05 * K[1, 1] / (inner[:, 1] - K[1, 2])  # the plane's depth at those image points (metres)
     args = (plane, 0, region, depth, K, WINDOW, 1, 0.02)
-    v0, t0 = face_mesh(*args)
+    v0, t0 = face_mesh(*args, np.inf)
     assert _covered(v0, t0, inner[z_of > 0.9]).mean() < 0.05  # far rows: steps over 2 cm
     assert _covered(v0, t0, inner[z_of < 0.6]).mean() > 0.99
     box = (np.array([-1.0, -1.0, 0.3]), np.array([1.0, 1.0, 1.5]))

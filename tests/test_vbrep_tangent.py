@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from v2c.primitives import Cylinder, Plane, Sphere
+from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.lift import points_on_curve, tangent_curve
 from v2c.vbrep.model import EdgeType
 
@@ -22,14 +23,14 @@ def test_tangent_curve_of_exact_blends() -> None:
     plane = Plane(np.array([0.0, 0.0, 0.5]), np.array([0.0, 0.0, -1.0]))
     cyl = Cylinder(np.array([0.0, 0.0, 0.48]), np.array([1.0, 0.0, 0.0]), 0.02)  # touches z = 0.5 from above
     pts = np.array([[-0.01, 0.003, 0.5], [0.02, -0.002, 0.501]])
-    c = tangent_curve(plane, cyl, pts)
+    c = tangent_curve(plane, cyl, pts, VBRepConfig().parallel_deg)
     assert c["kind"] == "line" and c["tangent"]
     on = points_on_curve(c, pts)
     assert np.abs(plane.signed_distance(on)).max() < 1e-12 and np.abs(cyl.signed_distance(on)).max() < 1e-12
     sph = Sphere(np.array([0.0, 0.1, 0.6]), 0.03)
     shaft = Cylinder(np.array([0.0, 0.0, 0.6]), np.array([0.0, 1.0, 0.0]), 0.03)
     pts = np.array([[0.03, 0.102, 0.6], [0.0, 0.099, 0.57]])
-    c = tangent_curve(shaft, sph, pts)
+    c = tangent_curve(shaft, sph, pts, VBRepConfig().parallel_deg)
     assert c["kind"] == "circle" and c["radius"] == pytest.approx(0.03)
     assert np.allclose(c["center"], [0.0, 0.1, 0.6])
     on = points_on_curve(c, pts)

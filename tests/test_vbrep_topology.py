@@ -12,8 +12,10 @@ from scenes.raycast import box_scene, cylinder_scene, scene_inputs
 
 from exporters import step
 from v2c.primitives import Cone, Plane, Torus
-from v2c.vbrep.extract import _face_groups, extract_vbrep
+from v2c.vbrep.config import VBRepConfig
+from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.topology import check_topology, solve_on_surfaces, valid_primitive
+from v2c.vbrep.vertices import face_groups
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
@@ -21,10 +23,10 @@ SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 def test_face_groups_split_t_junctions_and_join_corners():
     # T-junction: near face 1 (silhouettes against the background and against face 2), far face 2 (its
     # occluded edge and its silhouette): two vertices, one per depth layer
-    groups = _face_groups([(1,), (1,), (2,), (2,)])
+    groups = face_groups([(1,), (1,), (2,), (2,)])
     assert [g.tolist() for g in groups] == [[0, 1], [2, 3]]
     # a corner: three intersection edges of faces 1, 2, 3 and a silhouette of face 3: one vertex
-    assert len(_face_groups([(1, 2), (2, 3), (1, 3), (3,)])) == 1
+    assert len(face_groups([(1, 2), (2, 3), (1, 3), (3,)])) == 1
 
 
 def test_valid_primitive():
@@ -36,7 +38,7 @@ def test_valid_primitive():
 
 def test_solve_on_surfaces_finds_the_corner():
     planes = [Plane([0.1, 0, 0], [1, 0, 0]), Plane([0, 0.2, 0], [0, 1, 0]), Plane([0, 0, 0.3], [0, 0, 1])]
-    x, res = solve_on_surfaces(planes, np.array([0.0, 0.0, 0.0]))
+    x, res = solve_on_surfaces(planes, np.array([0.0, 0.0, 0.0]), VBRepConfig().snap_iters)
     assert np.allclose(x, [0.1, 0.2, 0.3]) and res < 1e-12
 
 

@@ -17,7 +17,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from scenes.vbrep import K_DEFAULT, look_at
-from v2c.vbrep.raycast import intersect, pixel_rays
+from v2c.camera import pixel_rays
+from v2c.vbrep.raycast import intersect
 
 Bound = Callable[[np.ndarray], np.ndarray]
 

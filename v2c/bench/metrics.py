@@ -47,9 +47,10 @@ from v2c.bench.surfaces import (
     vbrep_mesh,
 )
 from v2c.bench.vbrep import edge_correctness, edge_type_accuracy
+from v2c.camera import pixel_rays
 from v2c.labels import AXIS_ALIGN_TOL_DEG, IGNORE, axis_class
 from v2c.vbrep.model import EdgeType, VBRep, VFace
-from v2c.vbrep.raycast import intersect, pixel_rays
+from v2c.vbrep.raycast import intersect
 
 if TYPE_CHECKING:
     from v2c.scan import Scan

@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from v2c.camera import pixel_rays
 from v2c.vbrep.mesh import sample_surface
 from v2c.vbrep.model import VBRep
-from v2c.vbrep.raycast import pixel_rays
 
 if TYPE_CHECKING:
     from v2c.scan import Scan

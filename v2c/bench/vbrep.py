@@ -18,9 +18,9 @@ from scipy.spatial import cKDTree
 
 from v2c.bench.config import MetricConfig
 from v2c.bench.surfaces import chamfer_distance, gt_points, part_size, reconstruction_points
+from v2c.camera import project
 from v2c.vbrep.gt_types import GTEdgeSamples, GTTypeConfig, gt_edge_samples
 from v2c.vbrep.model import EdgeType, VBRep
-from v2c.vbrep.raycast import project
 
 if TYPE_CHECKING:
     from v2c.scan import Scan

@@ -13,7 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from v2c.vbrep.raycast import MAX_SHEETS, intersect, pixel_rays
+from v2c.camera import pixel_rays
+from v2c.primitives.base import Primitive
+from v2c.vbrep.raycast import MAX_SHEETS, intersect
 
 
 @dataclass
@@ -29,12 +31,13 @@ class SheetChoice:
         return self.sheet % 2 == 1
 
 
-def choose_sheet(prim: object, pixels: np.ndarray, depth: np.ndarray, K: np.ndarray,
-                 window: tuple[float, float], rng: np.random.Generator, max_pixels: int = 4000) -> SheetChoice:
+def choose_sheet(prim: Primitive, pixels: np.ndarray, depth: np.ndarray, K: np.ndarray,
+                 window: tuple[float, float], rng: np.random.Generator, max_pixels: int) -> SheetChoice:
     """Pick the sheet of ``prim`` that agrees best with observed depths.
 
-    pixels: (N, 2) (u, v) of the face; depth: (N,) observed depth (metres, 0 = none). A sheet present on fewer than
-    half the pixels counts as absent (its error is inf).
+    pixels: (N, 2) (u, v) of the face; depth: (N,) observed depth (metres, 0 = none); at most ``max_pixels`` of
+    those with a reading are scored (a sample drawn with ``rng``). A sheet present on fewer than half the pixels
+    counts as absent (its error is inf).
     """
     ok = depth > 0
     pixels, depth = pixels[ok], depth[ok]

@@ -38,8 +38,8 @@ def isotonic_fit(x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None, min_
     """Weighted isotonic (non-decreasing) least-squares regression of ``y`` on ``x`` by pool-adjacent-violators.
 
     Returns knots (xk, yk, wk): each pooled block's weighted mean x, its value and its weight; xk strictly
-    increasing, yk non-decreasing. Ties in x are pooled first (a function of x cannot give two values at one x), and so are
-    neighbouring blocks of equal value. ``min_block``: a block lighter than this is pooled with the neighbour
+    increasing, yk non-decreasing. Ties in x are pooled first (a function of x cannot give two values at one x),
+    and so are neighbouring blocks of equal value. ``min_block``: a block lighter than this is pooled with the neighbour
     whose value is closer (pooling neighbours of a non-decreasing sequence keeps it non-decreasing), so that no
     knot rests on a handful of edges."""
     x = np.asarray(x, float)
@@ -98,12 +98,15 @@ class CalibrationMap:
         return float(out) if np.ndim(out) == 0 else out
 
     def to_dict(self) -> dict[str, Any]:
+        """The JSON form of ``confidence_calibration.json`` (knots rounded to 6 decimals)."""
         return {"format": FORMAT, "format_version": 1, "meta": self.meta,
                 "types": {t: {"x": [round(float(v), 6) for v in xk], "y": [round(float(v), 6) for v in yk]}
                           for t, (xk, yk) in sorted(self.knots.items())}}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "calibration") -> CalibrationMap:
+        """Inverse of `to_dict`; ValueError (naming ``source``) for another format, an unknown edge type or knots
+        that are not monotone."""
         if d.get("format") != FORMAT:
             raise ValueError(f"{source}: format {d.get('format')!r}, expected {FORMAT!r}")
         knots = {}
@@ -116,6 +119,7 @@ class CalibrationMap:
         return cls(knots, dict(d.get("meta", {})))
 
     def save(self, path: str | Path) -> Path:
+        """Write the `to_dict` form as JSON to ``path``; returns it."""
         path = Path(path)
         path.write_text(json.dumps(self.to_dict(), indent=1) + "\n")
         return path

@@ -5,12 +5,14 @@ One rule serves both the extraction (fitted surfaces, noisy depth) and the groun
 and b, with unit image normal m pointing from a's side into b's side:
 
 1. **intersection** when both sides are surfaces and the two surfaces (each on its own sheet) cross or come
-   closer than ``gap_thr`` metres in depth along the rays through s + o m, |o| <= ``band_px``;
+   closer than ``gap_m`` metres in depth along the rays through s + o m, |o| <= ``band_px``;
 2. otherwise the nearer surface at s (the background is infinitely far) is the near face: its edge is
    **visibility** when its contour generator (normal orthogonal to the ray) crosses the image normal through s
    within ``vis_px`` pixels (that crossing is the sample's 3D position), runs along the boundary there (image
-   tangents within ``vis_angle_deg``) and projects onto the face's own pixels (within 1 pixel; not onto the
-   surface's extension beyond the face), else **silhouette**; the far face, if any, gets an **occluded** edge.
+   tangents within ``vis_angle_deg``) and projects onto the face's own pixels (within ``vis_face_px``; not onto
+   the surface's extension beyond the face), else **silhouette**; the far face, if any, gets an **occluded** edge.
+
+The tolerances are a `TypingRule`; the surfaces, camera and instance map a `SurfaceView`.
 """
 
 from __future__ import annotations
@@ -19,9 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from v2c.camera import pixel_rays, project
 from v2c.primitives.base import Primitive
 from v2c.vbrep.lift import project_to_intersection
-from v2c.vbrep.raycast import intersect, pixel_rays, project, sheet_depth
+from v2c.vbrep.raycast import intersect, sheet_depth
 from v2c.vbrep.visibility import contour_tangent, find_contour
 
 KIND_INT, KIND_NEAR_A, KIND_NEAR_B = 0, 1, 2
@@ -40,7 +43,36 @@ class FaceGeom:
 
     @property
     def curved(self) -> bool:
+        """True for every surface but a plane (only curved faces have contour generators)."""
         return self.prim.type != "plane"
+
+
+@dataclass(frozen=True)
+class TypingRule:
+    """Tolerances of the edge-type rule (module docstring). The extraction reads them from `VBRepConfig`, the
+    ground truth from `GTTypeConfig`."""
+
+    band_px: float  # pixels: half-width of the band across the boundary where the two surfaces may meet
+    band_step_px: float  # pixels: spacing of the rays across that band
+    gap_m: float  # metres: surfaces closer than this in depth within the band meet
+    vis_px: float  # pixels: how far along the image normal a contour generator is searched
+    vis_step_px: float  # pixels: step of that search
+    vis_bisect: int  # bisection steps refining a crossing found by it
+    vis_angle_deg: float  # degrees: the boundary's and the contour's image tangents must lie within this
+    vis_face_px: int  # pixels: the contour point must project within this of the face's own pixels
+    curve_iters: int  # Gauss-Newton iterations onto the intersection curve
+    curve_slack_px: float  # pixels: a point projected onto the curve may move band_px plus this in the image
+
+
+@dataclass
+class SurfaceView:
+    """What the rule looks at: the faces (instance id -> `FaceGeom`), intrinsics K (3, 3, pixels), the depth
+    window (near, far) of the ray casts (metres) and the (H, W) instance map (None: no face-pixel test)."""
+
+    faces: dict[int, FaceGeom]
+    K: np.ndarray
+    window: tuple[float, float]
+    instances: np.ndarray | None
 
 
 @dataclass
@@ -65,7 +97,7 @@ def _depths(face: FaceGeom, uv: np.ndarray, K: np.ndarray, window: tuple[float, 
     return sheet_depth(intersect(face.prim, pixel_rays(uv, K), window), face.sheet)
 
 
-def _near_region(instances: np.ndarray, inst: int, uv: np.ndarray, r: int = 1) -> np.ndarray:
+def _near_region(instances: np.ndarray, inst: int, uv: np.ndarray, r: int) -> np.ndarray:
     """(N,) bool: an instance pixel lies within ``r`` pixels (8-neighbourhood) of each image point."""
     h, w = instances.shape
     u0, v0 = np.rint(uv[:, 0]).astype(int), np.rint(uv[:, 1]).astype(int)
@@ -77,12 +109,12 @@ def _near_region(instances: np.ndarray, inst: int, uv: np.ndarray, r: int = 1) -
     return out
 
 
-def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, faces: dict[int, FaceGeom],
-                     K: np.ndarray, window: tuple[float, float], band_px: float, gap_thr: float,
-                     vis_px: float, vis_step_px: float = 0.5, curve_iters: int = 8,
-                     vis_angle_deg: float = 30.0, instances: np.ndarray | None = None) -> SampleTypes:
+def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, view: SurfaceView,
+                     rule: TypingRule) -> SampleTypes:
     """Type the samples ``uv`` (N, 2, pixels) of the boundary between instances ``a`` and ``b`` (0 or an instance
-    missing from ``faces`` = background); ``normal`` (N, 2) unit image vectors from a's side into b's side."""
+    missing from ``view.faces`` = background); ``normal`` (N, 2) unit image vectors from a's side into b's side."""
+    faces, K, window = view.faces, view.K, view.window
+    band_px = rule.band_px
     uv = np.asarray(uv, float).reshape(-1, 2)
     normal = np.asarray(normal, float).reshape(-1, 2)
     n = len(uv)
@@ -98,16 +130,17 @@ def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, faces: 
     angle = np.full(n, np.nan)
     p_int = nan3.copy()
     if fa and fb:
-        offs = np.arange(-band_px, band_px + 1e-9, 0.5)
+        offs = np.arange(-band_px, band_px + 1e-9, rule.band_step_px)
         q = (uv[:, None, :] + offs[None, :, None] * normal[:, None, :]).reshape(-1, 2)
         g = (_depths(fa, q, K, window) - _depths(fb, q, K, window)).reshape(n, len(offs))
         cross = (np.signbit(g[:, :-1]) != np.signbit(g[:, 1:])).any(1)
         gap = np.where(cross, 0.0, np.abs(g).min(1))
-        is_int = gap < gap_thr
+        is_int = gap < rule.gap_m
         kind[is_int] = KIND_INT
         if is_int.any():
             x0 = 0.5 * (p_a[is_int] + p_b[is_int])
-            p_int[is_int] = project_to_intersection(fa.prim, fb.prim, x0, curve_iters, K, band_px + 1.0)
+            p_int[is_int] = project_to_intersection(fa.prim, fb.prim, x0, rule.curve_iters, K,
+                                                    band_px + rule.curve_slack_px)
             x = p_int[is_int]
             cosang = np.abs(np.einsum("ij,ij->i", fa.prim.normal(x), fb.prim.normal(x)))
             angle[is_int] = np.arccos(np.clip(cosang, 0.0, 1.0))
@@ -117,7 +150,8 @@ def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, faces: 
         sel = np.nonzero(kind == near)[0]
         if face is None or not face.curved or len(sel) == 0:
             continue
-        res = find_contour(face.prim, face.sheet, uv[sel], sign * normal[sel], K, window, vis_px, vis_step_px)
+        res = find_contour(face.prim, face.sheet, uv[sel], sign * normal[sel], K, window, rule.vis_px,
+                           rule.vis_step_px, rule.vis_bisect)
         vis[sel] = res.found
         hit = sel[res.found]
         if len(hit):
@@ -129,9 +163,9 @@ def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, faces: 
             ti = project(q + eps * t3, K) - project(q, K)
             ti /= np.maximum(np.linalg.norm(ti, axis=1, keepdims=True), 1e-15)
             tb = np.stack([-normal[hit, 1], normal[hit, 0]], 1)
-            ok = np.abs(np.einsum("ij,ij->i", ti, tb)) >= np.cos(np.deg2rad(vis_angle_deg))
-            if instances is not None:  # ... and the contour point is on the face (not on the surface's extension)
-                ok &= _near_region(instances, face.instance, project(q, K))
+            ok = np.abs(np.einsum("ij,ij->i", ti, tb)) >= np.cos(np.deg2rad(rule.vis_angle_deg))
+            if view.instances is not None:  # ... and the contour point is on the face (not the surface's extension)
+                ok &= _near_region(view.instances, face.instance, project(q, K), rule.vis_face_px)
             p_vis[hit[ok]] = q[ok]
             vis[hit[~ok]] = False
     return SampleTypes(kind, vis, gap, angle, p_a, p_b, p_int, p_vis)

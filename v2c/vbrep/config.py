@@ -11,21 +11,36 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class VBRepConfig:
+    """Every threshold and iteration count of VB-Rep extraction (`v2c.vbrep.extract.extract_vbrep`); the functions
+    of v2c.vbrep take this object (or values read from it), never copies of its values as defaults."""
+
+    # --- depth window of the ray casts (which crossings of a surface along a ray count)
+    window_percentile: float = 0.5  # percent: the window spans the observed depths from this percentile ...
+    window_near: float = 0.5  # ratio: ... times this (near end) to the (100 - window_percentile) percentile ...
+    window_far: float = 1.5  # ratio: ... times this (far end)
+    window_min_m: float = 0.01  # metres: the near end is at least this
+    window_empty_m: tuple[float, float] = (0.05, 5.0)  # metres: the window of a scan without depth readings
+
     # --- vertices: intersection optimisation (paper: d_int, 5 px)
     d_int: float = 0.05  # scale units: an optimised vertex must lie within this of each of its surfaces and move
     #                      at most this far from its initial lift
     vertex_px: float = 5.0  # pixels: an optimised vertex must reproject within this of its image position
     vertex_iters: int = 12  # Gauss-Newton iterations of the vertex solves
+    vertex_merge_gap_share: float = 0.25  # ratio: vertices of one kind optimised closer than this times the
+    #                                       depth-gap threshold (max(int_gap * scale, int_gap_min_m)) merge
 
     # --- edge typing
     sample_step_px: float = 1.0  # pixels: spacing of the samples along each 2D edge
     side_probe_px: float = 2.0  # pixels: how far to each side of an edge the instance map is read
     int_band_px: float = 3.0  # pixels: two surfaces meeting within this of the 2D edge make it an intersection
+    int_band_step_px: float = 0.5  # pixels: spacing of the rays across that band
     int_gap: float = 0.005  # scale units: ... or coming closer than this (in depth) within the band
     int_gap_min_m: float = 0.0007  # metres: floor of the depth-gap threshold (sensor noise)
     vis_px: float = 5.0  # pixels: a curved near face whose contour generator lies within this is a visibility edge
     vis_angle_deg: float = 30.0  # degrees: ... and the edge runs along that contour (image tangents this close)
     vis_step_px: float = 0.5  # pixels: step of the contour search
+    vis_bisect: int = 5  # bisection steps refining a contour crossing found by that search (each halves the step)
+    vis_face_px: int = 1  # pixels: a contour point must project within this of its face's own pixels
     smooth_uv_px: float = 5.0  # pixels: moving-average window over the edge samples' image positions before
     #                            lifting (removes the pixel staircase; the ends stay)
     smooth_samples: int = 5  # samples: mode filter window over the per-sample edge types
@@ -33,6 +48,8 @@ class VBRepConfig:
 
     # --- projection onto the intersection curve
     curve_iters: int = 8  # Gauss-Newton iterations projecting samples onto both surfaces
+    curve_slack_px: float = 1.0  # pixels: a sample projected onto the intersection curve may move in the image by
+    #                              int_band_px plus this; one that moves farther keeps its start
     perpendicular_deg: float = 1.0  # degrees: plane normal and axis within this count as perpendicular (circle)
     parallel_deg: float = 1.0  # degrees: plane-plane normals within this have no line of intersection
     meet_tol: float = 0.01  # scale units: an intersection run is kept only where its two surfaces meet within
@@ -72,6 +89,7 @@ class VBRepConfig:
     #                                    twice as long (arcs turn in proportion to the arm, corners do not)
     polyline_px: float = 0.5  # pixels: Ramer-Douglas-Peucker tolerance of non-analytic edge polylines in the image
     min_edge_px: float = 5.0  # pixels: edges shorter than this in the image are dropped
+    min_loop_edges: float = 4.0  # ratio: closed edges shorter than this times min_edge_px are dropped
 
     # --- ambiguity (which sheet of a surface the face is: boss or hole)
     sheet_max_pixels: int = 4000  # pixels: at most this many (seeded sample) per face to score the sheets
@@ -84,6 +102,9 @@ class VBRepConfig:
     fallback_min_angle_deg: float = 5.0  # degrees: ... and the plane does not coincide with a fitted plane (within
     #                                      this angle and fallback_rms; evidence from at least two sources: its own
     #                                      depth, or a neighbour's edge each)
+    fallback_trim: float = 0.8  # share: the free plane and sphere fits are refitted on this share of the evidence
+    #                             closest to their first fit
+    fallback_fit_iters: int = 10  # Gauss-Newton iterations of the cylinder fit with a given axis
 
     # --- meshes
     mesh_stride_px: int = 1  # pixels: spacing of the back-projected pixel grid of each face mesh
@@ -92,6 +113,8 @@ class VBRepConfig:
     #                               0.5-99.5 percentiles per axis) padded by this are dropped (a wrong surface seen
     #                               nearly edge-on runs off past the part; a cylinder or cone may reach one part
     #                               size past the part's nearest point in depth: a hole's wall; negative: no box)
+    mesh_bound_percentile: float = 0.5  # percent: the part's box spans its observed points from this percentile
+    #                                     to (100 - this) per axis
     mesh_bound_pad_unmeasured: float = 0.1  # scale units: ... padded by this for a face with no depth reading on
     #                                          more than mesh_unmeasured_share of its pixels (placed by its edges)
     mesh_unmeasured_share: float = 0.7  # fraction
@@ -115,4 +138,4 @@ class VBRepConfig:
     sigma_depth_correlated: float = 1.0  # fraction of that depth sigma common to a whole face (not averaged out)
     sigma_min_angle_deg: float = 5.0  # degrees: intersection angle floor of an edge's positional sigma
 
-    seed: int = 0
+    seed: int = 0  # seeds the per-face pixel samples of the sheet choice

@@ -14,9 +14,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from v2c.camera import pixel_rays, project
 from v2c.primitives.base import Primitive
-from v2c.vbrep.raycast import intersect, pixel_rays, project, sheet_depth
+from v2c.vbrep.raycast import intersect, sheet_depth
 
+#: metres: the central-difference step of numeric Jacobians (far below any tolerance, far above rounding at 1 m)
+FD_STEP_M = 1e-6
 
 def lift_pixels(prim: Primitive, sheet: int, uv: np.ndarray, K: np.ndarray, window: tuple[float, float],
                 prior: np.ndarray | None = None) -> np.ndarray:
@@ -29,7 +32,7 @@ def lift_pixels(prim: Primitive, sheet: int, uv: np.ndarray, K: np.ndarray, wind
     return rays * z[:, None]
 
 
-def project_to_intersection(pa: Primitive, pb: Primitive, x0: np.ndarray, iters: int = 8,
+def project_to_intersection(pa: Primitive, pb: Primitive, x0: np.ndarray, iters: int,
                             K: np.ndarray | None = None, max_px: float | None = None) -> np.ndarray:
     """(N, 3) start points -> (N, 3) points on both surfaces (camera frame, metres), by minimal-norm Gauss-Newton
     steps on (sd_a, sd_b). Where the surfaces are tangent the step is damped and the point stays near both.
@@ -52,11 +55,11 @@ def project_to_intersection(pa: Primitive, pb: Primitive, x0: np.ndarray, iters:
     return x
 
 
-def surfaces_meet(pa: Primitive, pb: Primitive, x0: np.ndarray, tol: float, iters: int = 20,
-                  eps: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
+def surfaces_meet(pa: Primitive, pb: Primitive, x0: np.ndarray, tol: float, iters: int,
+                  eps: float) -> tuple[np.ndarray, np.ndarray]:
     """Whether the two surfaces meet near each start point (N, 3) (camera frame, metres): the Gauss-Newton
-    projection onto both (`project_to_intersection`, unrestricted) ends within ``eps`` metres of both surfaces
-    and within ``tol`` metres of its start. Returns (N,) bool and the projected points (N, 3)."""
+    projection onto both (`project_to_intersection`, unrestricted, ``iters`` steps) ends within ``eps`` metres of
+    both surfaces and within ``tol`` metres of its start. Returns (N,) bool and the projected points (N, 3)."""
     x0 = np.asarray(x0, float).reshape(-1, 3)
     x = project_to_intersection(pa, pb, x0, iters)
     res = np.maximum(np.abs(pa.signed_distance(x)), np.abs(pb.signed_distance(x))) if len(x) else np.zeros(0)
@@ -74,10 +77,12 @@ def visibility_residual(prim: Primitive) -> Callable[[np.ndarray], np.ndarray]:
     return g
 
 
-def solve_vertex(funcs: list[Callable[[np.ndarray], np.ndarray]], x0: np.ndarray, iters: int = 12,
-                 h: float = 1e-6) -> tuple[np.ndarray, float]:
+def solve_vertex(funcs: list[Callable[[np.ndarray], np.ndarray]], x0: np.ndarray, iters: int
+                 ) -> tuple[np.ndarray, float]:
     """Solve f_k(x) = 0 (k = 1..3) for one point x (3,) from x0 by damped Gauss-Newton with a central-difference
-    Jacobian (step ``h`` metres). Returns the point and the final max |f_k| (units of the f_k)."""
+    Jacobian (step `FD_STEP_M`), at most ``iters`` steps. Returns the point and the final max |f_k| (units of the
+    f_k)."""
+    h = FD_STEP_M
     x = np.asarray(x0, float).copy()
     eye = np.eye(3) * h
 
@@ -96,6 +101,7 @@ def solve_vertex(funcs: list[Callable[[np.ndarray], np.ndarray]], x0: np.ndarray
 
 
 def sd_func(prim: Primitive) -> Callable[[np.ndarray], np.ndarray]:
+    """f(x) = signed distance (metres) of points x (N, 3 or 3,) to ``prim``: a residual for `solve_vertex`."""
     return lambda x: prim.signed_distance(np.asarray(x, float).reshape(-1, 3))
 
 
@@ -103,11 +109,13 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def intersection_curve(pa: Primitive, pb: Primitive, polyline: np.ndarray, perpendicular_deg: float = 1.0,
-                       parallel_deg: float = 1.0) -> dict:
+def intersection_curve(pa: Primitive, pb: Primitive, polyline: np.ndarray, perpendicular_deg: float,
+                       parallel_deg: float) -> dict:
     """Analytic curve of the intersection edge of two surfaces, oriented along ``polyline`` (K, 3) (camera frame,
     metres): plane-plane -> line; plane with a cylinder/cone/torus whose axis is perpendicular to the plane, or a
-    plane and a sphere -> circle; anything else -> {"kind": "intersection"} (the polyline samples it)."""
+    plane and a sphere -> circle; anything else -> {"kind": "intersection"} (the polyline samples it). Axes within
+    ``perpendicular_deg`` of the plane's normal count as perpendicular; plane normals within ``parallel_deg`` as
+    parallel (no line)."""
     ta, tb = pa.type, pb.type
     if ta != "plane" and tb == "plane":
         pa, pb, ta, tb = pb, pa, tb, ta
@@ -156,12 +164,12 @@ def normals_angle_deg(pa: Primitive, pb: Primitive, x: np.ndarray) -> np.ndarray
     return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))
 
 
-def contact_points(pa: Primitive, pb: Primitive, x0: np.ndarray, iters: int = 20) -> tuple[np.ndarray, np.ndarray]:
+def contact_points(pa: Primitive, pb: Primitive, x0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
     """Points of contact of two (nearly) tangent surfaces near ``x0`` (N, 3), camera frame, metres: the midpoint of
-    each point's closest points on both, iterated (alternating projection, which converges to where the surfaces
-    touch, or to the middle of their closest approach where a small gap or overlap is left). Intersection solves
-    wander along the normal there: the surfaces barely cross. Returns the points and the gap between the two
-    surfaces at each (metres)."""
+    each point's closest points on both, iterated ``iters`` times (alternating projection, which converges to where
+    the surfaces touch, or to the middle of their closest approach where a small gap or overlap is left).
+    Intersection solves wander along the normal there: the surfaces barely cross. Returns the points and the gap
+    between the two surfaces at each (metres)."""
     x = np.asarray(x0, float).reshape(-1, 3).copy()
     if len(x) == 0:
         return x, np.zeros(0)
@@ -179,10 +187,11 @@ def _circle_about(o: np.ndarray, d: np.ndarray, h: float, radius: float) -> dict
     return {"kind": "circle", "center": o + h * d, "axis": d.copy(), "radius": float(radius)}
 
 
-def tangent_curve(pa: Primitive, pb: Primitive, pts: np.ndarray, parallel_deg: float = 1.0) -> dict:
+def tangent_curve(pa: Primitive, pb: Primitive, pts: np.ndarray, parallel_deg: float) -> dict:
     """Analytic line of contact of a tangent (G1) junction, from the two surfaces' parameters (camera frame,
     metres); ``pts`` (K, 3), samples along the junction, only orient it and pick the branch. Where the two fitted
-    surfaces do not touch exactly, the curve lies between them.
+    surfaces do not touch exactly, the curve lies between them. Axes and normals within ``parallel_deg`` count as
+    parallel.
 
     - plane and cylinder with its axis parallel to the plane (a fillet): the line under the axis, on the plane;
     - plane normal to the axis of a torus (a rounded edge of a disc): the torus' major circle, on the plane;

@@ -26,17 +26,23 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from v2c.camera import pixel_rays
 from v2c.primitives.base import Primitive
-from v2c.vbrep.raycast import as_primitive, intersect, pixel_rays, sheet_depth
+from v2c.vbrep.raycast import as_primitive, intersect, sheet_depth
+
+#: closest-point steps moving a vertex onto its surface: one is exact for the quadrics, a good step for the torus
+_CLOSEST_STEPS = 3
 
 
 def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray, K: np.ndarray,
-              window: tuple[float, float], stride: int = 2, max_edge: float = np.inf,
-              surface_tol: float = np.inf, bounds: tuple[np.ndarray, np.ndarray] | None = None,
+              window: tuple[float, float], stride: int, max_edge: float, surface_tol: float,
+              bounds: tuple[np.ndarray, np.ndarray] | None = None,
               long_in_bounds: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Mesh of one face. region: (H, W) bool pixels of the face; depth: (H, W) observed depth (metres, 0 = none)
     used to pick the crossing where the sheet is absent; window: (near, far) depths (metres) a vertex may have;
-    surface_tol: metres a ray's closest approach may lie off the surface to be moved onto it (farther: dropped);
+    stride: grid spacing (pixels); max_edge: metres (inf: no limit);
+    surface_tol: metres a ray's closest approach may lie off the surface to be moved onto it (farther: dropped;
+    inf: all kept);
     bounds: optional (low (3,), high (3,)) camera-frame box (metres) every kept triangle lies in;
     long_in_bounds: with bounds, triangles longer than max_edge are kept too.
     Returns vertices (n, 3) camera-frame metres and triangles (m, 3) int64; every vertex has
@@ -89,7 +95,7 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
         good[gi[off > surface_tol]] = False
         snap = gi[(off <= surface_tol) & (off > 1e-9)]
         if len(snap):
-            for _ in range(3):  # closest_point is exact for the quadrics, a good step for the torus
+            for _ in range(_CLOSEST_STEPS):
                 verts[snap] = p.closest_point(verts[snap])
             good[snap] &= (np.abs(p.signed_distance(verts[snap])) <= 1e-7) & (verts[snap, 2] >= window[0]) \
                 & (verts[snap, 2] <= window[1])
@@ -130,7 +136,7 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
 
 def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int,
                    rng: np.random.Generator) -> np.ndarray:
-    """n points drawn area-uniformly on a triangle mesh (metres, same frame as the vertices)."""
+    """Draw n points area-uniformly on a triangle mesh (metres, same frame as the vertices)."""
     if len(triangles) == 0 or n <= 0:
         return np.zeros((0, 3))
     p0, p1, p2 = (vertices[triangles[:, k]] for k in range(3))

@@ -37,7 +37,7 @@ FORMAT_VERSION = 1
 _CURVE_VECTOR_KEYS = ("origin", "direction", "center", "axis")
 
 
-class EdgeType(str, Enum):
+class EdgeType(str, Enum):  # noqa: UP042 - StrEnum would change str() and format() of members
     """What an edge of the view is: where two surfaces meet, where a curved surface turns away from the camera
     (normal orthogonal to the view ray), the near side of a depth jump, or the far (hidden-behind) side of one."""
 
@@ -47,7 +47,7 @@ class EdgeType(str, Enum):
     SILHOUETTE = "silhouette"
 
 
-class VertexKind(str, Enum):
+class VertexKind(str, Enum):  # noqa: UP042 - as EdgeType
     """Corner = three surfaces meet; intersection-visibility = an intersection edge meets a visibility edge;
     occlusion = a vertex on a depth jump (split into an occluded and a silhouette copy); other = anything else."""
 
@@ -136,6 +136,7 @@ class VFace:
         )
 
     def to_dict(self) -> dict:
+        """JSON-ready form (arrays as lists, enums as their values)."""
         return {
             "id": int(self.id),
             "instance": int(self.instance),
@@ -150,6 +151,7 @@ class VFace:
 
     @classmethod
     def from_dict(cls, d: dict) -> VFace:
+        """Inverse of `to_dict`."""
         return cls(
             id=int(d["id"]),
             instance=int(d["instance"]),
@@ -213,6 +215,7 @@ class VEdge:
         )
 
     def to_dict(self) -> dict:
+        """JSON-ready form (arrays as lists, enums as their values)."""
         return {
             "id": int(self.id),
             "type": EdgeType(self.type).value,
@@ -229,6 +232,7 @@ class VEdge:
 
     @classmethod
     def from_dict(cls, d: dict) -> VEdge:
+        """Inverse of `to_dict` (curve vectors back to arrays)."""
         curve = d.get("curve")
         if curve is not None:
             curve = {
@@ -269,6 +273,7 @@ class VVertex:
         )
 
     def to_dict(self) -> dict:
+        """JSON-ready form (arrays as lists, enums as their values)."""
         return {
             "id": int(self.id),
             "kind": VertexKind(self.kind).value,
@@ -278,6 +283,7 @@ class VVertex:
 
     @classmethod
     def from_dict(cls, d: dict) -> VVertex:
+        """Inverse of `to_dict`."""
         return cls(
             id=int(d["id"]),
             kind=VertexKind(d["kind"]),
@@ -323,15 +329,18 @@ class VBRep:
 
     # ----------------------------------------------------------------- queries
     def edges_of_type(self, t: EdgeType | str) -> list[VEdge]:
+        """The edges of type ``t``, in id order."""
         t = EdgeType(t)
         return [e for e in self.edges if EdgeType(e.type) is t]
 
     def vertices_of_kind(self, k: VertexKind | str) -> list[VVertex]:
+        """The vertices of kind ``k``, in id order."""
         k = VertexKind(k)
         return [v for v in self.vertices if VertexKind(v.kind) is k]
 
     # -------------------------------------------------------------------- JSON
     def to_dict(self) -> dict:
+        """JSON-ready form (arrays as lists, enums as their values)."""
         return {
             "format": FORMAT_NAME,
             "format_version": FORMAT_VERSION,
@@ -347,6 +356,7 @@ class VBRep:
 
     @classmethod
     def from_dict(cls, d: dict) -> VBRep:
+        """Inverse of `to_dict`; raises ValueError for another format."""
         if d.get("format", FORMAT_NAME) != FORMAT_NAME:
             raise ValueError(f"not a VB-Rep document (format {d.get('format')!r})")
         version = int(d.get("format_version", -1))
@@ -365,10 +375,12 @@ class VBRep:
         )
 
     def to_json(self, indent: int | None = None) -> str:
+        """The `to_dict` form as JSON text."""
         return json.dumps(self.to_dict(), indent=indent)
 
     @classmethod
     def from_json(cls, text: str) -> VBRep:
+        """Inverse of `to_json`."""
         return cls.from_dict(json.loads(text))
 
     def save(self, path: str | Path) -> Path:
@@ -380,6 +392,7 @@ class VBRep:
 
     @classmethod
     def load(cls, path: str | Path) -> VBRep:
+        """Read a VB-Rep JSON file written by `save`."""
         path = Path(path)
         try:
             return cls.from_json(path.read_text(encoding="utf-8"))

@@ -5,7 +5,8 @@ Rules, in order:
    silhouette or visibility edge over the same image samples (it is dropped otherwise);
 2. corner correction: vertices of one kind optimised onto the same point merge; short edges (image length
    < ``min_edge_px``) are contracted: their end vertex merges into their start vertex (the kind with the higher
-   priority, corner first, survives); closed loops shorter than 4 ``min_edge_px`` are dropped;
+   priority, corner first, survives); closed loops shorter than ``min_loop_edges`` times ``min_edge_px`` are
+   dropped;
 3. simplification: two edges of the same type and faces meeting at a vertex no other edge uses are merged into one
    when the polyline turns there by less than ``simplify_deg`` degrees;
 4. polylines are thinned with Ramer-Douglas-Peucker in the image (``polyline_px``), keeping both ends;
@@ -16,14 +17,13 @@ Camera frame, metres; pixels (u, v).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
+from v2c.camera import project
 from v2c.polyline import rdp_indices
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.model import EdgeType, VertexKind
-from v2c.vbrep.raycast import project
 
 
 @dataclass
@@ -34,8 +34,8 @@ class ProtoEdge:
     faces: tuple[int, ...]
     pts: np.ndarray
     uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    key0: Any = None
-    key1: Any = None
+    key0: tuple | None = None  # endpoint keys (`v2c.vbrep.edges.edge_protos`): ends with one key share a vertex
+    key1: tuple | None = None
     graph_edge: int = -1
     curve: dict | None = None
     stats: dict = field(default_factory=dict)
@@ -45,6 +45,8 @@ class ProtoEdge:
 
 @dataclass
 class ProtoVertex:
+    """A vertex under construction: position (3,) camera metres, pixel (2,) its image point."""
+
     kind: VertexKind
     position: np.ndarray
     pixel: np.ndarray
@@ -77,7 +79,7 @@ def _labelling(protos: list[ProtoEdge]) -> list[ProtoEdge]:
 
 
 def _contract_short(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray,
-                    min_px: float, same_m: float) -> list[ProtoEdge]:
+                    min_px: float, loop_min_px: float, same_m: float) -> list[ProtoEdge]:
     parent = list(range(len(verts)))
     # vertices optimised onto the same 3D point (junction clutter of the 2D graph) are one vertex
     pos = np.array([v.position for v in verts]) if verts else np.zeros((0, 3))
@@ -98,7 +100,7 @@ def _contract_short(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.nda
         a, b = find(p.v0), find(p.v1)
         length = image_length(p.pts, K)
         short = length < min_px
-        if a == b and length < 4 * min_px:  # a tiny closed loop (junction clutter)
+        if a == b and length < loop_min_px:  # a tiny closed loop (junction clutter)
             continue
         if a != b and short:
             # the higher-priority kind survives (corner correction)
@@ -160,11 +162,11 @@ def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplif
 
 
 def postprocess(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, cfg: VBRepConfig,
-                same_m: float = 1e-4) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
+                same_m: float) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
     """Apply the rules of the module docstring; returns edges and vertices with compact vertex ids.
     same_m: vertices of one kind closer than this (metres) are merged first."""
     protos = _labelling(protos)
-    protos = _contract_short(protos, verts, K, cfg.min_edge_px, same_m)
+    protos = _contract_short(protos, verts, K, cfg.min_edge_px, cfg.min_loop_edges * cfg.min_edge_px, same_m)
     protos = _merge_degree_two(protos, verts, cfg.simplify_deg)
     for p in protos:
         if len(p.pts) > 2:

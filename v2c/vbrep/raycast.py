@@ -13,12 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from v2c.camera import pixel_rays, project
 from v2c.primitives import from_dict
 from v2c.primitives.base import Primitive
 
-#: `pixel_rays` and `project` are `v2c.camera`'s, re-exported for the VB-Rep stage's modules that import them here.
-__all__ = ["MAX_SHEETS", "RayHits", "as_primitive", "intersect", "pixel_rays", "project", "sheet_depth"]
+__all__ = ["MAX_SHEETS", "RayHits", "as_primitive", "intersect", "sheet_depth"]
 
 MAX_SHEETS = 4
 

@@ -19,12 +19,13 @@ from typing import Any
 
 import numpy as np
 
+from v2c.camera import project
 from v2c.primitives import from_dict
 from v2c.primitives.base import Primitive
+from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.lift import contact_points, points_on_curve, project_to_intersection
 from v2c.vbrep.model import EdgeType, VBRep
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, image_length
-from v2c.vbrep.raycast import project
 
 
 def valid_primitive(prim: Primitive) -> bool:
@@ -47,10 +48,10 @@ def valid_primitive(prim: Primitive) -> bool:
     return True
 
 
-def solve_on_surfaces(prims: list[Primitive], x0: np.ndarray, iters: int = 20) -> tuple[np.ndarray, float]:
+def solve_on_surfaces(prims: list[Primitive], x0: np.ndarray, iters: int) -> tuple[np.ndarray, float]:
     """The point nearest ``x0`` (3,) on all the given surfaces (least squares where they have no common point):
-    Gauss-Newton with minimal-norm steps on their signed distances. Returns the point and the largest |signed
-    distance| left (metres)."""
+    Gauss-Newton with minimal-norm steps on their signed distances, at most ``iters``. Returns the point and the
+    largest |signed distance| left (metres)."""
     x = np.asarray(x0, float).copy()
     if not prims:
         return x, 0.0
@@ -67,27 +68,32 @@ def solve_on_surfaces(prims: list[Primitive], x0: np.ndarray, iters: int = 20) -
     return x, res
 
 
-def _on_surface(prim: Primitive, pts: np.ndarray, iters: int = 3) -> np.ndarray:
+#: closest-point steps moving points onto a surface: one is exact for the quadrics, the torus' is approximate
+_CLOSEST_STEPS = 3
+
+
+def _on_surface(prim: Primitive, pts: np.ndarray) -> np.ndarray:
     """Points moved onto a surface (closest point, repeated for surfaces where one step is approximate)."""
     x = np.asarray(pts, float)
-    for _ in range(iters):
+    for _ in range(_CLOSEST_STEPS):
         x = prim.closest_point(x)
     return x
 
 
 def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: dict[int, Primitive],
-                     max_move: float, iters: int = 20, eps: float = 1e-7, K: np.ndarray | None = None,
-                     end_px: float = 0.0) -> dict[str, Any]:
-    """Make the edges lie on their surfaces and end at their vertices (in place).
+                     max_move: float, K: np.ndarray, cfg: VBRepConfig) -> dict[str, Any]:
+    """Make the edges lie on their surfaces and end at their vertices (in place). Solves take ``cfg.snap_iters``
+    steps; ``eps`` below is ``cfg.snap_tol``, ``end_px`` ``cfg.snap_end_px``.
 
     Vertices: moved onto all the surfaces of the faces of their edges (least squares, `solve_on_surfaces`) if that
     moves them at most ``max_move`` metres. Intersection edges: interior samples onto the intersection curve
     (minimal-norm Gauss-Newton on both signed distances); samples that do not get within ``eps`` of both
     surfaces within ``max_move`` stay where they are (counted). Other edges: interior samples onto their face's
-    surface. With K: interior samples within ``end_px`` pixels of an end vertex's image point are dropped (a
+    surface. Interior samples within ``end_px`` pixels of an end vertex's image point are dropped (a
     vertex solved a few pixels off the lifted end would otherwise leave the polyline doubling back across its
     neighbour there). Every polyline then starts and ends exactly at its vertices. prims: instance id ->
     primitive. Returns counts."""
+    iters, eps, end_px = cfg.snap_iters, cfg.snap_tol, cfg.snap_end_px
     stats = {"vertices_on_surfaces": 0, "vertices": len(verts), "samples_off_curve": 0}
     faces_at: dict[int, set[int]] = {}
     int_at: dict[int, list[tuple[int, ...]]] = {}
@@ -136,7 +142,7 @@ def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: d
                 x = _on_surface(prims[p.faces[0]], inner)
                 inner = np.where(np.all(np.isfinite(x), 1)[:, None], x, inner)
         a, b = verts[p.v0].position, verts[p.v1].position
-        if K is not None and end_px > 0 and len(inner):
+        if end_px > 0 and len(inner):
             uv = project(inner, K)
             ua, ub = project(np.stack([a, b]), K)
             keep = np.ones(len(uv), bool)
@@ -155,7 +161,7 @@ def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: d
             inner = inner[keep]
         p.pts = np.concatenate([a[None], inner, b[None]])
         if len(p.uv):
-            p.uv = project(p.pts, K) if K is not None else p.uv
+            p.uv = project(p.pts, K)
     return stats
 
 

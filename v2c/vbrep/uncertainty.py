@@ -40,6 +40,9 @@ from v2c.primitives.base import Primitive
 
 @dataclass(frozen=True)
 class UncertaintyConfig:
+    """Noise model of the positional uncertainty (module docstring). The extraction builds it from the sigma_*
+    fields of `VBRepConfig` (`v2c.vbrep.assemble.uncertainty_config`); the defaults serve direct callers."""
+
     depth_sigma_coeff_per_m: float = 0.0015  # 1/m: depth noise sigma = coeff * z^2 (z metres), the sensor law
     depth_correlated: float = 1.0  # fraction of that sigma common to a whole face (not averaged out over its points)
     min_angle_deg: float = 5.0  # degrees: intersection angle floor (sigma / sin(angle) stays finite)
@@ -82,7 +85,7 @@ class FaceCovariance:
 
 
 def face_covariance(prim: Primitive, X: np.ndarray, residual_m: float,
-                    cfg: UncertaintyConfig = UncertaintyConfig()) -> FaceCovariance | None:
+                    cfg: UncertaintyConfig) -> FaceCovariance | None:
     """Covariance of ``prim`` fitted to points X (N, 3, camera frame, metres) with RMS residual ``residual_m``;
     None for fewer points than parameters."""
     X = np.asarray(X, float).reshape(-1, 3)
@@ -110,7 +113,7 @@ def face_sigma_m(fc: FaceCovariance, X: np.ndarray) -> float:
 
 
 def intersection_sigma_m(fa: FaceCovariance, fb: FaceCovariance, x: np.ndarray,
-                         cfg: UncertaintyConfig = UncertaintyConfig()) -> float:
+                         cfg: UncertaintyConfig) -> float:
     """RMS over the samples x (K, 3) of an intersection edge's 1-sigma position error (metres)."""
     x = np.asarray(x, float).reshape(-1, 3)
     if len(x) == 0:
@@ -123,7 +126,7 @@ def intersection_sigma_m(fa: FaceCovariance, fb: FaceCovariance, x: np.ndarray,
 
 
 def outline_sigma_m(f: FaceCovariance, x: np.ndarray, focal_px: float,
-                    cfg: UncertaintyConfig = UncertaintyConfig()) -> float:
+                    cfg: UncertaintyConfig) -> float:
     """RMS over the samples x (K, 3) of a one-face edge's 1-sigma position error (metres)."""
     x = np.asarray(x, float).reshape(-1, 3)
     if len(x) == 0:

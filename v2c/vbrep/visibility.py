@@ -12,8 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from v2c.camera import pixel_rays
 from v2c.primitives.base import Primitive
-from v2c.vbrep.raycast import intersect, pixel_rays
+from v2c.vbrep.lift import FD_STEP_M
+from v2c.vbrep.raycast import intersect
 
 
 @dataclass
@@ -35,10 +37,10 @@ def _exists(prim: Primitive, sheet: int, uv: np.ndarray, K: np.ndarray,
 
 
 def find_contour(prim: Primitive, sheet: int, uv: np.ndarray, direction: np.ndarray, K: np.ndarray,
-                 window: tuple[float, float], vis_px: float = 5.0, step_px: float = 0.5,
-                 bisect: int = 5) -> ContourSearch:
+                 window: tuple[float, float], vis_px: float, step_px: float, bisect: int) -> ContourSearch:
     """Search for the contour generator of ``prim`` (sheet ``sheet``) along ``uv + o * direction``,
-    o in [-vis_px, vis_px] pixels. uv, direction: (N, 2) pixels / unit image vectors."""
+    o in [-vis_px, vis_px] pixels, every ``step_px`` pixels, then ``bisect`` bisection steps. uv, direction: (N, 2)
+    pixels / unit image vectors."""
     uv = np.asarray(uv, float).reshape(-1, 2)
     n = len(uv)
     out = ContourSearch(np.zeros(n, bool), np.full(n, np.nan), np.full((n, 3), np.nan))
@@ -75,9 +77,10 @@ def find_contour(prim: Primitive, sheet: int, uv: np.ndarray, direction: np.ndar
     return out
 
 
-def contour_tangent(prim: Primitive, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
+def contour_tangent(prim: Primitive, x: np.ndarray) -> np.ndarray:
     """(N, 3) unit tangents of the contour generator at its points x (camera frame): orthogonal to both the
-    surface normal and the gradient of g = n . x / |x| (central differences, ``h`` metres)."""
+    surface normal and the gradient of g = n . x / |x| (central differences, `FD_STEP_M` metres)."""
+    h = FD_STEP_M
     x = np.asarray(x, float).reshape(-1, 3)
 
     def g(p: np.ndarray) -> np.ndarray:
