@@ -1,8 +1,8 @@
-"""Screenshot of `exporters/freecad_import.py` in the FreeCAD GUI (docs/img/freecad_import.png).
+r"""Screenshot of `exporters/freecad_import.py` in the FreeCAD GUI (docs/img/freecad_import.png).
 
 Run under Xvfb with a fresh HOME (FreeCAD's document recovery dialog would wait for a click otherwise):
 
-    SHOT_STEP=part.step SHOT_OUT=/tmp/shot.png HOME=$(mktemp -d) QTWEBENGINE_DISABLE_SANDBOX=1 \\
+    SHOT_STEP=part.step SHOT_OUT=/tmp/shot.png HOME=$(mktemp -d) QTWEBENGINE_DISABLE_SANDBOX=1 \
         xvfb-run -a -s "-screen 0 1600x1000x24" freecad scripts/freecad_gui_screenshot.py
 
 Writes SHOT_OUT (the 3D view, 900 x 700) and SHOT_OUT with ``_window`` (the main window: the tree with the

@@ -18,7 +18,7 @@ HEADER = (
 
 
 def split_of(sha1: str) -> str:
-    """train / val / test from a file's SHA-1 (hex)."""
+    """The split ("train", "val" or "test") of a file, from its SHA-1 (hex)."""
     k = int(sha1[:8], 16) % 100
     return "train" if k < 70 else ("val" if k < 80 else "test")
 
