@@ -131,8 +131,9 @@ def _add_shell(bb: BRep_Builder, compound: TopoDS_Compound, faces: list[TopoDS_F
     bb.Add(compound, shell)
 
 
-def build_brep(vbrep: VBRep, fmap: FrameMap, config: BrepConfig | None = None,
-               force_outline: frozenset[int] = frozenset()) -> BuiltBRep:
+def build_brep(
+    vbrep: VBRep, fmap: FrameMap, config: BrepConfig | None = None, force_outline: frozenset[int] = frozenset()
+) -> BuiltBRep:
     """The OCCT topology of a VB-Rep in the output frame of ``fmap`` (millimetres); see the module doc.
 
     force_outline: VFace ids bounded by their mesh outline whatever their loops (`exporters.step.write` uses
@@ -140,8 +141,15 @@ def build_brep(vbrep: VBRep, fmap: FrameMap, config: BrepConfig | None = None,
     cfg = config or BrepConfig()
     eb = EdgeBuilder(vbrep, fmap, cfg).run()
     fb = FaceBuilder(eb)
-    ob = OutlineBuilder(vbrep, fmap, eb.fit_tol, cfg.outline_tol_area_rel, cfg.outline_min_piece_rel,
-                        cfg.fix_precision, max_stretch=cfg.outline_max_stretch)
+    ob = OutlineBuilder(
+        vbrep,
+        fmap,
+        eb.fit_tol,
+        cfg.outline_tol_area_rel,
+        cfg.outline_min_piece_rel,
+        cfg.fix_precision,
+        max_stretch=cfg.outline_max_stretch,
+    )
     out = BuiltBRep(shape=TopoDS_Compound(), fmap=fmap, box=part_box(vbrep, fmap, cfg.box_margin_rel))
     faces: dict[int, TopoDS_Face] = {}
     face_edges: dict[int, set[int]] = {}
@@ -172,8 +180,9 @@ def build_brep(vbrep: VBRep, fmap: FrameMap, config: BrepConfig | None = None,
         pieces = sorted(pieces, key=lambda p: -face_area(p.face))
         oriented = [fb.orient_to_camera(p.face, f) for p in pieces]
         out.built_area[f.id] = sum(face_area(p) for p in oriented)
-        eb.warnings.append(f"face {f.id}: {why}; bounded by its mesh outline instead "
-                           f"({out.built_area[f.id]:.4g} of {target:.4g} mm²)")
+        eb.warnings.append(
+            f"face {f.id}: {why}; bounded by its mesh outline instead ({out.built_area[f.id]:.4g} of {target:.4g} mm²)"
+        )
         out.fallback_faces.append(f.id)
         faces[f.id] = oriented[0]
         out.face_parts[f.id] = oriented
@@ -237,8 +246,9 @@ def translate_built(built: BuiltBRep, shift: np.ndarray) -> BuiltBRep:
         skipped_faces=list(built.skipped_faces),
         warnings=list(built.warnings),
         face_parts={fid: [TopoDS.Face_s(tr.ModifiedShape(f)) for f in fs] for fid, fs in built.face_parts.items()},
-        outline_edges={fid: [(TopoDS.Edge_s(tr.ModifiedShape(e)), eid) for e, eid in es]
-                       for fid, es in built.outline_edges.items()},
+        outline_edges={
+            fid: [(TopoDS.Edge_s(tr.ModifiedShape(e)), eid) for e, eid in es] for fid, es in built.outline_edges.items()
+        },
         dropped_edges=list(built.dropped_edges),
         mesh_area=dict(built.mesh_area),
         built_area=dict(built.built_area),

@@ -144,8 +144,10 @@ class EdgeBuilder:
                 continue
             self.degenerate.add(e.id)
             kind = "closed" if e.v0 == e.v1 else "zero-length"
-            self.warnings.append(f"edge {e.id}: degenerate {kind} edge (spans {span:.3g} mm); dropped"
-                                 + ("" if e.v0 == e.v1 else f", vertices {e.v0} and {e.v1} merged"))
+            self.warnings.append(
+                f"edge {e.id}: degenerate {kind} edge (spans {span:.3g} mm); dropped"
+                + ("" if e.v0 == e.v1 else f", vertices {e.v0} and {e.v1} merged")
+            )
             a, b = find(e.v0), find(e.v1)
             if a != b:
                 parent[max(a, b)] = min(a, b)
@@ -390,16 +392,16 @@ class EdgeBuilder:
             if g.curve is None:
                 BRepLib.BuildCurves3d_s(edge)
             elif g.pcurve is not None:  # exact iso curve: attach its pcurve (same parametrisation)
-                self.bb.UpdateEdge(edge, g.pcurve, self.surfaces[g.face].geom, TopLoc_Location(),
-                                   BRep_Tool.Tolerance_s(edge))
+                self.bb.UpdateEdge(
+                    edge, g.pcurve, self.surfaces[g.face].geom, TopLoc_Location(), BRep_Tool.Tolerance_s(edge)
+                )
             if e.id in self.fit_face:
                 self._cover_other_face(e, edge, va, vb)
             # Stored oriented from v0 to v1, so a loop entry (id, reversed) is this edge, reversed or not.
             edges[e.id] = edge if forward else TopoDS.Edge_s(edge.Reversed())
         return edges
 
-    def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex,
-                          n: int = 33) -> None:
+    def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex, n: int = 33) -> None:
         """An intersection edge fitted on one face (no intersection curve): measure how far it lies off the
         other face's surface (mm, ``off_surface``), warn, and raise the edge's (and its vertices') tolerance to
         cover that gap when it is within ``branch_tol``; a larger gap is reported as a gap between the faces."""
@@ -418,8 +420,12 @@ class EdgeBuilder:
             self.bb.UpdateEdge(edge, max(tol, BRep_Tool.Tolerance_s(edge)))
             for vx in (va, vb):
                 self.bb.UpdateVertex(vx, max(tol, BRep_Tool.Tolerance_s(vx)))
-            self.warnings.append(f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
-                                 f"{other}'s surface; its tolerance covers the gap")
+            self.warnings.append(
+                f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
+                f"{other}'s surface; its tolerance covers the gap"
+            )
         else:
-            self.warnings.append(f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
-                                 f"{other}'s surface (more than {self.branch_tol:.2f} mm): a gap between the faces")
+            self.warnings.append(
+                f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
+                f"{other}'s surface (more than {self.branch_tol:.2f} mm): a gap between the faces"
+            )

@@ -70,8 +70,12 @@ class FaceBuilder:
         w.Closed(True)
         return w
 
-    def _loop_uv_polygon(self, s: AnalyticSurface, loop: Loop, n: int = 40,
-                         ) -> tuple[np.ndarray, float] | None:
+    def _loop_uv_polygon(
+        self,
+        s: AnalyticSurface,
+        loop: Loop,
+        n: int = 40,
+    ) -> tuple[np.ndarray, float] | None:
         """The loop's built edges sampled in the surface's (u, v) ((M, 2), periodic parameters made
         continuous) and their largest distance off the surface (mm, for edges carried by the other face); None
         when an edge is missing or the loop winds around a periodic surface (no closed polygon)."""
@@ -110,8 +114,9 @@ class FaceBuilder:
         pts = polygon_crossings([p for p, _ in sampled])
         if len(pts) == 0:
             return False
-        ends = np.array([self.vpos[v] for lp in loops for eid, _ in lp
-                         for v in (self.vb.edges[eid].v0, self.vb.edges[eid].v1)])
+        ends = np.array(
+            [self.vpos[v] for lp in loops for eid, _ in lp for v in (self.vb.edges[eid].v0, self.vb.edges[eid].v1)]
+        )
         # edges off the surface get that much tolerance once fixed, and BRepCheck looks no closer
         reach = max(3 * self.fit_tol, 1e-3 * self.fmap.length(self.vb.scale), 2 * max(d for _, d in sampled))
         dist = np.linalg.norm(s.evaluate(pts)[:, None] - ends[None], axis=2).min(1)
@@ -173,8 +178,12 @@ class FaceBuilder:
             face = TopoDS.Face_s(face.Reversed())
         return face
 
-    def _try_face(self, f: VFace, loops: list[Loop], edges: dict[int, TopoDS_Edge],
-                  ) -> TopoDS_Face | None:
+    def _try_face(
+        self,
+        f: VFace,
+        loops: list[Loop],
+        edges: dict[int, TopoDS_Edge],
+    ) -> TopoDS_Face | None:
         """The face bounded by ``loops`` (outer first) if ShapeFix makes it valid; edge replacements ShapeFix
         made are kept (in the shared context) only when it does."""
         s = self.surfaces[f.id]
@@ -260,8 +269,11 @@ class FaceBuilder:
             out.append(loop)
         return out
 
-    def build_face(self, f: VFace, edges: dict[int, TopoDS_Edge],
-                   ) -> tuple[TopoDS_Face, list[Loop]] | None:
+    def build_face(
+        self,
+        f: VFace,
+        edges: dict[int, TopoDS_Edge],
+    ) -> tuple[TopoDS_Face, list[Loop]] | None:
         """The face trimmed by its loops and the loops it kept, trying in turn: the VB-Rep's loops; their
         edges chained again through shared vertices (when the given loops do not close); only the loops that
         close; only the largest closed loop. Anything but the first is reported as a warning. None if all

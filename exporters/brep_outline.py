@@ -71,8 +71,12 @@ def _covers(tri: np.ndarray, q: np.ndarray) -> bool:
     return bool(np.any(((d1 >= 0) & (d2 >= 0) & (d3 >= 0)) | ((d1 <= 0) & (d2 <= 0) & (d3 <= 0))))
 
 
-def _union_from_boundary(uv: np.ndarray, tris: np.ndarray, area: float, rel_tol: float = 1e-6,
-                         ) -> shapely.Geometry | None:
+def _union_from_boundary(
+    uv: np.ndarray,
+    tris: np.ndarray,
+    area: float,
+    rel_tol: float = 1e-6,
+) -> shapely.Geometry | None:
     """The union of a triangle mesh in 2D from its boundary (the edges one triangle uses): the boundary's
     segments noded and polygonised, the cells the mesh covers kept. Five times faster than uniting the
     triangles; exact when no two triangles overlap, which the returned area (= the triangles' total ``area``)
@@ -93,7 +97,11 @@ def _union_from_boundary(uv: np.ndarray, tris: np.ndarray, area: float, rel_tol:
 
 
 def outline_polygons(
-    s: AnalyticSurface, points: np.ndarray, triangles: np.ndarray, tol: float, min_area: float,
+    s: AnalyticSurface,
+    points: np.ndarray,
+    triangles: np.ndarray,
+    tol: float,
+    min_area: float,
     max_stretch: float = 4.0,
 ) -> tuple[list[shapely.Polygon], np.ndarray]:
     """The union of a mesh's triangles in the surface's scaled (u, v) (millimetres), simplified within ``tol``
@@ -163,8 +171,12 @@ def nearest_edge_ids(midpoints: np.ndarray, candidates: list[tuple[int, np.ndarr
     return ids
 
 
-def _simplify_keeping_area(poly: shapely.Polygon, tol: float, area_rel: float, tries: int = 6,
-                           ) -> shapely.Geometry:
+def _simplify_keeping_area(
+    poly: shapely.Polygon,
+    tol: float,
+    area_rel: float,
+    tries: int = 6,
+) -> shapely.Geometry:
     """``poly`` simplified within ``tol`` (its units), the tolerance halved (up to ``tries`` times) until the
     area moves by at most ``area_rel`` of it. A pixel staircase simplifies to its centre line at the first
     try; only fine detail needs the smaller tolerances."""
@@ -208,8 +220,17 @@ class OutlineBuilder:
     max_stretch: see `outline_polygons`.
     """
 
-    def __init__(self, vbrep: VBRep, fmap: FrameMap, tol: float, tol_area_rel: float, min_piece_rel: float,
-                 precision: float, gap_factor: float = 20.0, max_stretch: float = 4.0) -> None:
+    def __init__(
+        self,
+        vbrep: VBRep,
+        fmap: FrameMap,
+        tol: float,
+        tol_area_rel: float,
+        min_piece_rel: float,
+        precision: float,
+        gap_factor: float = 20.0,
+        max_stretch: float = 4.0,
+    ) -> None:
         self.vb = vbrep
         self.fmap = fmap
         self.tol = tol
@@ -239,8 +260,13 @@ class OutlineBuilder:
                     out.append(piece)
         return out
 
-    def _ring_edges(self, s: AnalyticSurface, ring: np.ndarray, ccw: bool, cands: list[tuple[int, np.ndarray]],
-                    ) -> tuple[TopoDS_Wire, list[tuple[TopoDS_Edge, int]]] | None:
+    def _ring_edges(
+        self,
+        s: AnalyticSurface,
+        ring: np.ndarray,
+        ccw: bool,
+        cands: list[tuple[int, np.ndarray]],
+    ) -> tuple[TopoDS_Wire, list[tuple[TopoDS_Edge, int]]] | None:
         uv = np.asarray(ring, float)[:-1]  # shapely rings repeat the first point
         area2 = np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1])
         if (area2 > 0) != ccw:
@@ -271,8 +297,9 @@ class OutlineBuilder:
         w.Closed(True)
         return w, edges
 
-    def _face(self, s: AnalyticSurface, poly: shapely.Polygon, scale: np.ndarray,
-              cands: list[tuple[int, np.ndarray]]) -> OutlinePiece | None:
+    def _face(
+        self, s: AnalyticSurface, poly: shapely.Polygon, scale: np.ndarray, cands: list[tuple[int, np.ndarray]]
+    ) -> OutlinePiece | None:
         rings = [(np.asarray(poly.exterior.coords) / scale, True)]
         rings += [(np.asarray(r.coords) / scale, False) for r in poly.interiors]
         face = TopoDS_Face()

@@ -31,6 +31,7 @@ BACKGROUND = (255, 255, 255)
 #: Depth (metres, along the viewing axis) under which a point counts as at or behind the viewer in a drawing.
 MIN_VIEW_DEPTH_M = 1e-6
 
+
 def palette(n: int, seed: int = 3) -> np.ndarray:
     """(n, 3) uint8 distinct pastel colours (fixed for a seed)."""
     rng = np.random.default_rng(seed)
@@ -63,9 +64,14 @@ def _fit_transform(uv: np.ndarray, size: tuple[int, int], margin: float = 0.08) 
     return s, off
 
 
-def render_vbrep(vbrep: VBRep, size: tuple[int, int] = (480, 480), R: np.ndarray | None = None,
-                 t: np.ndarray | None = None, crop: tuple[float, np.ndarray] | None = None,
-                 supersample: int = 2) -> np.ndarray:
+def render_vbrep(
+    vbrep: VBRep,
+    size: tuple[int, int] = (480, 480),
+    R: np.ndarray | None = None,
+    t: np.ndarray | None = None,
+    crop: tuple[float, np.ndarray] | None = None,
+    supersample: int = 2,
+) -> np.ndarray:
     """(h, w, 3) uint8 RGB drawing of the VB-Rep seen by the scan's camera moved to x' = R x + t (camera frame,
     metres). crop: (scale, offset) mapping camera pixels to panel pixels; fitted to the geometry when None."""
     R = np.eye(3) if R is None else np.asarray(R, float)
@@ -162,7 +168,7 @@ def _crop(img: np.ndarray, box: tuple[int, int, int, int], size: tuple[int, int]
     pad = max(0, -x0, -y0, x1 - w, y1 - h)
     if pad:
         img = cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=BACKGROUND)
-    sub = img[y0 + pad:y1 + pad, x0 + pad:x1 + pad]
+    sub = img[y0 + pad : y1 + pad, x0 + pad : x1 + pad]
     return cv2.resize(sub, size, interpolation=cv2.INTER_AREA)
 
 
@@ -187,7 +193,9 @@ def _title(panel: np.ndarray, text: str) -> np.ndarray:
 def _legend(width: int) -> np.ndarray:
     """Edge colours and vertex balls, wrapped onto as many rows as the width needs."""
     items = [(t.value, EDGE_COLORS[t], "line") for t in EdgeType] + [
-        ("corner", CORNER_COLOR, "ball"), ("intersection-visibility vertex", INT_VIS_COLOR, "ball")]
+        ("corner", CORNER_COLOR, "ball"),
+        ("intersection-visibility vertex", INT_VIS_COLOR, "ball"),
+    ]
     font, scale = cv2.FONT_HERSHEY_SIMPLEX, 0.5
     rows: list[list[tuple[str, tuple, str, int]]] = [[]]
     x = 12
@@ -211,8 +219,14 @@ def _legend(width: int) -> np.ndarray:
     return bar
 
 
-def result_figure(scan: Any, instances: np.ndarray, vbrep: VBRep, path: str | Path | None = None,
-                  panel: int = 420, source: str = "VB-Rep") -> np.ndarray:
+def result_figure(
+    scan: Any,
+    instances: np.ndarray,
+    vbrep: VBRep,
+    path: str | Path | None = None,
+    panel: int = 420,
+    source: str = "VB-Rep",
+) -> np.ndarray:
     """The 2 x 2 result figure (RGB uint8): input image, segmentation, VB-Rep from the camera and from a turned
     view, with a legend. scan: anything with ``color`` (H, W, 3) RGB; instances: (H, W) int instance map.
     source: what the lower panels show, in their titles ("VB-Rep", or "STEP" when ``vbrep`` is the written file

@@ -58,8 +58,9 @@ class FrameMap:
 
     def shifted(self, shift: np.ndarray) -> FrameMap:
         """The map whose output is this one's plus ``shift`` (3,) output millimetres."""
-        return FrameMap(self.rotation, self.origin - self.rotation.T @ np.asarray(shift, float) / self.scale,
-                        self.scale)
+        return FrameMap(
+            self.rotation, self.origin - self.rotation.T @ np.asarray(shift, float) / self.scale, self.scale
+        )
 
     @property
     def camera_center(self) -> np.ndarray:

@@ -58,8 +58,17 @@ class TypedEdgeRecord:
 
     __slots__ = ("confidence", "edge_id", "kind", "name", "p0", "p1", "radius", "type")
 
-    def __init__(self, name: str, type_: str, confidence: float, edge_id: int, p0: Point | None, p1: Point | None,
-                 kind: str, radius: float | None) -> None:
+    def __init__(
+        self,
+        name: str,
+        type_: str,
+        confidence: float,
+        edge_id: int,
+        p0: Point | None,
+        p1: Point | None,
+        kind: str,
+        radius: float | None,
+    ) -> None:
         self.name, self.type, self.confidence, self.edge_id = name, type_, confidence, edge_id
         self.p0, self.p1, self.kind, self.radius = p0, p1, kind, radius
 
@@ -194,8 +203,11 @@ def parse_typed_edges(text: str) -> list[TypedEdgeRecord]:
                 ckind, radius = curve_info(int(r))
                 items.append((p0, p1, ckind, radius))
         for p0, p1, ckind, radius in items:
-            records.append(TypedEdgeRecord(_unquote(args[0]), m.group(1), float(m.group(2)), int(m.group(3)),
-                                           p0, p1, ckind, radius))
+            records.append(
+                TypedEdgeRecord(
+                    _unquote(args[0]), m.group(1), float(m.group(2)), int(m.group(3)), p0, p1, ckind, radius
+                )
+            )
     return records
 
 
@@ -210,8 +222,9 @@ def _kind_of(edge: Any) -> str:
     return {"Line": "LINE", "LineSegment": "LINE", "Circle": "CIRCLE", "Ellipse": "ELLIPSE"}.get(name, name)
 
 
-def match_edges(records: list[TypedEdgeRecord], edges: list[Any]
-                ) -> tuple[list[tuple[TypedEdgeRecord, Any]], list[TypedEdgeRecord]]:
+def match_edges(
+    records: list[TypedEdgeRecord], edges: list[Any]
+) -> tuple[list[tuple[TypedEdgeRecord, Any]], list[TypedEdgeRecord]]:
     """Pair every record with one FreeCAD edge: same end points (either direction), same curve kind, same
     radius for circles; each edge used once. Returns ([(record, edge)], [unmatched records])."""
     free = list(edges)
@@ -275,11 +288,21 @@ def open_typed_step(path: str, doc: Any = None) -> dict[str, Any]:
     for t, grp in groups.items():
         grp.Label = f"{t} ({counts[t]})"
     doc.recompute()
-    edges = [{"object": o.Name, "type": o.EdgeType, "confidence": o.Confidence, "id": o.EdgeId,
-              "length": o.Shape.Length} for o in doc.Objects if hasattr(o, "EdgeType")]
-    return {"document": doc.Name, "counts": counts, "named": len(records), "missing": [r.name for r in missing],
-            "part_faces": len(shape.Faces), "part_edges": len(shape.Edges), "edges": edges,
-            "groups": sorted(g.Label for g in groups.values())}
+    edges = [
+        {"object": o.Name, "type": o.EdgeType, "confidence": o.Confidence, "id": o.EdgeId, "length": o.Shape.Length}
+        for o in doc.Objects
+        if hasattr(o, "EdgeType")
+    ]
+    return {
+        "document": doc.Name,
+        "counts": counts,
+        "named": len(records),
+        "missing": [r.name for r in missing],
+        "part_faces": len(shape.Faces),
+        "part_edges": len(shape.Edges),
+        "edges": edges,
+        "groups": sorted(g.Label for g in groups.values()),
+    }
 
 
 def main() -> None:

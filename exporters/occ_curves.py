@@ -29,10 +29,7 @@ def intersection_curves(s1: AnalyticSurface, s2: AnalyticSurface, tol: float) ->
         return []
     curves = [inter.Line(i) for i in range(1, inter.NbLines() + 1)]
     # Closed branches come back trimmed to one period: keep the periodic basis so any arc can be cut from it.
-    return [
-        c.BasisCurve() if isinstance(c, Geom_TrimmedCurve) and c.BasisCurve().IsPeriodic() else c
-        for c in curves
-    ]
+    return [c.BasisCurve() if isinstance(c, Geom_TrimmedCurve) and c.BasisCurve().IsPeriodic() else c for c in curves]
 
 
 def project_on_curve(curve: Geom_Curve, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -51,9 +51,7 @@ def polygon_crossings(polygons: list[np.ndarray]) -> np.ndarray:
     c, d = segs[None, :, 0], segs[None, :, 1]
 
     def orient(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
-        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (
-            r[..., 0] - p[..., 0]
-        )
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
 
     d1, d2 = orient(a, b, c), orient(a, b, d)
     d3, d4 = orient(c, d, a), orient(c, d, b)

@@ -107,11 +107,14 @@ class Readback:
         tol = 100 * self.config.area_tol_rel
         worst = sorted(off, key=lambda f: -abs(f.written - f.reconstructed))[:3]
         detail = ", ".join(f"f{f.id} {f.written:.0f} of {f.reconstructed:.0f} mm²" for f in worst)
-        return (f"read back: {len(self.faces) - len(off)} of {len(self.faces)} faces within {tol:.0f} % of their "
-                f"reconstructed area ({100 * self.area_share:.1f} % of the area written)"
-                + (f", off: {detail}" if off else "")
-                + f"; {self.untyped_edges} of {self.n_edges} edges untyped; bounding box "
-                + ("matches" if self.box_ok else "differs from") + " the reconstruction's")
+        return (
+            f"read back: {len(self.faces) - len(off)} of {len(self.faces)} faces within {tol:.0f} % of their "
+            f"reconstructed area ({100 * self.area_share:.1f} % of the area written)"
+            + (f", off: {detail}" if off else "")
+            + f"; {self.untyped_edges} of {self.n_edges} edges untyped; bounding box "
+            + ("matches" if self.box_ok else "differs from")
+            + " the reconstruction's"
+        )
 
 
 def _inverse_points(fmap: FrameMap, p: np.ndarray) -> np.ndarray:
@@ -139,8 +142,12 @@ def _edge_points(edge: TopoDS.Edge, n: int) -> np.ndarray:
     return np.array([c.Value(float(t)).Coord() for t in ts])
 
 
-def check_written(vbrep: VBRep, path: str | Path, fmap: FrameMap, config: ReadbackConfig | None = None,
-                  ) -> Readback:
+def check_written(
+    vbrep: VBRep,
+    path: str | Path,
+    fmap: FrameMap,
+    config: ReadbackConfig | None = None,
+) -> Readback:
     """Read the STEP at ``path`` (written from ``vbrep`` with the frame map ``fmap``) and compare; see the
     module doc."""
     cfg = config or ReadbackConfig()
@@ -180,10 +187,26 @@ def check_written(vbrep: VBRep, path: str | Path, fmap: FrameMap, config: Readba
             verts.append(_inverse_points(fmap, p))
             tris.append(t + base)
             base += len(p)
-        faces.append(VFace(id=f.id, instance=f.instance, primitive=f.primitive, axis_label=f.axis_label,
-                           confidence=f.confidence, loops=[],
-                           mesh_vertices=np.concatenate(verts) if verts else np.zeros((0, 3)),
-                           mesh_triangles=np.concatenate(tris) if tris else np.zeros((0, 3), int)))
-    out.drawn = VBRep(faces=faces, edges=edges, vertices=list(vbrep.vertices), frame=vbrep.frame, K=vbrep.K,
-                      image_size=vbrep.image_size, scale=vbrep.scale, meta=dict(vbrep.meta))
+        faces.append(
+            VFace(
+                id=f.id,
+                instance=f.instance,
+                primitive=f.primitive,
+                axis_label=f.axis_label,
+                confidence=f.confidence,
+                loops=[],
+                mesh_vertices=np.concatenate(verts) if verts else np.zeros((0, 3)),
+                mesh_triangles=np.concatenate(tris) if tris else np.zeros((0, 3), int),
+            )
+        )
+    out.drawn = VBRep(
+        faces=faces,
+        edges=edges,
+        vertices=list(vbrep.vertices),
+        frame=vbrep.frame,
+        K=vbrep.K,
+        image_size=vbrep.image_size,
+        scale=vbrep.scale,
+        meta=dict(vbrep.meta),
+    )
     return out

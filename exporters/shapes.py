@@ -21,9 +21,7 @@ if TYPE_CHECKING:
     from v2c.vbrep.model import VBRep
 
 
-def to_build123d(
-    vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None
-) -> build123d.Compound:
+def to_build123d(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None) -> build123d.Compound:
     """A build123d Compound of the VB-Rep (millimetres), labelled "v2c"."""
     import build123d as bd
 
@@ -32,9 +30,7 @@ def to_build123d(
     return comp
 
 
-def to_cadquery(
-    vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None
-) -> cadquery.Shape:
+def to_cadquery(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None) -> cadquery.Shape:
     """A cadquery Shape (a `cadquery.Compound`) of the VB-Rep (millimetres)."""
     import cadquery as cq
 

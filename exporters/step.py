@@ -144,8 +144,12 @@ def quiet_occt() -> Iterator[None]:
             p.SetTraceLevel(lvl)
 
 
-def build(vbrep: VBRep, frame: Frame | str = Frame.PART, config: BrepConfig | None = None,
-          force_outline: frozenset[int] = frozenset()) -> BuiltBRep:
+def build(
+    vbrep: VBRep,
+    frame: Frame | str = Frame.PART,
+    config: BrepConfig | None = None,
+    force_outline: frozenset[int] = frozenset(),
+) -> BuiltBRep:
     """The OCCT topology of a VB-Rep in ``frame`` (millimetres); see `exporters.brep`.
 
     Part frame: the footprint origin (`exporters.frames`) is measured on the built faces and edges, so the
@@ -193,8 +197,7 @@ def _attributes(vbrep: VBRep, built: BuiltBRep) -> list[SubShapeAttrs]:
         cands = edge_candidates(vbrep, built.fmap, f.id) if extra and built.fmap is not None else []
         if not cands:
             continue
-        for edge, eid in zip(extra, nearest_edge_ids(np.array([_edge_midpoint(e) for e in extra]), cands),
-                             strict=True):
+        for edge, eid in zip(extra, nearest_edge_ids(np.array([_edge_midpoint(e) for e in extra]), cands), strict=True):
             if not named.Contains(edge):  # an edge two pieces share is named once
                 subs.append(edge_attrs(edge, by_id[int(eid)]))
                 named.Add(edge)
@@ -232,8 +235,9 @@ def write(
         raise StepExportError(f"{path}: no face could be built ({detail})")
     target = atomic_write(path) if atomic else contextlib.nullcontext(path)
     with target as tmp, quiet_occt():  # exclusive temporary in the folder, renamed into place
-        write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built),
-                        originating_system=v2c_origin())
+        write_xcaf_step(
+            tmp, built.shape, product or path.stem, _attributes(vbrep, built), originating_system=v2c_origin()
+        )
         # The file must hold what was built: OCCT's reader heals faces (and may split one, losing its name).
         # Faces the round trip changed are written again from their mesh outline.
         areas = written_face_areas(tmp)
@@ -242,8 +246,9 @@ def write(
         )
         if changed:
             built = build(vbrep, frame, cfg, force_outline=changed)
-            write_xcaf_step(tmp, built.shape, product or path.stem, _attributes(vbrep, built),
-                            originating_system=v2c_origin())
+            write_xcaf_step(
+                tmp, built.shape, product or path.stem, _attributes(vbrep, built), originating_system=v2c_origin()
+            )
     invalid = [fid for fid, face in built.faces.items() if not BRepCheck_Analyzer(face).IsValid()]
     shape_valid = BRepCheck_Analyzer(built.shape).IsValid()
     warnings = list(built.warnings) + [f"face {fid}: fails BRepCheck" for fid in invalid]
@@ -282,7 +287,6 @@ def faces_by_id(faces: list[ReadSubShape]) -> dict[int, list[TopoDS_Face]]:
 def written_face_areas(path: str | Path) -> dict[int, float]:
     """VFace id -> the area (mm²) of the faces named after it in a STEP written by `write` (all pieces)."""
     return {fid: sum(face_area(f) for f in fs) for fid, fs in faces_by_id(read_xcaf_step(path).faces).items()}
-
 
 
 def _edge_type(text: str | None) -> EdgeType | None:
@@ -395,9 +399,21 @@ def read_typed(path: str | Path) -> TypedStep:
                     uniq.append(face)
             n = len(uniq)
         layer = next((lay for lay in e.layers if lay.startswith("edge_")), e.layers[0] if e.layers else None)
-        layer_type = _edge_type(layer[len("edge_"):]) if layer and layer.startswith("edge_") else None
-        out.edges.append(TypedEdge(e.name, eid, etype, conf, layer, layer_type, e.color,
-                                   _type_of_color(e.color), n, (e.name or "").endswith(":tangent")))
+        layer_type = _edge_type(layer[len("edge_") :]) if layer and layer.startswith("edge_") else None
+        out.edges.append(
+            TypedEdge(
+                e.name,
+                eid,
+                etype,
+                conf,
+                layer,
+                layer_type,
+                e.color,
+                _type_of_color(e.color),
+                n,
+                (e.name or "").endswith(":tangent"),
+            )
+        )
     return out
 
 

@@ -107,7 +107,10 @@ def _color(rgb: RGB) -> Quantity_Color:
 
 
 def write_xcaf_step(
-    path: str | Path, shape: TopoDS_Shape, product: str, subshapes: list[SubShapeAttrs],
+    path: str | Path,
+    shape: TopoDS_Shape,
+    product: str,
+    subshapes: list[SubShapeAttrs],
     originating_system: str | None = None,
 ) -> None:
     """Write ``shape`` as one product named ``product`` with the sub-shape attributes to a STEP AP242 file.
@@ -219,8 +222,12 @@ def read_xcaf_step(path: str | Path) -> ReadStep:
     layered = _layers_by_shape(st, lt)
     transfer = reader.ChangeReader().WS().TransferReader()
 
-    def own(s: TopoDS_Shape, m: TopTools_IndexedMapOfShape, layers: dict[int, list[str]], colors: tuple,
-            ) -> tuple[str | None, tuple[str, ...], RGB | None]:
+    def own(
+        s: TopoDS_Shape,
+        m: TopTools_IndexedMapOfShape,
+        layers: dict[int, list[str]],
+        colors: tuple,
+    ) -> tuple[str | None, tuple[str, ...], RGB | None]:
         name = None
         for root in labels:
             sub = TDF_Label()
@@ -266,8 +273,10 @@ def read_xcaf_step(path: str | Path) -> ReadStep:
         up = inherited.get(i, (None, (), None))
         edges.append(ReadSubShape(s, name or up[0], layers or up[1], color or up[2]))
     fmap, flayers = indexed(TopAbs_FACE)
-    faces = [ReadSubShape(fmap.FindKey(i), *own(fmap.FindKey(i), fmap, flayers, (XCAFDoc_ColorSurf,)))
-             for i in range(1, fmap.Extent() + 1)]
+    faces = [
+        ReadSubShape(fmap.FindKey(i), *own(fmap.FindKey(i), fmap, flayers, (XCAFDoc_ColorSurf,)))
+        for i in range(1, fmap.Extent() + 1)
+    ]
     return ReadStep(products, shape, faces, edges)
 
 

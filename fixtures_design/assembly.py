@@ -117,8 +117,9 @@ def _export(out: OutputSet, path: Path, write: Callable[[Path], bool]) -> Path:
     return path
 
 
-def write_fixture(fixture: Fixture, out_dir: str | Path, part: Shape | None = None,
-                  stem: str | None = None, part_label: str = "part") -> FixtureFiles:
+def write_fixture(
+    fixture: Fixture, out_dir: str | Path, part: Shape | None = None, stem: str | None = None, part_label: str = "part"
+) -> FixtureFiles:
     """Write ``<stem>.step``, ``<stem>.stl`` and ``<stem>_assembly.step`` (part + fixture) into ``out_dir``.
 
     stem: default ``fixture_<kind>``. part: the part for the assembly, already in the fixture's output frame
@@ -129,6 +130,7 @@ def write_fixture(fixture: Fixture, out_dir: str | Path, part: Shape | None = No
     with OutputSet() as files:  # the three files are committed together: all new or all old
         step = _export(files, out / f"{stem}.step", lambda p: export_step(fixture.solid, p))
         stl = _export(files, out / f"{stem}.stl", lambda p: export_stl(fixture.solid, p, tolerance=0.05))
-        asm = _export(files, out / f"{stem}_assembly.step",
-                      lambda p: export_step(assembly(fixture, part, part_label), p))
+        asm = _export(
+            files, out / f"{stem}_assembly.step", lambda p: export_step(assembly(fixture, part, part_label), p)
+        )
     return FixtureFiles(step, stl, asm)

@@ -57,8 +57,9 @@ def design_corner(ref: DihedralReference, fmap: FrameMap, params: CornerParams =
     edge_len = float(np.linalg.norm(p1 - p0))
     length = min(params.length, edge_len - 2 * params.end_margin)
     if length <= 0:
-        raise ValueError(f"edge e{ref.edge_id} is {edge_len:.1f} mm long: too short for end margins of "
-                         f"{params.end_margin} mm")
+        raise ValueError(
+            f"edge e{ref.edge_id} is {edge_len:.1f} mm long: too short for end margins of {params.end_margin} mm"
+        )
     # depths[0] is how far face A reaches from the edge (along -y), depths[1] face B (along -x).
     leg_a = min(params.leg, params.leg_fraction * fmap.length(ref.depths[0]))
     leg_b = min(params.leg, params.leg_fraction * fmap.length(ref.depths[1]))
@@ -71,5 +72,6 @@ def design_corner(ref: DihedralReference, fmap: FrameMap, params: CornerParams =
     mating = [place(f, plane) for f in against_a + against_b]
     refs = [ref.faces[0]] * len(against_a) + [ref.faces[1]] * len(against_b)
     pts = np.concatenate([sample_face(f) for f in mating])
-    return Fixture(FixtureKind.CORNER, solid, mating, pts, ref, fmap, params, refs,
-                   {"leg_mm": (leg_a, leg_b), "length_mm": length})
+    return Fixture(
+        FixtureKind.CORNER, solid, mating, pts, ref, fmap, params, refs, {"leg_mm": (leg_a, leg_b), "length_mm": length}
+    )

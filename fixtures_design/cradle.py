@@ -54,12 +54,12 @@ def _v_profile(radius: float, p: CradleParams) -> np.ndarray:
     w = x_top + p.wall
     apex = -radius / _S45
     bottom = apex - p.wall
-    return np.array([(-w, bottom), (w, bottom), (w, y_top), (x_top, y_top), (0.0, apex), (-x_top, y_top),
-                     (-w, y_top)])
+    return np.array([(-w, bottom), (w, bottom), (w, y_top), (x_top, y_top), (0.0, apex), (-x_top, y_top), (-w, y_top)])
 
 
-def design_cradle(ref: CircleReference, fmap: FrameMap, up: np.ndarray,
-                  params: CradleParams = CradleParams()) -> Fixture:
+def design_cradle(
+    ref: CircleReference, fmap: FrameMap, up: np.ndarray, params: CradleParams = CradleParams()
+) -> Fixture:
     """A cradle under the boss/cylinder of ``ref`` (camera frame, metres), output frame of ``fmap`` (mm).
 
     up: (3,) the part's up direction in the output frame (`fixtures_design.frames.up_vector`).
@@ -71,8 +71,10 @@ def design_cradle(ref: CircleReference, fmap: FrameMap, up: np.ndarray,
     up = unit(up)
     tilt = float(np.degrees(np.arcsin(min(1.0, abs(z @ up)))))
     if tilt > params.max_tilt_deg:
-        raise ValueError(f"cylinder of e{ref.edge_id} is {tilt:.0f} deg off the horizontal (cradles take up to "
-                         f"{params.max_tilt_deg:.0f} deg)")
+        raise ValueError(
+            f"cylinder of e{ref.edge_id} is {tilt:.0f} deg off the horizontal (cradles take up to "
+            f"{params.max_tilt_deg:.0f} deg)"
+        )
     y = unit(up - (up @ z) * z)
     x = np.cross(y, z)
     seen = fmap.length(ref.extent)
@@ -88,15 +90,27 @@ def design_cradle(ref: CircleReference, fmap: FrameMap, up: np.ndarray,
         pts_local = np.concatenate([sample_face(f) for f in groove])
     elif params.style == "V":
         local = prism(_v_profile(radius, params), z0, z1)
-        groove = [f for f in local.faces() if f.geom_type.name == "PLANE"
-                  and abs(abs(np.array(tuple(f.normal_at(f.center())))[0]) - _S45) < 1e-6]
+        groove = [
+            f
+            for f in local.faces()
+            if f.geom_type.name == "PLANE" and abs(abs(np.array(tuple(f.normal_at(f.center())))[0]) - _S45) < 1e-6
+        ]
         zs = np.linspace(z0, z1, 25)
-        pts_local = np.concatenate([np.stack([np.full_like(zs, s * radius * _S45),
-                                              np.full_like(zs, -radius * _S45), zs], 1) for s in (-1, 1)])
+        pts_local = np.concatenate(
+            [np.stack([np.full_like(zs, s * radius * _S45), np.full_like(zs, -radius * _S45), zs], 1) for s in (-1, 1)]
+        )
     else:
         raise ValueError(f"unknown cradle style {params.style!r}: expected 'U' or 'V'")
     m = np.stack([np.array(tuple(plane.x_dir)), np.array(tuple(plane.y_dir)), np.array(tuple(plane.z_dir))])
     pts = pts_local @ m + np.array(tuple(plane.origin))
-    return Fixture(FixtureKind.CRADLE, place(local, plane), [place(f, plane) for f in groove], pts, ref, fmap,
-                   params, [ref.cylinder_face] * len(groove),
-                   {"length_mm": length, "groove_radius_mm": radius, "tilt_deg": tilt})
+    return Fixture(
+        FixtureKind.CRADLE,
+        place(local, plane),
+        [place(f, plane) for f in groove],
+        pts,
+        ref,
+        fmap,
+        params,
+        [ref.cylinder_face] * len(groove),
+        {"length_mm": length, "groove_radius_mm": radius, "tilt_deg": tilt},
+    )

@@ -93,8 +93,11 @@ def design_fixture(
     fmap = output_frame(vbrep, frame)
     if kind is FixtureKind.NEST:
         return design_nest(vbrep, fmap, params, ground_height)
-    refs = [reference] if reference is not None else select_references(
-        vbrep, [REFERENCE_OF[kind]], min_confidence, selection or SelectionConfig())
+    refs = (
+        [reference]
+        if reference is not None
+        else select_references(vbrep, [REFERENCE_OF[kind]], min_confidence, selection or SelectionConfig())
+    )
     errors = []
     for ref in refs:  # best first; the geometry checks of the generator may still refuse one
         p = sigma_clearance(params, mating_sigma_mm(vbrep, ref), clearance_k) if auto else params

@@ -80,8 +80,9 @@ def prism(profile_xy: np.ndarray, z0: float, z1: float) -> Solid:
     return Solid.extrude(face, Vector(0, 0, float(z1 - z0)))
 
 
-def faces_facing(solid: Shape, normal: np.ndarray, point_on: np.ndarray | None = None,
-                 tol_deg: float = 1.0, dist_tol: float = 1e-3) -> list[Face]:
+def faces_facing(
+    solid: Shape, normal: np.ndarray, point_on: np.ndarray | None = None, tol_deg: float = 1.0, dist_tol: float = 1e-3
+) -> list[Face]:
     """Planar faces of ``solid`` whose outward normal is ``normal`` (and whose plane holds ``point_on``)."""
     n = unit(normal)
     out = []

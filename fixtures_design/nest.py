@@ -49,8 +49,13 @@ class Footprint:
     axes: np.ndarray
 
 
-def footprint(vbrep: VBRep, pixel: float = 0.05, min_area_frac: float = 0.01,
-              ground_height: float | None = None, grow: float = 0.0) -> Footprint:
+def footprint(
+    vbrep: VBRep,
+    pixel: float = 0.05,
+    min_area_frac: float = 0.01,
+    ground_height: float | None = None,
+    grow: float = 0.0,
+) -> Footprint:
     """Project the VB-Rep face meshes onto the part's ground plane and trace the outer outlines (mm).
 
     grow: mm the outlines are pushed outwards (a disc dilation of the raster, plus one pixel so the traced
@@ -95,8 +100,9 @@ def footprint(vbrep: VBRep, pixel: float = 0.05, min_area_frac: float = 0.01,
     return Footprint(outlines, zmin if ground_height is None else 1000.0 * ground_height, axes)
 
 
-def design_nest(vbrep: VBRep, fmap: FrameMap, params: NestParams = NestParams(),
-                ground_height: float | None = None) -> Fixture:
+def design_nest(
+    vbrep: VBRep, fmap: FrameMap, params: NestParams = NestParams(), ground_height: float | None = None
+) -> Fixture:
     """A nest plate for the part of ``vbrep``, in the output frame of ``fmap`` (mm).
 
     ground_height: the ground's height (metres along the part's Z, camera origin); default: lowest mesh point.
@@ -135,6 +141,14 @@ def design_nest(vbrep: VBRep, fmap: FrameMap, params: NestParams = NestParams(),
     mating = [place(f, plane) for f in walls]
     pts = np.concatenate([sample_face(f, grid=2 if len(mating) > 50 else 8) for f in mating])
     solid = place(local, plane)
-    return Fixture(FixtureKind.NEST, solid, mating, pts, fp, fmap, params, [-1] * len(mating),
-                   {"pocket_depth_mm": params.depth, "outlines": len(fp.outlines), "convex_hull_fallbacks": hulls})
-
+    return Fixture(
+        FixtureKind.NEST,
+        solid,
+        mating,
+        pts,
+        fp,
+        fmap,
+        params,
+        [-1] * len(mating),
+        {"pocket_depth_mm": params.depth, "outlines": len(fp.outlines), "convex_hull_fallbacks": hulls},
+    )

@@ -56,9 +56,14 @@ def face_primitive(face: object) -> dict | None:
         return {"type": "plane", "params": {"origin": (_xyz(ax.Location()) * M_PER_MM).tolist(), "normal": n.tolist()}}
     if s.GetType() == GeomAbs_Cylinder:
         c = s.Cylinder()
-        return {"type": "cylinder", "params": {"origin": (_xyz(c.Axis().Location()) * M_PER_MM).tolist(),
-                                               "axis": _xyz(c.Axis().Direction()).tolist(),
-                                               "radius": c.Radius() * M_PER_MM}}
+        return {
+            "type": "cylinder",
+            "params": {
+                "origin": (_xyz(c.Axis().Location()) * M_PER_MM).tolist(),
+                "axis": _xyz(c.Axis().Direction()).tolist(),
+                "radius": c.Radius() * M_PER_MM,
+            },
+        }
     return None
 
 
@@ -81,6 +86,10 @@ def edge_curve(edge: object, n: int = 24) -> tuple[np.ndarray, dict | None]:
         return poly, {"kind": "line", "origin": poly[0] * M_PER_MM, "direction": d / np.linalg.norm(d)}
     if c.GetType() == GeomAbs_Circle:
         circ = c.Circle()
-        return poly, {"kind": "circle", "center": _xyz(circ.Location()) * M_PER_MM,
-                      "axis": _xyz(circ.Axis().Direction()), "radius": circ.Radius() * M_PER_MM}
+        return poly, {
+            "kind": "circle",
+            "center": _xyz(circ.Location()) * M_PER_MM,
+            "axis": _xyz(circ.Axis().Direction()),
+            "radius": circ.Radius() * M_PER_MM,
+        }
     return poly, {"kind": "intersection"}

@@ -41,8 +41,9 @@ def design_pin(ref: CircleReference, fmap: FrameMap, params: PinParams = PinPara
     c = params.clearance
     r = fmap.length(ref.radius) - c
     if r <= 0:
-        raise ValueError(f"hole e{ref.edge_id} radius {fmap.length(ref.radius):.2f} mm is not above the "
-                         f"clearance {c} mm")
+        raise ValueError(
+            f"hole e{ref.edge_id} radius {fmap.length(ref.radius):.2f} mm is not above the clearance {c} mm"
+        )
     depth = min(params.depth, fmap.length(ref.extent) - c)
     if depth <= 0:
         raise ValueError(f"hole e{ref.edge_id} shows only {fmap.length(ref.extent):.2f} mm of depth")
@@ -61,5 +62,14 @@ def design_pin(ref: CircleReference, fmap: FrameMap, params: PinParams = PinPara
     mating: list[Face] = [place(f, plane) for f in side + under]
     pts = np.concatenate([sample_face(f) for f in mating])
     refs = [ref.cylinder_face] * len(side) + [ref.plane_face] * len(under)
-    return Fixture(FixtureKind.PIN, place(local, plane), mating, pts, ref, fmap, params, refs,
-                   {"pin_radius_mm": r, "depth_mm": depth, "flange_radius_mm": flange_r})
+    return Fixture(
+        FixtureKind.PIN,
+        place(local, plane),
+        mating,
+        pts,
+        ref,
+        fmap,
+        params,
+        refs,
+        {"pin_radius_mm": r, "depth_mm": depth, "flange_radius_mm": flange_r},
+    )

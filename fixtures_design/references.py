@@ -179,8 +179,9 @@ def _inside_triangles(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
     a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
 
     def cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        return (p[None, :, 0] - o[None, :, 0]) * (q[:, None, 1] - o[None, :, 1]) - (
-            p[None, :, 1] - o[None, :, 1]) * (q[:, None, 0] - o[None, :, 0])
+        return (p[None, :, 0] - o[None, :, 0]) * (q[:, None, 1] - o[None, :, 1]) - (p[None, :, 1] - o[None, :, 1]) * (
+            q[:, None, 0] - o[None, :, 0]
+        )
 
     d1, d2, d3 = cross(a, b, points), cross(b, c, points), cross(c, a, points)
     neg = (d1 < 0) | (d2 < 0) | (d3 < 0)
@@ -253,8 +254,7 @@ def _dihedral(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> DihedralReference | 
         inside = (along >= -margin) & (along <= length + margin)
         perp = rel[inside] - np.outer(along[inside], d)
         depths.append(float(np.linalg.norm(perp, axis=1).max()) if inside.any() else 0.0)
-    return DihedralReference(e.id, float(e.confidence), (f0.id, f1.id), a, b, (n0, n1),
-                             (depths[0], depths[1]), angle)
+    return DihedralReference(e.id, float(e.confidence), (f0.id, f1.id), a, b, (n0, n1), (depths[0], depths[1]), angle)
 
 
 def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
@@ -308,8 +308,9 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
         for f in cfg.rim_probes:
             hit |= _inside_triangles(full * (1 + f), v2[tri])
         if hit.mean() < cfg.min_hole_closure:
-            return (f"the plane surrounds only {100 * hit.mean():.0f}% of the rim: an open arc (a slot's end?), "
-                    "not a hole")
+            return (
+                f"the plane surrounds only {100 * hit.mean():.0f}% of the rim: an open arc (a slot's end?), not a hole"
+            )
         land = radius
         for f in np.arange(1.05, 4.0, 0.05):
             if not _inside_triangles(full * f, v2[tri]).all():
@@ -321,15 +322,14 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     # boss's base (plane outside) or a blind hole's floor (plane inside).
     kind = ReferenceKind.BOSS if front != inside else ReferenceKind.HOLE
     into = n if front else -n
-    site = {(False, False): "rim", (True, True): "floor", (True, False): "base", (False, True): "cap"}[
-        (front, inside)]
+    site = {(False, False): "rim", (True, True): "floor", (True, False): "base", (False, True): "cap"}[(front, inside)]
     extent = float(np.abs(h).max())
-    return CircleReference(e.id, float(e.confidence), kind, cyl.id, pln.id, center, into, radius, n, extent,
-                           site, land)
+    return CircleReference(e.id, float(e.confidence), kind, cyl.id, pln.id, center, into, radius, n, extent, site, land)
 
 
-def _select(vb: VBRep, wanted: set[ReferenceKind], min_confidence: float,
-            cfg: SelectionConfig) -> tuple[list[Reference], _Audit]:
+def _select(
+    vb: VBRep, wanted: set[ReferenceKind], min_confidence: float, cfg: SelectionConfig
+) -> tuple[list[Reference], _Audit]:
     refs: list[Reference] = []
     audit = _Audit()
     for e in vb.edges:
@@ -383,7 +383,6 @@ def select_references(
     return refs
 
 
-def explain_edges(vbrep: VBRep, min_confidence: float = 0.5,
-                  config: SelectionConfig = SelectionConfig()) -> str:
+def explain_edges(vbrep: VBRep, min_confidence: float = 0.5, config: SelectionConfig = SelectionConfig()) -> str:
     """One line per edge saying whether (and as what) it qualifies as a mating reference."""
     return "\n".join(_select(vbrep, set(ReferenceKind), min_confidence, config)[1].lines)

@@ -59,8 +59,9 @@ def ground_height(scan: object, vbrep: VBRep, ring_px: int = 25) -> float | None
 STEP_SUFFIXES = (".step", ".stp")
 
 
-def load_vbrep(source: str | Path, segmentation: str = "learned",
-               roi: tuple[int, int, int, int] | None = None) -> tuple[VBRep, object | None]:
+def load_vbrep(
+    source: str | Path, segmentation: str = "learned", roi: tuple[int, int, int, int] | None = None
+) -> tuple[VBRep, object | None]:
     """A VB-Rep from a scan folder (reconstructed, within ``roi`` pixels x0, y0, x1, y1 when given), a VB-Rep JSON
     file or a ``v2c to-step`` STEP file (`fixtures_design.step_input`); the loaded scan (or None)."""
     path = Path(source)
@@ -101,8 +102,7 @@ def fixture_for_scan(
     if from_step:
         frame = Frame.CAMERA  # the VB-Rep is in the file's frame already
     ground = ground_height(scan, vbrep) if scan is not None else None
-    fixture = design_fixture(vbrep, kind, params, frame=frame, min_confidence=min_confidence,
-                             ground_height=ground)
+    fixture = design_fixture(vbrep, kind, params, frame=frame, min_confidence=min_confidence, ground_height=ground)
     if part == "true":
         gt = source / "gt" / "part.step"
         if not gt.exists():

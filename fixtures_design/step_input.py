@@ -40,7 +40,7 @@ def _edge_type(name: str | None, layers: tuple[str, ...]) -> tuple[EdgeType, flo
     for layer in layers:
         if layer.startswith("edge_"):
             try:
-                return EdgeType(layer[len("edge_"):]), 0.0
+                return EdgeType(layer[len("edge_") :]), 0.0
             except ValueError:
                 continue
     return None
@@ -67,8 +67,7 @@ def vbrep_from_step(path: str | Path, deflection_mm: float = 0.2) -> VBRep:
         v, t = face_mesh(f)
         d = np.asarray(prim["params"].get("normal", prim["params"].get("axis")), float)
         face_ids.append((f, len(faces)))
-        faces.append(VFace(len(faces), len(faces) + 1, prim, axis_class(d, np.eye(3)).value, [], v * M_PER_MM, t,
-                           1.0))
+        faces.append(VFace(len(faces), len(faces) + 1, prim, axis_class(d, np.eye(3)).value, [], v * M_PER_MM, t, 1.0))
     anc = TopTools_IndexedDataMapOfShapeListOfShape()
     TopExp.MapShapesAndAncestors_s(shape, TopAbs_EDGE, TopAbs_FACE, anc)
     edges: list[VEdge] = []
@@ -93,14 +92,31 @@ def vbrep_from_step(path: str | Path, deflection_mm: float = 0.2) -> VBRep:
         poly = poly_mm * M_PER_MM
         v0 = len(vertices)
         closed = bool(np.linalg.norm(poly[0] - poly[-1]) < 1e-9)
-        for p in (poly[:1] if closed else (poly[0], poly[-1])):
+        for p in poly[:1] if closed else (poly[0], poly[-1]):
             vertices.append(VVertex(len(vertices), VertexKind.OTHER, np.asarray(p).reshape(3), np.zeros(2)))
-        edges.append(VEdge(len(edges), etype, conf, tuple(sorted(owners)), poly, v0, v0 if closed else v0 + 1,
-                           curve if etype is EdgeType.INTERSECTION else None))
+        edges.append(
+            VEdge(
+                len(edges),
+                etype,
+                conf,
+                tuple(sorted(owners)),
+                poly,
+                v0,
+                v0 if closed else v0 + 1,
+                curve if etype is EdgeType.INTERSECTION else None,
+            )
+        )
     pts = np.concatenate([f.mesh_vertices for f in faces]) if faces else np.zeros((1, 3))
-    return VBRep(faces, edges, vertices, frame=np.eye(3), K=np.eye(3), image_size=(0, 0),
-                 scale=float(np.ptp(pts, axis=0).max()),
-                 meta={"source": str(path), "products": rs.products, "outward_normals": True})
+    return VBRep(
+        faces,
+        edges,
+        vertices,
+        frame=np.eye(3),
+        K=np.eye(3),
+        image_size=(0, 0),
+        scale=float(np.ptp(pts, axis=0).max()),
+        meta={"source": str(path), "products": rs.products, "outward_normals": True},
+    )
 
 
 def step_shape(path: str | Path) -> Shape:

@@ -33,8 +33,9 @@ class MatingCheck:
     n_points: int
 
 
-def check_mating(fixture: Fixture, true_part: Shape, true_faces: dict[int, Face] | None = None,
-                 max_points_per_face: int = 60) -> MatingCheck:
+def check_mating(
+    fixture: Fixture, true_part: Shape, true_faces: dict[int, Face] | None = None, max_points_per_face: int = 60
+) -> MatingCheck:
     """Distance from each mating face to what it references on the true part (output frame, mm).
 
     true_faces: VB-Rep face id -> the true part's face it is (moved into the output frame); a mating face whose

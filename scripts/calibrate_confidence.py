@@ -37,8 +37,15 @@ def label_scan(args: tuple[str, str]) -> list[dict]:
     scan = load_scan(path)
     v = reconstruct(scan, seg)
     ok = edge_correctness(v, scan)
-    return [{"type": e.type.value, "raw": float(e.confidence_raw if e.confidence_raw is not None else e.confidence),
-             "ok": int(k), "tangent": bool(e.tangent)} for e, k in zip(v.edges, ok)]
+    return [
+        {
+            "type": e.type.value,
+            "raw": float(e.confidence_raw if e.confidence_raw is not None else e.confidence),
+            "ok": int(k),
+            "tangent": bool(e.tangent),
+        }
+        for e, k in zip(v.edges, ok)
+    ]
 
 
 def collect(dirs: list[Path], seg: str, records: dict, jobs: int) -> list[dict]:
@@ -54,8 +61,11 @@ def collect(dirs: list[Path], seg: str, records: dict, jobs: int) -> list[dict]:
 
 
 def arrays(rows: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return (np.array([r["type"] for r in rows], object), np.array([r["raw"] for r in rows], float),
-            np.array([r["ok"] for r in rows], float))
+    return (
+        np.array([r["type"] for r in rows], object),
+        np.array([r["raw"] for r in rows], float),
+        np.array([r["ok"] for r in rows], float),
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -82,23 +92,36 @@ def main(argv: list[str] | None = None) -> int:
     a.records.parent.mkdir(parents=True, exist_ok=True)
     a.records.write_text(json.dumps(records))
     t, raw, ok = arrays(tr)
-    cmap = fit_map(t, raw, ok, meta={
-        "fitted_on": f"v2c bench cache seed {a.train_seed}, scans 0..{a.train_n - 1} (640x480, sensor noise)",
-        "segmentation": a.segmentation, "edges": len(tr), "label": "v2c.bench.vbrep.edge_correctness",
-        "tol_px": 3.0, "method": "isotonic (pool-adjacent-violators) per edge type on the raw confidence"})
+    cmap = fit_map(
+        t,
+        raw,
+        ok,
+        meta={
+            "fitted_on": f"v2c bench cache seed {a.train_seed}, scans 0..{a.train_n - 1} (640x480, sensor noise)",
+            "segmentation": a.segmentation,
+            "edges": len(tr),
+            "label": "v2c.bench.vbrep.edge_correctness",
+            "tol_px": 3.0,
+            "method": "isotonic (pool-adjacent-violators) per edge type on the raw confidence",
+        },
+    )
     for name, rows in (("train", tr), ("val", va)):
         if not rows:
             continue
         t, raw, ok = arrays(rows)
         cal = np.array([cmap.apply(ti, ri) for ti, ri in zip(t, raw)])
         for sel_name, sel in (("intersection", t == "intersection"), ("all", np.ones(len(t), bool))):
-            print(f"{name} {sel_name}: {int(sel.sum())} edges, right {ok[sel].mean():.3f}, "
-                  f"ECE raw {expected_calibration_error(raw[sel], ok[sel]):.4f} "
-                  f"calibrated {expected_calibration_error(cal[sel], ok[sel]):.4f}")
+            print(
+                f"{name} {sel_name}: {int(sel.sum())} edges, right {ok[sel].mean():.3f}, "
+                f"ECE raw {expected_calibration_error(raw[sel], ok[sel]):.4f} "
+                f"calibrated {expected_calibration_error(cal[sel], ok[sel]):.4f}"
+            )
         cmap.meta[f"ece_{name}"] = {
             "intersection_raw": expected_calibration_error(raw[t == "intersection"], ok[t == "intersection"]),
             "intersection_calibrated": expected_calibration_error(cal[t == "intersection"], ok[t == "intersection"]),
-            "all_raw": expected_calibration_error(raw, ok), "all_calibrated": expected_calibration_error(cal, ok)}
+            "all_raw": expected_calibration_error(raw, ok),
+            "all_calibrated": expected_calibration_error(cal, ok),
+        }
     cmap.save(a.out)
     print(f"wrote {a.out}")
     return 0

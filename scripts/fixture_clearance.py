@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     from v2c.scan import load_scan
 
     ks = [float(k) for k in a.k.split(",")]
-    dirs = prepare_scans(BenchConfig(n=a.start + a.n, seed=a.seed, jobs=1), progress=False)[a.start:]
+    dirs = prepare_scans(BenchConfig(n=a.start + a.n, seed=a.seed, jobs=1), progress=False)[a.start :]
     rows = []
     for d in dirs:
         scan = load_scan(d)
@@ -45,24 +45,38 @@ def main(argv: list[str] | None = None) -> int:
         for kind in a.kinds.split(","):
             for k in ks:
                 try:
-                    fx = design_fixture(v, kind, None if k > 0 else DEFAULT_PARAMS[FixtureKind(kind)],
-                                        clearance_k=k)
+                    fx = design_fixture(v, kind, None if k > 0 else DEFAULT_PARAMS[FixtureKind(kind)], clearance_k=k)
                 except (NoReferenceError, ValueError):
                     break
                 tp = true_part(d / "gt" / "part.step", fx.fmap)
                 vol, share = interference(fx, tp)
                 sig = mating_sigma_mm(v, fx.reference)
-                rows.append({"scan": d.name, "family": scan.gt.meta.get("family"), "kind": kind, "k": k,
-                             "sigma_mm": sig, "clearance": fx.params.clearance, "cut_mm3": vol, "cut_share": share})
-                print(f"{d.name} {kind:6s} k={k:.0f} sigma {sig if sig is None else round(sig, 3)} clearance "
-                      f"{fx.params.clearance:.2f} mm cut {vol:.1f} mm^3 ({100 * share:.2f} %)", flush=True)
+                rows.append(
+                    {
+                        "scan": d.name,
+                        "family": scan.gt.meta.get("family"),
+                        "kind": kind,
+                        "k": k,
+                        "sigma_mm": sig,
+                        "clearance": fx.params.clearance,
+                        "cut_mm3": vol,
+                        "cut_share": share,
+                    }
+                )
+                print(
+                    f"{d.name} {kind:6s} k={k:.0f} sigma {sig if sig is None else round(sig, 3)} clearance "
+                    f"{fx.params.clearance:.2f} mm cut {vol:.1f} mm^3 ({100 * share:.2f} %)",
+                    flush=True,
+                )
     for kind in a.kinds.split(","):
         for k in ks:
             r = [x for x in rows if x["kind"] == kind and x["k"] == k]
             if r:
                 cut = np.mean([x["cut_share"] > a.cut_share for x in r])
-                print(f"{kind} k={k:g}: {len(r)} designs, {100 * cut:.0f} % cut > {100 * a.cut_share:.1f} % of the "
-                      f"fixture, median clearance {np.median([x['clearance'] for x in r]):.2f} mm")
+                print(
+                    f"{kind} k={k:g}: {len(r)} designs, {100 * cut:.0f} % cut > {100 * a.cut_share:.1f} % of the "
+                    f"fixture, median clearance {np.median([x['clearance'] for x in r]):.2f} mm"
+                )
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=1)

@@ -89,14 +89,18 @@ def main(argv: list[str]) -> int:
     fix, hashes = "--fix" in argv, "--hashes" in argv
     dists = ocp_distributions()
     if KEEP not in dists:
-        print(f"[ocp] {KEEP} is not installed (found: {sorted(dists) or 'none'}); cadquery 2.8.0 needs it",
-              file=sys.stderr)
+        print(
+            f"[ocp] {KEEP} is not installed (found: {sorted(dists) or 'none'}); cadquery 2.8.0 needs it",
+            file=sys.stderr,
+        )
         return 1
     keep = dists[KEEP]
     others = {n: d for n, d in dists.items() if n != KEEP}
     if others and not fix:
-        print(f"[ocp] {len(dists)} distributions own OCP/: {sorted(dists)}; run scripts/ocp_single.py --fix",
-              file=sys.stderr)
+        print(
+            f"[ocp] {len(dists)} distributions own OCP/: {sorted(dists)}; run scripts/ocp_single.py --fix",
+            file=sys.stderr,
+        )
         return 1
     for name, d in others.items():
         version = d.version  # read before its metadata goes
@@ -106,8 +110,19 @@ def main(argv: list[str]) -> int:
         bad = mismatched_files(keep)
         if bad:
             print(f"[ocp] {len(bad)} OCP/ files differ from {KEEP} {keep.version} (e.g. {bad[0]}): reinstalling it")
-            subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--force-reinstall",
-                            f"{KEEP}=={keep.version}"], check=True)
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "pip",
+                    "install",
+                    "-q",
+                    "--no-deps",
+                    "--force-reinstall",
+                    f"{KEEP}=={keep.version}",
+                ],
+                check=True,
+            )
             md_dists = ocp_distributions()
             bad = mismatched_files(md_dists[KEEP])
             if bad:

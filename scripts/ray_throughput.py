@@ -81,18 +81,25 @@ def main() -> int:
     args.out.mkdir(parents=True)
     t = time.perf_counter()
     ray.init(num_cpus=2, include_dashboard=False)
-    record: dict = {"ray": ray.__version__, "cpus": os.cpu_count(), "size": [w, h],
-                    "segmentation": args.segmentation, "ray_init_s": time.perf_counter() - t,
-                    "started_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())}
+    record: dict = {
+        "ray": ray.__version__,
+        "cpus": os.cpu_count(),
+        "size": [w, h],
+        "segmentation": args.segmentation,
+        "ray_init_s": time.perf_counter() - t,
+        "started_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
+    }
 
     def step_task(out: Path):
-        return partial(_to_step_task, out=out, batch=True, frame="part", segmentation=args.segmentation,
-                       extras=True, roi=None)
+        return partial(
+            _to_step_task, out=out, batch=True, frame="part", segmentation=args.segmentation, extras=True, roi=None
+        )
 
     # warm-up: both workers import the stack and load the model before anything is timed
     warm = generate_dataset(args.out / "warm", 4, 99, cfg, progress=False, executor=ExecutorConfig("ray", jobs=2))
-    assert all(exc is None for _, _, exc in run_tasks(step_task(args.out / "warm_steps"), warm,
-                                                     ExecutorConfig("ray", jobs=2)))
+    assert all(
+        exc is None for _, _, exc in run_tasks(step_task(args.out / "warm_steps"), warm, ExecutorConfig("ray", jobs=2))
+    )
     runs: dict = {}
     for workers in (1, 2):
         where = ExecutorConfig("ray", jobs=workers)
@@ -111,13 +118,23 @@ def main() -> int:
         steps_s = time.perf_counter() - t
         failed = [str(item) for item, _, exc in res if exc is not None]
         step_cpu = [r[1] for _, r, exc in res if exc is None]
-        runs[workers] = {"synth_s": synth_s, "synth_scans_per_s": args.synth / synth_s, "synth_load1": load,
-                         "synth_cpu_s_median": _median(synth_cpu), "synth_failed": synth_failed,
-                         "to_step_s": steps_s, "to_step_scans_per_s": args.to_step / steps_s,
-                         "to_step_load1": load2, "to_step_cpu_s_median": _median(step_cpu),
-                         "to_step_failed": failed}
-        print(f"{workers} worker(s): synth {args.synth} scans {synth_s:.1f} s (load {load:.2f}), "
-              f"to-step {args.to_step} scans {steps_s:.1f} s (load {load2:.2f})", file=sys.stderr)
+        runs[workers] = {
+            "synth_s": synth_s,
+            "synth_scans_per_s": args.synth / synth_s,
+            "synth_load1": load,
+            "synth_cpu_s_median": _median(synth_cpu),
+            "synth_failed": synth_failed,
+            "to_step_s": steps_s,
+            "to_step_scans_per_s": args.to_step / steps_s,
+            "to_step_load1": load2,
+            "to_step_cpu_s_median": _median(step_cpu),
+            "to_step_failed": failed,
+        }
+        print(
+            f"{workers} worker(s): synth {args.synth} scans {synth_s:.1f} s (load {load:.2f}), "
+            f"to-step {args.to_step} scans {steps_s:.1f} s (load {load2:.2f})",
+            file=sys.stderr,
+        )
     record["runs"] = runs
     record["synth_speedup"] = runs[1]["synth_s"] / runs[2]["synth_s"]
     record["to_step_speedup"] = runs[1]["to_step_s"] / runs[2]["to_step_s"]
@@ -126,8 +143,9 @@ def main() -> int:
     record["load1_end"] = os.getloadavg()[0]
     record["same_synth_files"] = _digest(args.out / "synth_1") == _digest(args.out / "synth_2")
     # STEP headers carry a timestamp and the VB-Rep JSON timings: compare the figures byte for byte
-    record["same_to_step_figures"] = (_digest(args.out / "steps_1", (".step", ".json"))
-                                      == _digest(args.out / "steps_2", (".step", ".json")))
+    record["same_to_step_figures"] = _digest(args.out / "steps_1", (".step", ".json")) == _digest(
+        args.out / "steps_2", (".step", ".json")
+    )
     peak = dict(ray.get([ray.remote(_peak_rss_mib).remote(i) for i in range(2)]))
     record["worker_peak_rss_mib"] = sorted(peak.values())
     record["finished_utc"] = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())

@@ -44,8 +44,13 @@ def tiny_depth_m() -> np.ndarray:
     return (n @ TINY.plane_point) / (rays @ n)
 
 
-def camera_dict(form: str = "v2c", *, K: np.ndarray | None = None, depth_scale: float | None = None,
-                size: tuple[int, int] | None = None) -> dict:
+def camera_dict(
+    form: str = "v2c",
+    *,
+    K: np.ndarray | None = None,
+    depth_scale: float | None = None,
+    size: tuple[int, int] | None = None,
+) -> dict:
     """camera.json content in one of the accepted forms: "v2c", "v2c-flat", "open3d", "bop", "bop-file"."""
     K = TINY.K if K is None else np.asarray(K, float)
     ds = TINY.depth_scale if depth_scale is None else depth_scale
@@ -59,15 +64,26 @@ def camera_dict(form: str = "v2c", *, K: np.ndarray | None = None, depth_scale: 
     if form == "bop":  # BOP scene_camera entry: depth_scale in millimetres per unit
         return {"cam_K": K.reshape(-1).tolist(), "depth_scale": ds * 1000.0}
     if form == "bop-file":  # a whole scene_camera.json keyed by image id: the first entry is used
-        entry = {"cam_K": K.reshape(-1).tolist(), "depth_scale": ds * 1000.0,
-                 "cam_R_w2c": np.eye(3).reshape(-1).tolist(), "cam_t_w2c": [0.0, 0.0, 0.0]}
+        entry = {
+            "cam_K": K.reshape(-1).tolist(),
+            "depth_scale": ds * 1000.0,
+            "cam_R_w2c": np.eye(3).reshape(-1).tolist(),
+            "cam_t_w2c": [0.0, 0.0, 0.0],
+        }
         other = dict(entry, cam_K=(K * 2).reshape(-1).tolist())
         return {"7": other, "3": entry}
     raise ValueError(form)
 
 
-def write_tiny_scan(folder: Path, *, camera: str = "v2c", depth_format: str = "png", color_ext: str = "png",
-                    mask: bool = False, gt: bool = False) -> Path:
+def write_tiny_scan(
+    folder: Path,
+    *,
+    camera: str = "v2c",
+    depth_format: str = "png",
+    color_ext: str = "png",
+    mask: bool = False,
+    gt: bool = False,
+) -> Path:
     """Write the tiny scan into ``folder`` (created) and return it."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -102,14 +118,29 @@ def write_tiny_scan(folder: Path, *, camera: str = "v2c", depth_format: str = "p
         clean = np.where(faces > 0, tiny_depth_m(), 0.0)
         cv2.imwrite(str(g / "depth_clean.png"), np.round(clean / TINY.depth_scale).astype(np.uint16))
         prims = [
-            {"id": 0, "pixel_value": 1, "type": "plane", "axis_label": "U",
-             "params": {"origin": TINY.plane_point.tolist(), "normal": TINY.plane_normal.tolist()}},
-            {"id": 1, "pixel_value": 2, "type": "cylinder", "axis_label": "Z",  # hidden face
-             "params": {"origin": [0.0, 0.0, 0.7], "axis": [0.0, 0.0, 1.0], "radius": 0.01}},
+            {
+                "id": 0,
+                "pixel_value": 1,
+                "type": "plane",
+                "axis_label": "U",
+                "params": {"origin": TINY.plane_point.tolist(), "normal": TINY.plane_normal.tolist()},
+            },
+            {
+                "id": 1,
+                "pixel_value": 2,
+                "type": "cylinder",
+                "axis_label": "Z",  # hidden face
+                "params": {"origin": [0.0, 0.0, 0.7], "axis": [0.0, 0.0, 1.0], "radius": 0.01},
+            },
         ]
         (g / "primitives.json").write_text(json.dumps(prims))
-        meta = {"generator": "tests/conftest.py", "seed": 0, "family": "fixture-plane",
-                "part_size_m": TINY.part_size_m, "axes_cam": np.eye(3).tolist()}
+        meta = {
+            "generator": "tests/conftest.py",
+            "seed": 0,
+            "family": "fixture-plane",
+            "part_size_m": TINY.part_size_m,
+            "axes_cam": np.eye(3).tolist(),
+        }
         (g / "meta.json").write_text(json.dumps(meta))
         (g / "part.step").write_text("ISO-10303-21;\nEND-ISO-10303-21;\n")  # a path only; never parsed here
     return folder
@@ -131,8 +162,10 @@ def scan_copy(tiny_scan_dir: Path, tmp_path: Path) -> Path:
 def shared_data() -> Path:
     """../shared/data (real frames, CAD parts); skipped with a reason when the folder is absent."""
     if not SHARED_DATA.is_dir():
-        pytest.skip(f"shared test data not found at {SHARED_DATA} (expected next to the repository; "
-                    "set V2C_SHARED_DATA to use another place)")
+        pytest.skip(
+            f"shared test data not found at {SHARED_DATA} (expected next to the repository; "
+            "set V2C_SHARED_DATA to use another place)"
+        )
     return SHARED_DATA
 
 
@@ -154,5 +187,4 @@ def real_scan_dirs() -> list[Path]:
 def listing(folder: Path) -> dict[str, tuple[int, int]]:
     """Recursive {relative path: (size, mtime_ns)} of a folder, to prove a command wrote nothing."""
     folder = Path(folder)
-    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
-            for p in sorted(folder.rglob("*"))}
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*"))}

@@ -117,9 +117,16 @@ def test_missing_and_spurious_faces(box):
     Kinv = np.linalg.inv(scan.K)
     corners = np.array([[5, 5, 1], [60, 5, 1], [60, 60, 1], [5, 60, 1]], float) @ Kinv.T * z
     assert not np.asarray(scan.gt.faces)[5:61, 5:61].any()
-    extra.faces.append(VFace(id=3, instance=99, primitive={"type": "plane", "params": {
-        "origin": corners[0].tolist(), "normal": [0.0, 0.0, -1.0]}}, axis_label="U", mesh_vertices=corners,
-        mesh_triangles=np.array([[0, 1, 2], [0, 2, 3]])))
+    extra.faces.append(
+        VFace(
+            id=3,
+            instance=99,
+            primitive={"type": "plane", "params": {"origin": corners[0].tolist(), "normal": [0.0, 0.0, -1.0]}},
+            axis_label="U",
+            mesh_vertices=corners,
+            mesh_triangles=np.array([[0, 1, 2], [0, 2, 3]]),
+        )
+    )
     m = M.scan_metrics(extra, scan, CFG)
     assert m["precision"] == pytest.approx(3 / 4) and m["recall"] == 1.0 and m["n_pred"] == 4
 
@@ -128,8 +135,16 @@ def test_hidden_face_changes_only_chamfer_all(box):
     scan, vb = box
     hidden = deepcopy(vb)
     f = hidden.faces[2]
-    hidden.faces.append(VFace(id=3, instance=98, primitive=f.primitive, axis_label=f.axis_label,
-                              mesh_vertices=f.mesh_vertices * 1.3, mesh_triangles=f.mesh_triangles))
+    hidden.faces.append(
+        VFace(
+            id=3,
+            instance=98,
+            primitive=f.primitive,
+            axis_label=f.axis_label,
+            mesh_vertices=f.mesh_vertices * 1.3,
+            mesh_triangles=f.mesh_triangles,
+        )
+    )
     m = M.scan_metrics(hidden, scan, CFG)
     m0 = M.scan_metrics(vb, scan, CFG)
     # the copy lies behind the original along the same rays: it covers no pixel, so precision ignores it,
@@ -159,9 +174,9 @@ def test_generated_scan_ideal_vbrep(generated):
 
 
 def test_box_angles_and_can_radius_on_hand_built_vbreps():
-    from scenes.vbrep import box_corner, cylinder_upright
-
     from v2c.bench import real
+
+    from scenes.vbrep import box_corner, cylinder_upright
 
     b = R.box_angles(box_corner())
     assert len(b["pairs"]) == 3
@@ -176,9 +191,12 @@ def test_box_angles_and_can_radius_on_hand_built_vbreps():
     n = np.asarray(big.primitive["params"]["normal"], float)
     t = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
     tilted = np.cos(np.deg2rad(5)) * n + np.sin(np.deg2rad(5)) * t / np.linalg.norm(t)
-    piece = replace(big, id=max(f.id for f in box.faces) + 1,
-                    primitive={"type": "plane", "params": {**big.primitive["params"], "normal": tilted.tolist()}},
-                    mesh_vertices=0.9 * np.asarray(big.mesh_vertices, float))
+    piece = replace(
+        big,
+        id=max(f.id for f in box.faces) + 1,
+        primitive={"type": "plane", "params": {**big.primitive["params"], "normal": tilted.tolist()}},
+        mesh_vertices=0.9 * np.asarray(big.mesh_vertices, float),
+    )
     box.faces.append(piece)
     b2 = R.box_angles(box)
     assert len(b2["pairs"]) == 3 and piece.id not in {i for p in b2["pairs"] for i in p["faces"]}
@@ -201,8 +219,17 @@ def test_real_rois_fit_their_frames(shared_data):
 
 
 def test_table_layout_and_paper_columns():
-    summ = {"scans": 2, "failed": 0, "errors": [], "chamfer": 0.01, "alignment": 0.02, "precision": 0.9,
-            "recall": 0.95, "runtime": 3.0, "runtime_stages": {"fit": 1.0}}
+    summ = {
+        "scans": 2,
+        "failed": 0,
+        "errors": [],
+        "chamfer": 0.01,
+        "alignment": 0.02,
+        "precision": 0.9,
+        "recall": 0.95,
+        "runtime": 3.0,
+        "runtime_stages": {"fit": 1.0},
+    }
     result = {"columns": ["oracle/full", "oracle/no-int"], "summary": {"oracle/full": summ, "oracle/no-int": summ}}
     lines = R.format_table(result).splitlines()
     assert lines[0] == "| metric | full | no-int | paper full | paper no-int |"
@@ -215,18 +242,55 @@ def test_v2c_bench_end_to_end(tmp_path):
     from v2c.cli import main
 
     out = tmp_path / "bench.json"
-    res = CliRunner().invoke(main, ["bench", "--n", "2", "--seed", "0", "--segmentation", "oracle", "--ablation",
-                                    "full,gt", "--size", "320x240", "--jobs", "1", "--cache", str(tmp_path / "c"),
-                                    "--json", str(out), "-q"])
+    res = CliRunner().invoke(
+        main,
+        [
+            "bench",
+            "--n",
+            "2",
+            "--seed",
+            "0",
+            "--segmentation",
+            "oracle",
+            "--ablation",
+            "full,gt",
+            "--size",
+            "320x240",
+            "--jobs",
+            "1",
+            "--cache",
+            str(tmp_path / "c"),
+            "--json",
+            str(out),
+            "-q",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "| metric | full | ideal (gt VB-Rep) | paper full |" in res.output
     data = json.loads(out.read_text())
     assert data["columns"] == ["oracle/full", "gt/gt"]
     assert len(data["scans"]) == 2 and all(Path(p, "gt", "meta.json").is_file() for p in data["scans"])
     full = data["summary"]["oracle/full"]
-    for key in ("chamfer", "chamfer_all", "alignment", "precision", "recall", "recall_all", "precision_75",
-                "recall_75", "recall_all_75", "type_accuracy", "axis_accuracy", "depth_error", "edge_type_accuracy",
-                "runtime", "runtime_cpu", "runtime_stages", "process_start_s", "failed"):
+    for key in (
+        "chamfer",
+        "chamfer_all",
+        "alignment",
+        "precision",
+        "recall",
+        "recall_all",
+        "precision_75",
+        "recall_75",
+        "recall_all_75",
+        "type_accuracy",
+        "axis_accuracy",
+        "depth_error",
+        "edge_type_accuracy",
+        "runtime",
+        "runtime_cpu",
+        "runtime_stages",
+        "process_start_s",
+        "failed",
+    ):
         assert key in full, key
     assert full["failed"] == 0, full["errors"]
     assert set(full["runtime_stages"]) == {"load", "segment", "fit", "vbrep", "step"}
@@ -243,16 +307,20 @@ def test_v2c_bench_end_to_end(tmp_path):
         assert rt["to_step"] == pytest.approx(sum(rt[s] for s in R.STAGES), rel=0.05, abs=0.05)
     # a second run reuses the cached scans (same folders, nothing regenerated)
     mtime = Path(data["scans"][0], "gt", "meta.json").stat().st_mtime
-    assert R.prepare_scans(R.BenchConfig(n=2, size=(320, 240), cache_dir=tmp_path / "c"), progress=False) == \
-        [Path(p) for p in data["scans"]]
+    assert R.prepare_scans(R.BenchConfig(n=2, size=(320, 240), cache_dir=tmp_path / "c"), progress=False) == [
+        Path(p) for p in data["scans"]
+    ]
     assert Path(data["scans"][0], "gt", "meta.json").stat().st_mtime == mtime
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--size", "640"], "expected WxH"),
-    (["--segmentation", "oracle,magic"], "magic"),
-    (["--ablation", "full,none"], "none"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--size", "640"], "expected WxH"),
+        (["--segmentation", "oracle,magic"], "magic"),
+        (["--ablation", "full,none"], "none"),
+    ],
+)
 def test_v2c_bench_rejects_bad_options(args, message):
     from v2c.cli import main
 
@@ -277,8 +345,10 @@ def test_vbrep_chamfer_is_the_exact_visible_chamfer(box):
     scan, vb = box
     m = M.scan_metrics(vb, scan, CFG)
     assert chamfer(vb, scan) == m["chamfer"]
-    assert chamfer(vb, scan, n=5000, seed=3) == M.scan_metrics(vb, scan, M.MetricConfig(5000, 3, edge_types=False))[
-        "chamfer"]
+    assert (
+        chamfer(vb, scan, n=5000, seed=3)
+        == M.scan_metrics(vb, scan, M.MetricConfig(5000, 3, edge_types=False))["chamfer"]
+    )
     assert chamfer(vb, scan, visible_only=False) == pytest.approx(m["chamfer_all"], abs=3e-4)
     # every point of the box's meshes is visible: the visible-R draw keeps all of its first candidates
     rng = np.random.default_rng(0)
@@ -293,9 +363,26 @@ def test_v2c_bench_segmentation_only(tmp_path):
     from v2c.cli import main
 
     out = tmp_path / "seg.json"
-    res = CliRunner().invoke(main, ["bench", "--segmentation-only", "--n", "2", "--segmentation", "oracle",
-                                    "--size", "320x240", "--jobs", "1", "--cache", str(tmp_path / "c"),
-                                    "--json", str(out), "-q"])
+    res = CliRunner().invoke(
+        main,
+        [
+            "bench",
+            "--segmentation-only",
+            "--n",
+            "2",
+            "--segmentation",
+            "oracle",
+            "--size",
+            "320x240",
+            "--jobs",
+            "1",
+            "--cache",
+            str(tmp_path / "c"),
+            "--json",
+            str(out),
+            "-q",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "| oracle | 2 |" in res.output
     s = json.loads(out.read_text())["oracle"]["summary"]

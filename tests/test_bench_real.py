@@ -28,13 +28,32 @@ def test_distances_to_mesh_are_exact_near_the_threshold() -> None:
 
 
 def test_format_table_rows_and_summary() -> None:
-    row = {"frame": "f1", "object": "can", "segmentation": "learned", "ok": True, "faces": 4, "faces_per_side": 2.0,
-           "can": {"radius_mm": 34.0, "error_pct": 3.03}, "expected": {"radius_mm": 33.0}, "depth_rms_mm": 1.5,
-           "coverage_3mm": 0.91, "coverage_3mm_faces": 0.95, "seconds": 4.2, "cpu_seconds": 3.9}
-    report = {"frames": [row], "near_mm": 3.0, "process_start_s": 3.0,
-              "summary": {"learned": R._summary([{**row, "visible_sides": 2}])}}
+    row = {
+        "frame": "f1",
+        "object": "can",
+        "segmentation": "learned",
+        "ok": True,
+        "faces": 4,
+        "faces_per_side": 2.0,
+        "can": {"radius_mm": 34.0, "error_pct": 3.03},
+        "expected": {"radius_mm": 33.0},
+        "depth_rms_mm": 1.5,
+        "coverage_3mm": 0.91,
+        "coverage_3mm_faces": 0.95,
+        "seconds": 4.2,
+        "cpu_seconds": 3.9,
+    }
+    report = {
+        "frames": [row],
+        "near_mm": 3.0,
+        "process_start_s": 3.0,
+        "summary": {"learned": R._summary([{**row, "visible_sides": 2}])},
+    }
     text = R.format_table(report)
-    assert "| f1 | can | learned | 4 | 2.0 | radius 34.0 mm (+3.0 %) | 33.0 mm | 1.50 | 91.0 / 95.0 % | 4.2 (3.9) |" in text
+    assert (
+        "| f1 | can | learned | 4 | 2.0 | radius 34.0 mm (+3.0 %) | 33.0 mm | 1.50 | 91.0 / 95.0 % | 4.2 (3.9) |"
+        in text
+    )
     assert "can radius error 3.0 %" in text and "within 3 mm 91.0 %" in text
 
 
@@ -47,9 +66,23 @@ def test_bench_real_one_frame(shared_data: Path, tmp_path: Path) -> None:
     rois = tmp_path / "rois.json"
     rois.write_text(json.dumps({"frames": {"lm_occluded_example": frames["lm_occluded_example"]}}))
     out = tmp_path / "real.json"
-    res = CliRunner().invoke(main, ["bench", "--real", str(shared_data / "real"), "--rois", str(rois),
-                                    "--segmentation", "learned", "--out", str(tmp_path / "o"), "--json", str(out),
-                                    "-q"])
+    res = CliRunner().invoke(
+        main,
+        [
+            "bench",
+            "--real",
+            str(shared_data / "real"),
+            "--rois",
+            str(rois),
+            "--segmentation",
+            "learned",
+            "--out",
+            str(tmp_path / "o"),
+            "--json",
+            str(out),
+            "-q",
+        ],
+    )
     assert res.exit_code == 0, res.output
     data = json.loads(out.read_text())
     (row,) = data["frames"]

@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import SHARED_DATA
 
 from v2c.bench import run as R
 from v2c.bench import suite as S
+
+from conftest import SHARED_DATA
 
 WASHER, GEAR = "kcl__washer.step", "charm__gear1.step"  # test split: 4 and 51 faces
 
@@ -47,8 +48,9 @@ def test_committed_split_test_parts_by_band() -> None:
 
 
 def test_leave_out_families_come_from_the_feature_module(monkeypatch, tmp_path: Path) -> None:
-    cfg = S.SuiteConfig(suite="unseen", parts=(), family_scans=3,
-                        bench=R.BenchConfig(ablations=("full",), cache_dir=tmp_path))
+    cfg = S.SuiteConfig(
+        suite="unseen", parts=(), family_scans=3, bench=R.BenchConfig(ablations=("full",), cache_dir=tmp_path)
+    )
     monkeypatch.setattr(S, "UNSEEN_FAMILIES_SOURCE", ("v2c_no_such_module", "LEAVE_OUT_FAMILIES"))
     scans, notes = S.plan_scans(cfg)
     assert scans == [] and len(notes) == 1 and "skipped" in notes[0] and "v2c_no_such_module" in notes[0]
@@ -81,8 +83,14 @@ def _row(result: dict, part: str) -> dict:
 
 
 def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
-    bench = R.BenchConfig(noise="sensor", size=(320, 240), segmentations=("oracle",), ablations=("full",), jobs=1,
-                          cache_dir=tmp_path / "cache")
+    bench = R.BenchConfig(
+        noise="sensor",
+        size=(320, 240),
+        segmentations=("oracle",),
+        ablations=("full",),
+        jobs=1,
+        cache_dir=tmp_path / "cache",
+    )
     cfg = S.SuiteConfig(suite="unseen", bench=bench, corpus_dir=corpus, views=1, parts=(WASHER, GEAR), families=())
     res = S.run_suite(cfg, progress=False)
     assert res["groups"] == ["corpus test", "corpus test <30", "corpus test 30-100", "corpus test >100"]
@@ -115,9 +123,11 @@ def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
     assert all(summ[g]["failed"] == 0 and summ[g]["failures"] == [] for g in res["groups"])
     table = S.format_suite_tables(res)
     assert "| metric | corpus test | corpus test <30 | corpus test 30-100 | corpus test >100 |" in table
-    assert (f"| STEP faces bounded by their mesh outline / STEP faces | {summ['corpus test']['fallback_faces']} / "
-            f"{summ['corpus test']['step_faces']} | {washer['step_fallback_faces']} / {washer['step_faces']} | "
-            f"{gear['step_fallback_faces']} / {gear['step_faces']} | 0 / 0 |") in table
+    assert (
+        f"| STEP faces bounded by their mesh outline / STEP faces | {summ['corpus test']['fallback_faces']} / "
+        f"{summ['corpus test']['step_faces']} | {washer['step_fallback_faces']} / {washer['step_faces']} | "
+        f"{gear['step_fallback_faces']} / {gear['step_faces']} | 0 / 0 |"
+    ) in table
     assert "| failures (scans that raised) | 0 | 0 | 0 | 0 |" in table
     assert "| scans (parts) | 2 (2) | 1 (1) | 1 (1) | 0 (0) |" in table
 

@@ -11,11 +11,12 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from conftest import write_tiny_scan
 
 import v2c
 from v2c.cli import main
 from v2c.io_safe import written_by_v2c
+
+from conftest import write_tiny_scan
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -66,8 +67,10 @@ def test_never_replaces_a_file_v2c_did_not_write(scan: Path, tmp_path: Path) -> 
     foreign.write_text("my notes")
     res = _v2c(["to-step", str(scan), "-o", str(foreign), "--segmentation", "oracle"])
     assert res.exit_code == 1, res.output
-    assert res.output.strip() == (f"error: {foreign}: exists and is a file that v2c did not write; pass --force to "
-                                  "replace it (or choose another -o)")
+    assert res.output.strip() == (
+        f"error: {foreign}: exists and is a file that v2c did not write; pass --force to "
+        "replace it (or choose another -o)"
+    )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["existing.txt"] and foreign.read_text() == "my notes"
     # v2c's own files are replaced without --force; a foreign one only with it
     step = tmp_path / "part.step"
@@ -111,8 +114,9 @@ def test_oracle_without_ground_truth_is_one_clear_line(tmp_path: Path) -> None:
     for command in ("reconstruct", "to-step", "fit"):
         res = _v2c([command, str(s), "--segmentation", "oracle"])
         assert res.exit_code == 1, res.output
-        assert res.output.strip() == (f"error: {s}: oracle segmentation needs gt/ (a synthetic scan); use "
-                                      "--segmentation learned"), (command, res.output)
+        assert res.output.strip() == (
+            f"error: {s}: oracle segmentation needs gt/ (a synthetic scan); use --segmentation learned"
+        ), (command, res.output)
     assert sorted(p.name for p in s.iterdir()) == ["camera.json", "color.png", "depth.png"]
 
 
@@ -124,13 +128,12 @@ def test_scan_commands_share_roi_max_pixels_and_force() -> None:
         assert "--force" in {o for p in main.commands[name].params for o in p.opts}, name
 
 
-def test_reconstruct_without_a_face_writes_nothing(scan: Path, tmp_path: Path,
-                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_reconstruct_without_a_face_writes_nothing(scan: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A pipeline that ends with no face (issue 20: `reconstruct` wrote a VB-Rep of 0 faces) is an error."""
-    from scenes.vbrep import box_corner
-
     import v2c.pipeline
     from v2c.segment.oracle import segment_oracle
+
+    from scenes.vbrep import box_corner
 
     def no_faces(s, segmentation="learned", ablation="full", return_stages=False, **kw):
         v = box_corner()
@@ -140,6 +143,7 @@ def test_reconstruct_without_a_face_writes_nothing(scan: Path, tmp_path: Path,
     monkeypatch.setattr(v2c.pipeline, "reconstruct", no_faces)
     res = _v2c(["reconstruct", str(scan), "-o", str(tmp_path / "out")])
     assert res.exit_code == 1, res.output
-    assert res.output.strip() == (f"error: {scan}: no face could be reconstructed (1 surface instances segmented); "
-                                  "nothing written")
+    assert res.output.strip() == (
+        f"error: {scan}: no face could be reconstructed (1 surface instances segmented); nothing written"
+    )
     assert not (tmp_path / "out").exists()

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import TINY, listing, real_scan_dirs
 from test_scan import BAD_INPUTS
 
 from v2c.commands.info import command as info_command
+
+from conftest import TINY, listing, real_scan_dirs
 
 
 def _run(args: list[str], cwd: Path, monkeypatch: pytest.MonkeyPatch):
@@ -61,8 +62,9 @@ def test_info_with_roi(tiny_scan_dir: Path, tmp_path: Path, monkeypatch) -> None
 
 
 @pytest.mark.parametrize("case,mutate,fname,problem,roi", BAD_INPUTS, ids=[c[0] for c in BAD_INPUTS])
-def test_info_bad_input_fails_and_writes_nothing(case, mutate, fname, problem, roi, scan_copy: Path,
-                                                 tmp_path: Path, monkeypatch) -> None:
+def test_info_bad_input_fails_and_writes_nothing(
+    case, mutate, fname, problem, roi, scan_copy: Path, tmp_path: Path, monkeypatch
+) -> None:
     if mutate is not None:
         mutate(scan_copy)
     cwd = tmp_path / "cwd"
@@ -114,11 +116,11 @@ def test_v2c_info_process_exit_code(scan_copy: Path, tmp_path: Path) -> None:
     (scan_copy / "depth.png").write_bytes((scan_copy / "depth.png").read_bytes()[:100])
     before = listing(scan_copy)
     cmd = [sys.executable, "-m", "v2c.cli", "info"]
-    res = subprocess.run([*cmd, str(scan_copy)], cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                         check=False)
+    res = subprocess.run([*cmd, str(scan_copy)], cwd=tmp_path, capture_output=True, text=True, timeout=120, check=False)
     assert res.returncode == 1, (res.stdout, res.stderr)
     assert "depth.png: truncated PNG" in res.stderr and res.stdout == ""
     assert listing(scan_copy) == before and list(tmp_path.iterdir()) == [scan_copy]
-    res = subprocess.run([*cmd, str(scan_copy.parent / "nope")], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=120, check=False)
+    res = subprocess.run(
+        [*cmd, str(scan_copy.parent / "nope")], cwd=tmp_path, capture_output=True, text=True, timeout=120, check=False
+    )
     assert res.returncode == 1 and "scan folder not found" in res.stderr

@@ -31,6 +31,7 @@ NO_FLOOR = UncertaintyConfig(depth_sigma_coeff_per_m=0.0)  # the residual alone,
 
 # ------------------------------------------------------------------------------------------- the map itself
 
+
 def test_isotonic_fit_is_the_least_squares_monotone_fit() -> None:
     # a violation (0.8 then 0.2) is pooled into its mean; equal neighbours are pooled too
     x = np.array([0.1, 0.2, 0.3, 0.4, 0.5])
@@ -113,8 +114,9 @@ def heldout(tmp_path_factory):
     from v2c.scan import load_scan
     from v2c.synth.dataset import SynthConfig, generate_dataset
 
-    dirs = generate_dataset(tmp_path_factory.mktemp("calib"), 8, 5151,
-                            SynthConfig(width=320, height=240, noise="sensor"), progress=False)
+    dirs = generate_dataset(
+        tmp_path_factory.mktemp("calib"), 8, 5151, SynthConfig(width=320, height=240, noise="sensor"), progress=False
+    )
     rows = []
     vbreps = []
     for d in dirs:
@@ -167,6 +169,7 @@ def test_vbrep_json_carries_sigma_and_raw_confidence(heldout, tmp_path) -> None:
 
 
 # ------------------------------------------------------------------------------------ positional uncertainty
+
 
 def _plane_points(n: int, noise: float, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
@@ -227,8 +230,10 @@ def test_cylinder_sigma_is_finite_despite_its_free_turn() -> None:
     rng = np.random.default_rng(2)
     n, s, r = 3000, 0.0005, 0.02
     th, h = rng.uniform(-1.2, 1.2, n), rng.uniform(-0.03, 0.03, n)
-    X = np.c_[r * np.sin(th), h, 0.5 - r * np.cos(th)] + rng.normal(0, s, (n, 3)) * np.c_[np.sin(th), 0 * th,
-                                                                                            -np.cos(th)]
+    X = (
+        np.c_[r * np.sin(th), h, 0.5 - r * np.cos(th)]
+        + rng.normal(0, s, (n, 3)) * np.c_[np.sin(th), 0 * th, -np.cos(th)]
+    )
     cyl = Cylinder([0, 0, 0.5], [0, 1, 0], r)
     sig = face_sigma_m(face_covariance(cyl, X, s, NO_FLOOR), X)
     assert np.isfinite(sig) and s / np.sqrt(n) < sig < 10 * s / np.sqrt(n)
@@ -236,16 +241,17 @@ def test_cylinder_sigma_is_finite_despite_its_free_turn() -> None:
 
 # ---------------------------------------------------------------------------- fixtures: clearance from sigma
 
+
 def test_fixture_default_clearance_grows_with_injected_noise() -> None:
     """The box-corner VB-Rep's faces get the sigma of a plane fitted to their own mesh points with injected depth
     noise (face-wide part off, so that the fit's covariance alone carries the noise): with clearance_k = 2 the
     corner's default clearance is max(0.2 mm, 2 sigma) and grows with the noise; an explicit clearance is kept as
     given; the default k (0) keeps the kind's clearance."""
-    from scenes.vbrep import box_corner
-
     from fixtures_design import CornerParams
     from fixtures_design.design import design_fixture
     from v2c.primitives import from_dict
+
+    from scenes.vbrep import box_corner
 
     cfg = UncertaintyConfig(depth_sigma_coeff_per_m=0.0)
     clearances = []

@@ -8,12 +8,13 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from conftest import listing, write_tiny_scan
 
 from v2c.atomic import TMP_TAG, atomic_dir, atomic_file, sweep, temp_name
 from v2c.commands.synth import command as synth_command
 from v2c.commands.to_step import command as to_step_command
 from v2c.executors import RAY_INSTALL_HINT, ExecutorConfig, ExecutorError, run_tasks
+
+from conftest import listing, write_tiny_scan
 
 
 def _square_or_fail(x: int) -> int:
@@ -54,7 +55,8 @@ def test_ray_missing_says_how_to_install_it(no_ray, tmp_path: Path) -> None:
     res = CliRunner().invoke(to_step_command, [str(scan), "--executor", "ray"])
     assert res.exit_code == 1
     assert res.output.strip().splitlines()[-1] == (
-        f"Error: --executor ray needs the Ray package, which is not installed: {RAY_INSTALL_HINT}")
+        f"Error: --executor ray needs the Ray package, which is not installed: {RAY_INSTALL_HINT}"
+    )
     assert listing(tmp_path) == before  # nothing written
     res = CliRunner().invoke(synth_command, [str(tmp_path / "synth"), "--n", "1", "--executor", "ray"])
     assert res.exit_code == 1 and RAY_INSTALL_HINT in res.output

@@ -5,9 +5,10 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scenes.vbrep import box_corner
 
 from exporters.figure import render_vbrep
+
+from scenes.vbrep import box_corner
 
 
 def test_points_on_the_viewer_plane_are_skipped_not_drawn_as_garbage() -> None:

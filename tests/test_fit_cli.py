@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import TINY
 
 from v2c.cli import main
 from v2c.fit import FitConfig, fit_scan
@@ -18,6 +17,8 @@ from v2c.primitives.directions import angle_between_axes
 from v2c.segment import segment
 from v2c.segment.oracle import segment_oracle
 from v2c.segment.types import Segmentation
+
+from conftest import TINY
 
 
 def test_fit_command_recovers_the_tilted_plane(tiny_scan_dir: Path, tmp_path: Path) -> None:

@@ -38,8 +38,9 @@ def test_ransac_ignores_zero_normals() -> None:
     assert abs(abs(fit.primitive.axis_vector @ np.array([0.0, 0.0, 1.0])) - 1) < 1e-9
 
 
-def test_scan_with_a_degenerate_fit_reconstructs_the_rest(monkeypatch: pytest.MonkeyPatch,
-                                                          caplog: pytest.LogCaptureFixture) -> None:
+def test_scan_with_a_degenerate_fit_reconstructs_the_rest(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
     """One instance whose fit degenerates (a plane with a zero normal after RANSAC) is dropped with a
     warning naming it; the other faces are reconstructed (before: 'Residuals are not finite in the initial
     point', exit 1, no output)."""
@@ -61,8 +62,7 @@ def test_scan_with_a_degenerate_fit_reconstructs_the_rest(monkeypatch: pytest.Mo
     monkeypatch.setattr(stage, "_assign_axes", broken)
     with caplog.at_level(logging.WARNING, logger="v2c.fit.stage"):
         vb = reconstruct(SAMPLES / "bracket_planes_cylinders", "oracle")
-    assert any(f"instance {victim['id']}:" in r.getMessage() and "degenerate" in r.getMessage()
-               for r in caplog.records)
+    assert any(f"instance {victim['id']}:" in r.getMessage() and "degenerate" in r.getMessage() for r in caplog.records)
     # the other faces are all there (the VB-Rep's labelled fallback may even place the dropped one from its
     # neighbours' edges), every mesh finite
     assert len(full.faces) - 1 <= len(vb.faces) <= len(full.faces)

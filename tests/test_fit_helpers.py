@@ -43,8 +43,11 @@ class FakeScan:
 def turned_frame(angles_deg: tuple[float, float, float]) -> np.ndarray:
     """Rotation (3, 3) whose columns are the part axes X, Y, Z in the camera frame, from Euler-like angles."""
     a = np.deg2rad(angles_deg)
-    return rotation_exp(np.array([a[0], 0, 0])) @ rotation_exp(np.array([0, a[1], 0])) @ rotation_exp(
-        np.array([0, 0, a[2]]))
+    return (
+        rotation_exp(np.array([a[0], 0, 0]))
+        @ rotation_exp(np.array([0, a[1], 0]))
+        @ rotation_exp(np.array([0, 0, a[2]]))
+    )
 
 
 def rays(K: np.ndarray = K_TEST, size: tuple[int, int] = SIZE) -> np.ndarray:
@@ -53,8 +56,14 @@ def rays(K: np.ndarray = K_TEST, size: tuple[int, int] = SIZE) -> np.ndarray:
     return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
 
 
-def render_boxes(boxes: list[Box], frame_cols: np.ndarray, noise_m: float = 0.0, seed: int = 0,
-                 K: np.ndarray = K_TEST, size: tuple[int, int] = SIZE):
+def render_boxes(
+    boxes: list[Box],
+    frame_cols: np.ndarray,
+    noise_m: float = 0.0,
+    seed: int = 0,
+    K: np.ndarray = K_TEST,
+    size: tuple[int, int] = SIZE,
+):
     """Depth (H, W) metres, instances (H, W) (box b face f -> 6 b + f + 1), labels per instance (18-class against
     the part frame ``frame_cols`` columns X, Y, Z) and gt planes {instance: (point, normal)}."""
     d = rays(K, size)
@@ -93,8 +102,9 @@ def render_boxes(boxes: list[Box], frame_cols: np.ndarray, noise_m: float = 0.0,
 
 
 def make_scan(depth: np.ndarray, inst: np.ndarray, labels: np.ndarray, K: np.ndarray = K_TEST):
-    seg = Segmentation(instances=inst.astype(np.int32), labels=labels,
-                       scores=np.ones(len(labels), np.float32), method="oracle")
+    seg = Segmentation(
+        instances=inst.astype(np.int32), labels=labels, scores=np.ones(len(labels), np.float32), method="oracle"
+    )
     return FakeScan(depth=depth.astype(np.float32), K=K, valid=depth > 0), seg
 
 

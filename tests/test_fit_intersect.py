@@ -64,8 +64,13 @@ def test_membership_rejects_the_farther_parallel_plane() -> None:
     near = Plane([0, 0, 0.5], [0, 0, -1.0])
     far = Plane([0, 0, 0.502], [0, 0, -1.0])
     side = Plane([0, 0, 0.5], [1.0, 0, 0])
-    lifted = Lifted(uv=np.zeros((1, 2)), rays=np.array([[0.0, 0.0, 1.0]]), candidates=[(0, 1, 2)],
-                    vertex=np.array([0]), s=np.array([0.5005]))
+    lifted = Lifted(
+        uv=np.zeros((1, 2)),
+        rays=np.array([[0.0, 0.0, 1.0]]),
+        candidates=[(0, 1, 2)],
+        vertex=np.array([0]),
+        s=np.array([0.5005]),
+    )
     pi, tj = memberships(lifted, [near, far, side], scale=0.1, d_thresh=0.05, parallel_deg=10.0)
     assert sorted(tj.tolist()) == [0, 2]  # the farther of the two parallel planes is dropped
     pi, tj = memberships(lifted, [near, far, side], scale=0.1, d_thresh=0.05, parallel_deg=0.0)

@@ -33,8 +33,8 @@ def test_recon_jacobian_matches_finite_differences() -> None:
         return recon_residuals(layout.primitives(x)[1], terms, 0.1)
 
     _, cur = layout.primitives(x0)
-    ana = assemble(recon_jacobian_blocks(layout, x0, cur, 0.1), (sum(len(t.points) for t in terms),
-                                                                   layout.size)).toarray()
+    ana = assemble(
+        recon_jacobian_blocks(layout, x0, cur, 0.1), (sum(len(t.points) for t in terms), layout.size)
+    ).toarray()
     num = approx_derivative(fun, x0, method="3-point")
     assert np.abs(ana - num).max() < 1e-5 * np.abs(num).max()
-

@@ -59,7 +59,7 @@ def cylinder_depth(radius: float, z0: float, arc_deg: float, cols: tuple[int, in
     phi = np.arctan2(y, -(z - z0))  # angle around the axis from the point facing the camera
     keep = (disc >= 0) & (np.abs(phi) <= np.deg2rad(arc_deg) / 2)
     keep[:, : cols[0]] = False
-    keep[:, cols[1]:] = False
+    keep[:, cols[1] :] = False
     return np.where(keep, t, 0.0)
 
 
@@ -87,8 +87,13 @@ class PatchScan:
     mask: np.ndarray | None = None
 
 
-def fit_labelled(patch: np.ndarray, label: int, score: float, seed: int, label_certain: float | None = None,
-                 ) -> Primitive:
+def fit_labelled(
+    patch: np.ndarray,
+    label: int,
+    score: float,
+    seed: int,
+    label_certain: float | None = None,
+) -> Primitive:
     """The primitive `fit_scan` gives instance 1, the rendered ``patch`` (depth, m) with ``label`` at confidence
     ``score``, on a part whose other instance (2) is a plane labelled Z with its normal orthogonal to the camera
     x axis (the part is 0.3 m across, as in a scan); sensor depth noise on both."""
@@ -97,8 +102,12 @@ def fit_labelled(patch: np.ndarray, label: int, score: float, seed: int, label_c
     inst = np.where(patch > 0, 1, np.where(floor > 0, 2, 0)).astype(np.int32)
     rng = np.random.default_rng(seed)
     noisy = np.where(depth > 0, depth + SIGMA_COEFF * depth**2 * rng.standard_normal(depth.shape), 0.0)
-    seg = Segmentation(instances=inst, labels=np.array([0, label, label_of("plane", "Z")], np.uint8),
-                       scores=np.array([0.0, score, 0.9], np.float32), method="learned")
+    seg = Segmentation(
+        instances=inst,
+        labels=np.array([0, label, label_of("plane", "Z")], np.uint8),
+        scores=np.array([0.0, score, 0.9], np.float32),
+        method="learned",
+    )
     cfg = replace(FitConfig(), seed=seed)
     if label_certain is not None:
         cfg = replace(cfg, support_label_certain=label_certain)
@@ -160,8 +169,9 @@ def test_shallow_cylinder_under_the_noise_is_a_plane() -> None:
     assert sag < cfg.noise_sigma_coeff * 1.2**2
     assert not supported(gt, exact, cfg)
     for seed in range(10):  # with the labelled test on (off by default, see FitConfig.support_label_certain)
-        assert isinstance(fit_labelled(depth, label_of("cylinder", "X"), LEARNED_SCORE, seed, label_certain=0.999),
-                          Plane), seed
+        assert isinstance(
+            fit_labelled(depth, label_of("cylinder", "X"), LEARNED_SCORE, seed, label_certain=0.999), Plane
+        ), seed
 
 
 def test_large_radius_over_a_small_patch_is_a_plane() -> None:
@@ -171,8 +181,9 @@ def test_large_radius_over_a_small_patch_is_a_plane() -> None:
     gt = Cylinder([0.0, 0.0, 0.8], [1.0, 0.0, 0.0], 0.4)
     assert not supported(gt, backproject(depth, K)[depth > 0], FitConfig())
     for seed in range(10):  # with the labelled test on (off by default, see FitConfig.support_label_certain)
-        assert isinstance(fit_labelled(depth, label_of("cylinder", "X"), LEARNED_SCORE, seed, label_certain=0.999),
-                          Plane), seed
+        assert isinstance(
+            fit_labelled(depth, label_of("cylinder", "X"), LEARNED_SCORE, seed, label_certain=0.999), Plane
+        ), seed
 
 
 def test_certain_label_is_kept() -> None:

@@ -83,8 +83,9 @@ def test_torus() -> None:
     assert np.linalg.norm(p.origin - gt.origin) < 0.002
 
 
-@pytest.mark.parametrize("gt", [Plane([0.0, 0.0, 0.5], [0.0, -0.6, -0.8]), Cylinder([0, 0, 0.5], AXIS, 0.02),
-                                Sphere([0, 0, 0.5], 0.03)])
+@pytest.mark.parametrize(
+    "gt", [Plane([0.0, 0.0, 0.5], [0.0, -0.6, -0.8]), Cylinder([0, 0, 0.5], AXIS, 0.02), Sphere([0, 0, 0.5], 0.03)]
+)
 def test_type_search_picks_the_true_type(gt: Primitive) -> None:
     x, n = visible_samples(gt)
     t, f = fit_instance(x, n, None, SCALE, FitConfig(), np.random.default_rng(2))
@@ -173,8 +174,11 @@ def test_axis_refit_keeps_a_slight_taper() -> None:
     axis = unit(np.array([0.05, 0.92, 0.4]))
     gt = Cone(np.array([0.0, 0.0, 0.5]) - 0.196 * axis, axis, np.deg2rad(5.0))
     x, n = taper_samples(gt)
-    free = Cone(gt.origin + 0.001 * tangent_basis(axis)[0], unit(axis + 0.01 * tangent_basis(axis)[1]),
-                gt.half_angle + np.deg2rad(0.5))  # a free fit a little off
+    free = Cone(
+        gt.origin + 0.001 * tangent_basis(axis)[0],
+        unit(axis + 0.01 * tangent_basis(axis)[1]),
+        gt.half_angle + np.deg2rad(0.5),
+    )  # a free fit a little off
     q = fit_with_axis(free, x, n, axis, 0.2, FitConfig())
     assert isinstance(q, Cone) and cone_ok(q, x, 0.2, FitConfig())
     assert abs(np.rad2deg(q.half_angle) - 5.0) < 1.5  # degrees

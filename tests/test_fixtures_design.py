@@ -12,15 +12,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scenes.truth import synthetic_scan, true_faces, vbrep_from_scan
 
 from fixtures_design import CradleParams, check_mating, design_fixture, interference
 from fixtures_design.frames import camera_mm_matrix, up_vector
 from fixtures_design.model import transformed
 
+from scenes.truth import synthetic_scan, true_faces, vbrep_from_scan
+
 #: (family, seed) of the generated scans and the fixtures each one gets (seeds chosen for the needed feature).
-CASES = [("block", 0, "corner"), ("block", 0, "nest"), ("bracket", 0, "pin"), ("bracket", 1, "corner"),
-         ("shaft", 0, "cradle"), ("shaft", 2, "cradle")]
+CASES = [
+    ("block", 0, "corner"),
+    ("block", 0, "nest"),
+    ("bracket", 0, "pin"),
+    ("bracket", 1, "corner"),
+    ("shaft", 0, "cradle"),
+    ("shaft", 2, "cradle"),
+]
 
 
 @pytest.fixture(scope="module")
@@ -99,9 +106,9 @@ def test_pin_fits_the_hole(scans):
 
 
 def test_cradle_refuses_an_upright_cylinder():
-    from scenes.vbrep import cylinder_upright
-
     from fixtures_design import NoReferenceError
+
+    from scenes.vbrep import cylinder_upright
 
     with pytest.raises(NoReferenceError, match="90 deg off the horizontal"):
         design_fixture(cylinder_upright(), "cradle")

@@ -13,16 +13,17 @@ import numpy as np
 import pytest
 from build123d import import_step, import_stl
 from click.testing import CliRunner
-from scenes.truth import synthetic_scan, vbrep_from_scan
-from scenes.vbrep import box_corner
 
 from fixtures_design import design_fixture, reconstructed_part, true_part, write_fixture
+
+from scenes.truth import synthetic_scan, vbrep_from_scan
+from scenes.vbrep import box_corner
 
 REPO = Path(__file__).resolve().parents[1]
 
 #: Runs under FreeCAD's own Python (freecadcmd). FreeCAD 0.20 headless crashes (SIGSEGV) in Import.insert on a
 #: multi-product STEP when it builds link groups, so the document import turns them off (the GUI has them).
-FREECAD_SCRIPT = r'''
+FREECAD_SCRIPT = r"""
 import json, os, traceback
 out = {"ok": False}
 try:
@@ -40,7 +41,7 @@ try:
 except Exception:
     out["error"] = traceback.format_exc()
 open(os.environ["V2C_OUT"], "w").write(json.dumps(out))
-'''
+"""
 
 
 def freecad_import(step: Path, tmp: Path) -> dict:
@@ -51,8 +52,7 @@ def freecad_import(step: Path, tmp: Path) -> dict:
     script.write_text(FREECAD_SCRIPT)
     res_path = tmp / "fc_result.json"
     env = dict(os.environ, V2C_STEP=str(step), V2C_OUT=str(res_path))
-    proc = subprocess.run([exe, str(script)], env=env, capture_output=True, text=True, timeout=120,
-                          check=False)
+    proc = subprocess.run([exe, str(script)], env=env, capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     res = json.loads(res_path.read_text())
     assert res["ok"], res.get("error")
@@ -71,7 +71,10 @@ def test_files_and_assembly_with_the_true_part_open_in_freecad(block, tmp_path):
     fx = design_fixture(vb, "corner")
     files = write_fixture(fx, tmp_path, part=true_part(path / "gt" / "part.step", fx.fmap), part_label="true_part")
     assert [p.name for p in (files.step, files.stl, files.assembly)] == [
-        "fixture_corner.step", "fixture_corner.stl", "fixture_corner_assembly.step"]
+        "fixture_corner.step",
+        "fixture_corner.stl",
+        "fixture_corner_assembly.step",
+    ]
     assert import_step(files.step).volume == pytest.approx(fx.volume_mm3, rel=1e-6)
     stl = import_stl(files.stl)
     assert stl.bounding_box().size.X == pytest.approx(fx.solid.bounding_box().size.X, abs=0.05)
@@ -99,12 +102,30 @@ def test_cli_writes_the_fixture_of_a_scan(block, tmp_path):
 
     path, _ = block
     out = tmp_path / "out"
-    r = CliRunner().invoke(main, ["fixture", str(path), "--kind", "nest", "--segmentation", "oracle",
-                                  "--frame", "part", "-o", str(out), "--part", "true", "--clearance", "1.0"])
+    r = CliRunner().invoke(
+        main,
+        [
+            "fixture",
+            str(path),
+            "--kind",
+            "nest",
+            "--segmentation",
+            "oracle",
+            "--frame",
+            "part",
+            "-o",
+            str(out),
+            "--part",
+            "true",
+            "--clearance",
+            "1.0",
+        ],
+    )
     assert r.exit_code == 0, r.output
     assert "nest fixture on footprint" in r.output
-    assert sorted(p.name for p in out.iterdir()) == sorted([
-        "fixture_nest.stl", "fixture_nest.step", "fixture_nest_assembly.step"])
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["fixture_nest.stl", "fixture_nest.step", "fixture_nest_assembly.step"]
+    )
     # The nest of the reconstructed part, placed with the part-frame map of that reconstruction, holds the true
     # part (read back from the assembly) without cutting into it: the 1 mm clearance (under 1 % of the 214 mm
     # part) absorbs the reconstruction's error on the outline (about 0.3-1 mm here; 0.2 mm cut 0.12 %).
@@ -128,8 +149,7 @@ def test_cli_says_what_is_missing_and_writes_nothing(tmp_path):
     assert r.exit_code == 1
     assert "qualifies as a hole reference" in r.output and "e0: intersection conf 0.95" in r.output
     assert not out.exists()
-    r = CliRunner().invoke(main, ["fixture", str(src), "--kind", "corner", "-o", str(out), "--min-confidence",
-                                  "0.99"])
+    r = CliRunner().invoke(main, ["fixture", str(src), "--kind", "corner", "-o", str(out), "--min-confidence", "0.99"])
     assert r.exit_code == 1 and "confidence under 0.99" in r.output and not out.exists()
     r = CliRunner().invoke(main, ["fixture", str(tmp_path / "nope"), "--kind", "corner"])
     assert r.exit_code == 1 and "nope" in r.output
@@ -162,8 +182,7 @@ def test_fixture_from_a_to_step_file_matches_the_one_from_its_vbrep(tmp_path):
     write(vb, step, frame="part")
     direct = design_fixture(vb, "corner", frame="part", min_confidence=0.9)
     out = tmp_path / "from_step"
-    r = CliRunner().invoke(main, ["fixture", str(step), "--kind", "corner", "-o", str(out), "--min-confidence",
-                                  "0.9"])
+    r = CliRunner().invoke(main, ["fixture", str(step), "--kind", "corner", "-o", str(out), "--min-confidence", "0.9"])
     assert r.exit_code == 0, r.output
     assert "confidence 0.95" in r.output
     back = import_step(out / "fixture_corner.step")

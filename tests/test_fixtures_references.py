@@ -6,8 +6,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scenes.truth import holed_block, lying_rod, posed_part, vbrep_from_shape
-from scenes.vbrep import box_corner, cylinder_upright
 
 from fixtures_design.references import (
     CircleReference,
@@ -18,6 +16,9 @@ from fixtures_design.references import (
     select_references,
 )
 from v2c.vbrep.model import EdgeType
+
+from scenes.truth import holed_block, lying_rod, posed_part, vbrep_from_shape
+from scenes.vbrep import box_corner, cylinder_upright
 
 
 def test_box_corner_gives_its_three_convex_right_angle_edges():

@@ -13,12 +13,13 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from scenes.revolved import revolved_all_types
-from scenes.vbrep import box_corner, cylinder_upright
 
 from exporters import freecad_import as fci
 from exporters import step
 from v2c.vbrep.model import EdgeType
+
+from scenes.revolved import revolved_all_types
+from scenes.vbrep import box_corner, cylinder_upright
 
 FREECADCMD = shutil.which("freecadcmd")
 SCRIPT = Path(fci.__file__)
@@ -31,8 +32,12 @@ def _broken_box():
     return vb
 
 
-EXAMPLES = {"box_corner": box_corner, "cylinder_upright": cylinder_upright, "revolved": revolved_all_types,
-            "free_edges": _broken_box}
+EXAMPLES = {
+    "box_corner": box_corner,
+    "cylinder_upright": cylinder_upright,
+    "revolved": revolved_all_types,
+    "free_edges": _broken_box,
+}
 
 
 REPO = Path(__file__).resolve().parents[1]
@@ -50,8 +55,9 @@ def steps(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     for name, make in EXAMPLES.items():
         paths[name] = out / f"{name}.step"
         step.write(make(), paths[name])
-    paths["knob_sample"] = scan_to_step(REPO / "samples" / "knob_cone_torus_sphere", out / "knob.step",
-                                        segmentation="learned", extras=False).step
+    paths["knob_sample"] = scan_to_step(
+        REPO / "samples" / "knob_cone_torus_sphere", out / "knob.step", segmentation="learned", extras=False
+    ).step
     return paths
 
 
@@ -66,7 +72,8 @@ def test_parser_finds_every_typed_edge_like_occt(name: str, steps: dict[str, Pat
     back = step.read_typed(path)
     assert Counter(r.type for r in records) == Counter(e.type.value for e in back.typed_edges)
     assert sorted((r.edge_id, r.confidence) for r in records) == sorted(
-        (e.id, round(e.confidence, 2)) for e in back.typed_edges)
+        (e.id, round(e.confidence, 2)) for e in back.typed_edges
+    )
     assert all(r.p0 is not None and r.p1 is not None for r in records)
     if name == "free_edges":
         assert sorted(r.edge_id for r in records if r.kind == "LINE" and r.edge_id in (3, 4)) == [3, 4]
@@ -74,8 +81,7 @@ def test_parser_finds_every_typed_edge_like_occt(name: str, steps: dict[str, Pat
 
 def _freecad(path: Path, home: Path, save: Path) -> dict:
     env = dict(os.environ, V2C_STEP=str(path), V2C_FCSTD=str(save), HOME=str(home))
-    proc = subprocess.run([FREECADCMD, str(SCRIPT)], env=env, capture_output=True, text=True, timeout=180,
-                          check=False)
+    proc = subprocess.run([FREECADCMD, str(SCRIPT)], env=env, capture_output=True, text=True, timeout=180, check=False)
     assert fci.MARK in proc.stdout, f"rc={proc.returncode}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
     return json.loads(proc.stdout.split(fci.MARK, 1)[1].splitlines()[0])
 
@@ -101,4 +107,5 @@ def test_freecad_document_has_typed_edge_groups(name: str, steps: dict[str, Path
     if name == "free_edges":  # the two free edges are silhouettes of 80 and 60 mm
         lengths = sorted(round(e["length"], 6) for e in res["edges"] if e["id"] in (3, 4))
         assert lengths == [60.0, 80.0] and {e["type"] for e in res["edges"] if e["id"] in (3, 4)} == {
-            EdgeType.SILHOUETTE.value}
+            EdgeType.SILHOUETTE.value
+        }

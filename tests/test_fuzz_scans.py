@@ -22,9 +22,10 @@ import cv2
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import TINY, camera_dict, tiny_depth_m, write_tiny_scan
 
 from v2c.cli import main as v2c_main
+
+from conftest import TINY, camera_dict, tiny_depth_m, write_tiny_scan
 
 H, W = TINY.height, TINY.width
 
@@ -40,12 +41,14 @@ def _png(path: Path, arr: np.ndarray) -> None:
 
 def _png_header_only(path: Path, width: int, height: int, bit_depth: int = 8, color_type: int = 2) -> None:
     """A valid-looking PNG (IHDR, one small IDAT, IEND, correct CRCs) claiming width x height pixels."""
+
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
     ihdr = struct.pack(">IIBBBBB", width, height, bit_depth, color_type, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 4096))
-                     + chunk(b"IEND", b""))
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 4096)) + chunk(b"IEND", b"")
+    )
 
 
 def _truncate(path: Path, keep: float = 0.6) -> None:
@@ -117,8 +120,10 @@ def _outliers(folder: Path) -> None:
 def _one_by_one(folder: Path) -> None:
     _png(folder / "color.png", np.full((1, 1, 3), 128, np.uint8))
     _depth_units(folder, np.full((1, 1), 6000))
-    _camera(folder, {"width": 1, "height": 1, "K": [[1.0, 0, 0.0], [0, 1.0, 0.0], [0, 0, 1]],
-                     "depth_scale": TINY.depth_scale})
+    _camera(
+        folder,
+        {"width": 1, "height": 1, "K": [[1.0, 0, 0.0], [0, 1.0, 0.0], [0, 0, 1]], "depth_scale": TINY.depth_scale},
+    )
 
 
 def _faraway(folder: Path) -> None:
@@ -185,11 +190,15 @@ CASES: list[tuple[str, Callable[[Path], object] | None, Expect, list[str]]] = [
     ("depth-npy-float64", lambda f: _npy(f, tiny_depth_m()), OK, []),
     ("depth-npy-float16", lambda f: _npy(f, tiny_depth_m().astype(np.float16)), OK, []),
     ("depth-near-outlier", _outliers, OK, []),
-    ("with-mask", lambda f: _png(f / "mask.png", np.pad(np.full((20, 30), 255, np.uint8), ((10, 18), (20, 14)))),
-     OK, []),
+    (
+        "with-mask",
+        lambda f: _png(f / "mask.png", np.pad(np.full((20, 30), 255, np.uint8), ((10, 18), (20, 14)))),
+        OK,
+        [],
+    ),
     ("with-roi", None, OK, ["--roi", "10,5,40,30"]),
     ("non-ascii-folder", _rename("Ünïcødé_部品 scan"), OK, []),
-    ("quotes-in-folder-name", _rename("it's a \"scan\""), OK, []),
+    ("quotes-in-folder-name", _rename('it\'s a "scan"'), OK, []),
     ("symlinked-files", _symlink_all, OK, []),
     ("read-only-folder", _read_only, OK, []),
     ("max-pixels-raised", None, OK, ["--max-pixels", "5000"]),
@@ -202,56 +211,99 @@ CASES: list[tuple[str, Callable[[Path], object] | None, Expect, list[str]]] = [
     ("empty-camera", lambda f: _camera(f, ""), ("camera.json", "invalid JSON"), []),
     ("truncated-color", lambda f: _truncate(f / "color.png"), ("color.png", "truncated PNG"), []),
     ("truncated-depth", lambda f: _truncate(f / "depth.png", 0.9), ("depth.png", "truncated PNG"), []),
-    ("depth-missing-last-byte", lambda f: (f / "depth.png").write_bytes((f / "depth.png").read_bytes()[:-1]),
-     ("depth.png", "truncated PNG"), []),
+    (
+        "depth-missing-last-byte",
+        lambda f: (f / "depth.png").write_bytes((f / "depth.png").read_bytes()[:-1]),
+        ("depth.png", "truncated PNG"),
+        [],
+    ),
     ("corrupt-color-crc", lambda f: _flip_idat(f / "color.png"), ("color.png", "CRC"), []),
-    ("garbage-color", lambda f: (f / "color.png").write_bytes(b"GIF89a not what it says"),
-     ("color.png", "not a PNG or JPEG"), []),
+    (
+        "garbage-color",
+        lambda f: (f / "color.png").write_bytes(b"GIF89a not what it says"),
+        ("color.png", "not a PNG or JPEG"),
+        [],
+    ),
     ("truncated-jpeg", _jpeg_truncated, ("color.jpg", "truncated JPEG"), []),
-    ("truncated-npy", lambda f: (_npy(f, tiny_depth_m()), _truncate(f / "depth.npy", 0.5)),
-     ("depth.npy", "truncated"), []),
-    ("garbage-npy", lambda f: (_npy(f, tiny_depth_m()), (f / "depth.npy").write_bytes(b"\x93NUMPY garbage")),
-     ("depth.npy", "cannot read .npy"), []),
+    (
+        "truncated-npy",
+        lambda f: (_npy(f, tiny_depth_m()), _truncate(f / "depth.npy", 0.5)),
+        ("depth.npy", "truncated"),
+        [],
+    ),
+    (
+        "garbage-npy",
+        lambda f: (_npy(f, tiny_depth_m()), (f / "depth.npy").write_bytes(b"\x93NUMPY garbage")),
+        ("depth.npy", "cannot read .npy"),
+        [],
+    ),
     ("object-npy", lambda f: _npy(f, np.array([[None, 1.0]], dtype=object)), ("depth.npy", "real-number"), []),
     ("both-depth-files", lambda f: np.save(f / "depth.npy", tiny_depth_m()), ("depth.npy", "keep one"), []),
     # sizes
     ("depth-size-mismatch", lambda f: _depth_units(f, np.full((H, W + 2), 6000)), ("depth.png", "differs"), []),
-    ("mask-size-mismatch", lambda f: _png(f / "mask.png", np.full((H - 1, W), 255, np.uint8)),
-     ("mask.png", "differs"), []),
+    (
+        "mask-size-mismatch",
+        lambda f: _png(f / "mask.png", np.full((H - 1, W), 255, np.uint8)),
+        ("mask.png", "differs"),
+        [],
+    ),
     ("camera-size-mismatch", lambda f: _camera(f, camera_dict(size=(640, 480))), ("camera.json", "disagrees"), []),
-    ("gt-faces-size", lambda f: (write_tiny_scan(f, gt=True),
-                                 _png(f / "gt" / "faces.png", np.ones((H, W - 1), np.uint16))),
-     ("faces.png", "differs"), []),
+    (
+        "gt-faces-size",
+        lambda f: (write_tiny_scan(f, gt=True), _png(f / "gt" / "faces.png", np.ones((H, W - 1), np.uint16))),
+        ("faces.png", "differs"),
+        [],
+    ),
     # depth types and values
     ("depth-8bit", lambda f: _png(f / "depth.png", np.full((H, W), 100, np.uint8)), ("depth.png", "8-bit"), []),
-    ("depth-3-channel", lambda f: _png(f / "depth.png", np.full((H, W, 3), 6000, np.uint16)),
-     ("depth.png", "one channel"), []),
+    (
+        "depth-3-channel",
+        lambda f: _png(f / "depth.png", np.full((H, W, 3), 6000, np.uint16)),
+        ("depth.png", "one channel"),
+        [],
+    ),
     ("color-16bit", lambda f: _png(f / "color.png", np.full((H, W, 3), 300, np.uint16)), ("color.png", "8-bit"), []),
     ("depth-all-zero", lambda f: _depth_units(f, np.zeros((H, W))), ("depth.png", "all depth values are zero"), []),
     ("depth-npy-all-zero", lambda f: _npy(f, np.zeros((H, W), np.float32)), ("depth.npy", "all depth values"), []),
     ("depth-all-65535", lambda f: _depth_units(f, np.full((H, W), 65535)), ("depth.png", "65535"), []),
-    ("depth-npy-nan", lambda f: _npy(f, np.where(tiny_depth_m() > 0.61, np.nan, tiny_depth_m())),
-     ("depth.npy", "non-finite"), []),
+    (
+        "depth-npy-nan",
+        lambda f: _npy(f, np.where(tiny_depth_m() > 0.61, np.nan, tiny_depth_m())),
+        ("depth.npy", "non-finite"),
+        [],
+    ),
     ("depth-npy-inf", lambda f: _npy(f, np.full((H, W), np.inf)), ("depth.npy", "non-finite"), []),
     ("depth-npy-negative", lambda f: _npy(f, -tiny_depth_m()), ("depth.npy", "negative"), []),
     ("depth-npy-1e30", lambda f: _npy(f, np.full((H, W), 1e30)), ("depth.npy", "outside"), []),
     ("depth-npy-1e300", lambda f: _npy(f, np.full((H, W), 1e300)), ("depth.npy", "outside"), []),
-    ("depth-npy-millimetres", lambda f: _npy(f, 1000.0 * tiny_depth_m()), ("depth.npy", "wrong depth_scale or unit"),
-     []),
+    (
+        "depth-npy-millimetres",
+        lambda f: _npy(f, 1000.0 * tiny_depth_m()),
+        ("depth.npy", "wrong depth_scale or unit"),
+        [],
+    ),
     ("depth-npy-int64", lambda f: _npy(f, _tiny_units().astype(np.int64)), ("depth.npy", "int64"), []),
     ("depth-npy-uint16", lambda f: _npy(f, _tiny_units()), ("depth.npy", "uint16"), []),
     ("depth-npy-bool", lambda f: _npy(f, tiny_depth_m() > 0), ("depth.npy", "bool"), []),
     ("depth-npy-3d", lambda f: _npy(f, np.ones((H, W, 2), np.float32)), ("depth.npy", "2-D"), []),
-    ("depth-scale-micrometres", lambda f: _camera(f, dict(camera_dict(), depth_scale=1e-6)),
-     ("depth.png", "outside"), []),
+    (
+        "depth-scale-micrometres",
+        lambda f: _camera(f, dict(camera_dict(), depth_scale=1e-6)),
+        ("depth.png", "outside"),
+        [],
+    ),
     ("one-pixel-depth", _one_pixel, ("depth.png", "one face"), []),
     ("one-by-one-image", _one_by_one, ("depth.png", "one face"), []),
     ("scattered-depth", _scattered, ("depth.png", "scattered"), []),
     ("pure-noise-depth", _noise, ("depth.png", "noise"), []),
     ("landscape-not-part", _faraway, ("depth.npy", "expected a part"), []),
     ("mask-empty", lambda f: _png(f / "mask.png", np.zeros((H, W), np.uint8)), ("mask.png", "marks no pixel"), []),
-    ("mask-tiny", lambda f: _png(f / "mask.png", np.pad(np.full((3, 3), 255, np.uint8), ((20, H - 23), (20, W - 23)))),
-     ("depth.png", "one face"), []),
+    (
+        "mask-tiny",
+        lambda f: _png(f / "mask.png", np.pad(np.full((3, 3), 255, np.uint8), ((20, H - 23), (20, W - 23)))),
+        ("depth.png", "one face"),
+        [],
+    ),
     ("roi-outside", None, ("color.png", "outside the image"), ["--roi", f"10,10,{W + 1},20"]),
     ("roi-tiny", None, ("depth.png", "one face"), ["--roi", "10,10,15,15"]),
     # camera.json
@@ -264,51 +316,120 @@ CASES: list[tuple[str, Callable[[Path], object] | None, Expect, list[str]]] = [
     ("cx-1e6", lambda f: _cam_K(f, cx=1e6), ("camera.json", "cx"), []),
     ("cy-minus-1e6", lambda f: _cam_K(f, cy=-1e6), ("camera.json", "cy"), []),
     ("K-nan", lambda f: _cam_K(f, cx=float("nan")), ("camera.json", "non-finite"), []),
-    ("K-strings", lambda f: _camera(f, dict(camera_dict(), K=[[str(x) for x in r] for r in TINY.K])),
-     ("camera.json", "3x3 matrix"), []),
-    ("K-booleans", lambda f: _camera(f, dict(camera_dict(), K=[[True, 0, 31.5], [0, True, 23.5], [0, 0, 1]])),
-     ("camera.json", "3x3 matrix"), []),
+    (
+        "K-strings",
+        lambda f: _camera(f, dict(camera_dict(), K=[[str(x) for x in r] for r in TINY.K])),
+        ("camera.json", "3x3 matrix"),
+        [],
+    ),
+    (
+        "K-booleans",
+        lambda f: _camera(f, dict(camera_dict(), K=[[True, 0, 31.5], [0, True, 23.5], [0, 0, 1]])),
+        ("camera.json", "3x3 matrix"),
+        [],
+    ),
     ("K-2x3", lambda f: _camera(f, dict(camera_dict(), K=TINY.K[:2].tolist())), ("camera.json", "not 3x3"), []),
     ("K-missing", lambda f: _camera(f, {"width": W, "height": H}), ("camera.json", "no intrinsics"), []),
-    ("depth-scale-true", lambda f: _camera(f, dict(camera_dict(), depth_scale=True)),
-     ("camera.json", "'depth_scale' = True"), []),
-    ("depth-scale-string", lambda f: _camera(f, dict(camera_dict(), depth_scale="0.0001")),
-     ("camera.json", "depth_scale"), []),
-    ("depth-scale-null", lambda f: _camera(f, dict(camera_dict(), depth_scale=None)), ("camera.json", "depth_scale"),
-     []),
-    ("depth-scale-negative", lambda f: _camera(f, dict(camera_dict(), depth_scale=-0.001)),
-     ("camera.json", "depth_scale"), []),
-    ("depth-scale-units-per-metre", lambda f: _camera(f, dict(camera_dict(), depth_scale=1000)),
-     ("camera.json", "units per metre"), []),
+    (
+        "depth-scale-true",
+        lambda f: _camera(f, dict(camera_dict(), depth_scale=True)),
+        ("camera.json", "'depth_scale' = True"),
+        [],
+    ),
+    (
+        "depth-scale-string",
+        lambda f: _camera(f, dict(camera_dict(), depth_scale="0.0001")),
+        ("camera.json", "depth_scale"),
+        [],
+    ),
+    (
+        "depth-scale-null",
+        lambda f: _camera(f, dict(camera_dict(), depth_scale=None)),
+        ("camera.json", "depth_scale"),
+        [],
+    ),
+    (
+        "depth-scale-negative",
+        lambda f: _camera(f, dict(camera_dict(), depth_scale=-0.001)),
+        ("camera.json", "depth_scale"),
+        [],
+    ),
+    (
+        "depth-scale-units-per-metre",
+        lambda f: _camera(f, dict(camera_dict(), depth_scale=1000)),
+        ("camera.json", "units per metre"),
+        [],
+    ),
     ("width-true", lambda f: _camera(f, dict(camera_dict(), width=True)), ("camera.json", "'width'"), []),
     ("width-fraction", lambda f: _camera(f, dict(camera_dict(), width=64.5)), ("camera.json", "'width'"), []),
     ("camera-nested-100000", lambda f: _camera(f, _nested(100_000)), ("camera.json", "nested too deeply"), []),
     ("camera-K-nested-100000", lambda f: _camera(f, _nested(100_000, "K")), ("camera.json", "nested too deeply"), []),
     ("camera-array", lambda f: _camera(f, "[1, 2, 3]"), ("camera.json", "JSON object"), []),
     ("camera-not-utf8", lambda f: _camera(f, b'{"K": "\xff\xfe"}'), ("camera.json", "UTF-8"), []),
-    ("camera-invalid-json", lambda f: _camera(f, '{"K": [[60, 0, 31.5], [0, 62, 23.5]'), ("camera.json", "invalid JSON"),
-     []),
-    ("gt-meta-nested", lambda f: (write_tiny_scan(f, gt=True), (f / "gt" / "meta.json").write_text(_nested(50_000))),
-     ("meta.json", "nested too deeply"), []),
+    (
+        "camera-invalid-json",
+        lambda f: _camera(f, '{"K": [[60, 0, 31.5], [0, 62, 23.5]'),
+        ("camera.json", "invalid JSON"),
+        [],
+    ),
+    (
+        "gt-meta-nested",
+        lambda f: (write_tiny_scan(f, gt=True), (f / "gt" / "meta.json").write_text(_nested(50_000))),
+        ("meta.json", "nested too deeply"),
+        [],
+    ),
     # size limits: headers only, refused before decoding
-    ("color-30000x30000", lambda f: _png_header_only(f / "color.png", 30000, 30000), ("color.png", "exceeds the limit"), []),
-    ("depth-30000x30000", lambda f: _png_header_only(f / "depth.png", 30000, 30000, 16, 0),
-     ("depth.png", "exceeds the limit"), []),
-    ("mask-30000x30000", lambda f: _png_header_only(f / "mask.png", 30000, 30000, 8, 0), ("mask.png", "exceeds the limit"),
-     []),
-    ("npy-30000x30000-header", lambda f: (_npy(f, tiny_depth_m()), _npy_header_only(f / "depth.npy", 30000, 30000)),
-     ("depth.npy", "exceeds the limit"), []),
+    (
+        "color-30000x30000",
+        lambda f: _png_header_only(f / "color.png", 30000, 30000),
+        ("color.png", "exceeds the limit"),
+        [],
+    ),
+    (
+        "depth-30000x30000",
+        lambda f: _png_header_only(f / "depth.png", 30000, 30000, 16, 0),
+        ("depth.png", "exceeds the limit"),
+        [],
+    ),
+    (
+        "mask-30000x30000",
+        lambda f: _png_header_only(f / "mask.png", 30000, 30000, 8, 0),
+        ("mask.png", "exceeds the limit"),
+        [],
+    ),
+    (
+        "npy-30000x30000-header",
+        lambda f: (_npy(f, tiny_depth_m()), _npy_header_only(f / "depth.npy", 30000, 30000)),
+        ("depth.npy", "exceeds the limit"),
+        [],
+    ),
     ("max-pixels-lowered", None, ("color.png", "--max-pixels 3072"), ["--max-pixels", "1000"]),
     # the file system
-    ("color-is-a-folder", lambda f: ((f / "color.png").unlink(), (f / "color.png").mkdir()),
-     ("color.png", "found a folder"), []),
+    (
+        "color-is-a-folder",
+        lambda f: ((f / "color.png").unlink(), (f / "color.png").mkdir()),
+        ("color.png", "found a folder"),
+        [],
+    ),
     ("depth-is-a-fifo", _fifo, ("depth.png", "not a regular file"), []),
-    ("camera-links-to-dev-zero", lambda f: ((f / "camera.json").unlink(), (f / "camera.json").symlink_to("/dev/zero")),
-     ("camera.json", "not a regular file"), []),
-    ("color-broken-symlink", lambda f: ((f / "color.png").unlink(), (f / "color.png").symlink_to(f / "nowhere.png")),
-     ("color.png", "broken symlink"), []),
-    ("depth-symlink-loop", lambda f: ((f / "depth.png").unlink(), (f / "depth.png").symlink_to(f / "depth.png")),
-     ("depth.png", "cannot read"), []),
+    (
+        "camera-links-to-dev-zero",
+        lambda f: ((f / "camera.json").unlink(), (f / "camera.json").symlink_to("/dev/zero")),
+        ("camera.json", "not a regular file"),
+        [],
+    ),
+    (
+        "color-broken-symlink",
+        lambda f: ((f / "color.png").unlink(), (f / "color.png").symlink_to(f / "nowhere.png")),
+        ("color.png", "broken symlink"),
+        [],
+    ),
+    (
+        "depth-symlink-loop",
+        lambda f: ((f / "depth.png").unlink(), (f / "depth.png").symlink_to(f / "depth.png")),
+        ("depth.png", "cannot read"),
+        [],
+    ),
     ("scan-is-a-file", lambda f: (shutil.rmtree(f), f.write_text("x")), ("scan", "not a folder"), []),
     ("scan-missing", lambda f: shutil.rmtree(f), ("scan", "not found"), []),
 ]
@@ -400,8 +521,9 @@ def test_to_step_refuses_and_writes_nothing(case, tmp_path: Path, monkeypatch: p
     cwd.mkdir()
     before = _snapshot(tmp_path)
     out = tmp_path / "out"
-    res = _invoke(["to-step", str(folder), "-o", str(out / "part.step"), "--segmentation", "oracle", *case[3]],
-                  cwd, monkeypatch)
+    res = _invoke(
+        ["to-step", str(folder), "-o", str(out / "part.step"), "--segmentation", "oracle", *case[3]], cwd, monkeypatch
+    )
     _check_refusal(res, case[2])
     assert not out.exists()
     assert _snapshot(tmp_path) == before
@@ -412,14 +534,23 @@ def _run_measured(args: list[str], cwd: Path, timeout: float = 300.0) -> tuple[i
     import subprocess
     import sys
 
-    probe = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
-             "r = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
-             "dt = time.perf_counter() - t; "
-             "print(r.stdout + r.stderr, end=''); "
-             "print(f'@@ {r.returncode} {dt:.3f} {resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}')")
+    probe = (
+        "import resource, subprocess, sys, time; t = time.perf_counter(); "
+        "r = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
+        "dt = time.perf_counter() - t; "
+        "print(r.stdout + r.stderr, end=''); "
+        "print(f'@@ {r.returncode} {dt:.3f} {resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}')"
+    )
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    res = subprocess.run([sys.executable, "-c", probe, sys.executable, "-m", "v2c", *args], check=True, cwd=cwd, env=env,
-                         capture_output=True, text=True, timeout=timeout)
+    res = subprocess.run(
+        [sys.executable, "-c", probe, sys.executable, "-m", "v2c", *args],
+        check=True,
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
     out, _, tail = res.stdout.rpartition("@@ ")
     rc, secs, kb = tail.split()
     return int(rc), out, float(secs), int(kb) / 2**20
@@ -435,8 +566,11 @@ def test_4000x3000_scan_is_refused_fast_and_small(command: str, tmp_path: Path) 
     u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     _png(scan / "color.png", np.stack([u % 256, v % 256, (u + v) % 256], -1).astype(np.uint8))
     _png(scan / "depth.png", (600 + 0.01 * u + 0.02 * v).astype(np.uint16))
-    (scan / "camera.json").write_text(json.dumps({"width": w, "height": h, "depth_scale": 0.001,
-                                                  "K": [[3000.0, 0, 2000.0], [0, 3000.0, 1500.0], [0, 0, 1]]}))
+    (scan / "camera.json").write_text(
+        json.dumps(
+            {"width": w, "height": h, "depth_scale": 0.001, "K": [[3000.0, 0, 2000.0], [0, 3000.0, 1500.0], [0, 0, 1]]}
+        )
+    )
     before = _snapshot(tmp_path)
     args = [command, str(scan)] + (["-o", str(tmp_path / "out") + "/"] if command == "to-step" else [])
     rc, out, secs, gb = _run_measured(args, tmp_path)
@@ -450,13 +584,13 @@ def test_4000x3000_scan_is_refused_fast_and_small(command: str, tmp_path: Path) 
 
 
 #: Legitimate variants that also run the whole pipeline (`to-step`, oracle segmentation on the tiny scan with gt/).
-TO_STEP_OK = ["plain", "open3d-camera", "depth-npy-float64", "non-ascii-folder", "symlinked-files",
-              "read-only-folder"]
+TO_STEP_OK = ["plain", "open3d-camera", "depth-npy-float64", "non-ascii-folder", "symlinked-files", "read-only-folder"]
 
 
 @pytest.mark.parametrize("name", TO_STEP_OK)
-def test_to_step_on_legitimate_variants_writes_only_the_output_set(name: str, tmp_path: Path,
-                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_to_step_on_legitimate_variants_writes_only_the_output_set(
+    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     case = next(c for c in CASES if c[0] == name)
     folder = write_tiny_scan(tmp_path / "scan", gt=True)
     if case[1] is not None:
@@ -485,8 +619,9 @@ FIXTURE_INPUTS = [
 
 
 @pytest.mark.parametrize("name,content,problem", FIXTURE_INPUTS, ids=[c[0] for c in FIXTURE_INPUTS])
-def test_fixture_refuses_bad_inputs(name: str, content: str, problem: str, tmp_path: Path,
-                                    monkeypatch: pytest.MonkeyPatch) -> None:
+def test_fixture_refuses_bad_inputs(
+    name: str, content: str, problem: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     src = tmp_path / name
     src.write_text(content)
     before = _snapshot(tmp_path)
@@ -498,8 +633,7 @@ def test_fixture_refuses_bad_inputs(name: str, content: str, problem: str, tmp_p
 
 
 @pytest.mark.parametrize("name", ["camera-nested-100000", "pure-noise-depth", "fx-1e30"])
-def test_fixture_and_reconstruct_refuse_bad_scans(name: str, tmp_path: Path,
-                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+def test_fixture_and_reconstruct_refuse_bad_scans(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     case = next(c for c in CASES if c[0] == name)
     folder = _make(case, tmp_path)
     before = _snapshot(tmp_path)

@@ -16,13 +16,14 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from conftest import write_tiny_scan
-from scenes.vbrep import box_corner, cylinder_upright
 
 from v2c.cli import main as v2c_main
 from v2c.errors import OutputError
 from v2c.io_safe import OutputSet, atomic_write, write_text_atomic
 from v2c.vbrep.model import VBRep
+
+from conftest import write_tiny_scan
+from scenes.vbrep import box_corner, cylinder_upright
 
 REPO = Path(__file__).resolve().parents[1]
 STEM = "part"
@@ -52,8 +53,9 @@ def test_atomic_write_replaces_and_never_follows_symlinks(tmp_path: Path) -> Non
     write_text_atomic(out / "x.json", '{"a": 1}')
     assert victim.read_text() == "precious"
     assert not (out / "x.json").is_symlink() and json.loads((out / "x.json").read_text()) == {"a": 1}
-    assert sorted(p.name for p in out.iterdir()) == sorted([".x.123.tmp.json", ".x.tmp.json", "x.json",
-                                                            "x.json.tmp"])  # no temporary left behind
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [".x.123.tmp.json", ".x.tmp.json", "x.json", "x.json.tmp"]
+    )  # no temporary left behind
     with pytest.raises(RuntimeError), atomic_write(out / "y.json") as tmp:
         tmp.write_text("half")
         raise RuntimeError("writer failed")
@@ -101,8 +103,9 @@ def _old_set(folder: Path) -> dict[str, bytes]:
 
 @pytest.mark.parametrize("fail_after", [0, 1, 2])
 @pytest.mark.parametrize("exc", [OSError(28, "No space left on device"), KeyboardInterrupt()])
-def test_failure_in_the_middle_of_the_commit_leaves_the_old_set(fail_after: int, exc: BaseException,
-                                                                tmp_path: Path) -> None:
+def test_failure_in_the_middle_of_the_commit_leaves_the_old_set(
+    fail_after: int, exc: BaseException, tmp_path: Path
+) -> None:
     out = tmp_path / "out"
     before = _old_set(out)
     s = OutputSet()
@@ -156,8 +159,13 @@ def test_to_step_with_planted_symlinks_writes_only_its_own_files(tiny_gt_scan: P
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
     out = tmp_path / "out"
-    planted = [f"{STEM}.vbrep.json.tmp", f"{STEM}.png.tmp.png", f".{STEM}.{os.getpid()}.tmp.step",
-               f".{STEM}.tmp.step", *SET]
+    planted = [
+        f"{STEM}.vbrep.json.tmp",
+        f"{STEM}.png.tmp.png",
+        f".{STEM}.{os.getpid()}.tmp.step",
+        f".{STEM}.tmp.step",
+        *SET,
+    ]
     _plant(out, victim, planted)
     before = _files(out)
     # without --force the symlinks at the outputs are refused (v2c did not write them), before any work
@@ -186,8 +194,9 @@ def test_to_step_into_an_unwritable_place_says_so_and_writes_nothing(tiny_gt_sca
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"] and blocker.read_text() == "not a folder"
 
 
-def test_failing_figure_after_the_step_keeps_the_old_set(tiny_gt_scan: Path, tmp_path: Path,
-                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+def test_failing_figure_after_the_step_keeps_the_old_set(
+    tiny_gt_scan: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Ctrl-C (KeyboardInterrupt) while the figure is drawn, after the new STEP and JSON were written: the
     command says "interrupted", exits 130, and the folder holds the complete old set."""
     import exporters.figure
@@ -210,8 +219,18 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
     holds the complete old set or the complete new set, nothing else."""
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "v2c", "to-step", str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"),
-           "--segmentation", "oracle", "--force"]  # --force: the old set is a stand-in, not v2c's
+    cmd = [
+        sys.executable,
+        "-m",
+        "v2c",
+        "to-step",
+        str(tiny_gt_scan),
+        "-o",
+        str(out / f"{STEM}.step"),
+        "--segmentation",
+        "oracle",
+        "--force",
+    ]  # --force: the old set is a stand-in, not v2c's
     outcomes = []
     # The moments are fractions of this run's own duration, measured first without a signal: a fixed schedule
     # (2-6 s) missed the whole run on an idle machine, where the tiny scan takes under 2 s. Not before 0.3 s: in its
@@ -250,8 +269,18 @@ def test_sigkill_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, t
     complete new set; hidden temporaries it left are removed by the next run, which completes the new set."""
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "v2c", "to-step", str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"),
-           "--segmentation", "oracle", "--force"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "v2c",
+        "to-step",
+        str(tiny_gt_scan),
+        "-o",
+        str(out / f"{STEM}.step"),
+        "--segmentation",
+        "oracle",
+        "--force",
+    ]
     for delay in (1.5, 3.5, 5.0):
         before = _old_set(out)
         p = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -269,8 +298,9 @@ def test_sigkill_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, t
 def test_stale_temporaries_of_dead_processes_are_swept(tmp_path: Path) -> None:
     from v2c.io_safe import sweep_stale_temporaries
 
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
-                          check=True)
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True
+    )
     dead_pid = int(dead.stdout)
     alive_pid = os.getppid()  # the process that started this test: running
     victim = tmp_path / "victim.txt"
@@ -283,12 +313,14 @@ def test_stale_temporaries_of_dead_processes_are_swept(tmp_path: Path) -> None:
     removed = sweep_stale_temporaries(tmp_path / "part.step")
     assert sorted(p.name for p in removed) == [f".part.{dead_pid}.abc123.tmp.step", f".part.{dead_pid}.link00.tmp.step"]
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        [f".part.{alive_pid}.def456.tmp.step", f".other.{dead_pid}.abc123.tmp.step", "part.step", "victim.txt"])
+        [f".part.{alive_pid}.def456.tmp.step", f".other.{dead_pid}.abc123.tmp.step", "part.step", "victim.txt"]
+    )
     assert victim.read_text() == "precious"
 
 
-def test_unwritable_output_folder_is_one_error_line(tiny_gt_scan: Path, tmp_path: Path,
-                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+def test_unwritable_output_folder_is_one_error_line(
+    tiny_gt_scan: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A read-only output folder (simulated: the tests may run as root, who can write anyway): mkstemp's
     PermissionError becomes one line naming the folder, and the old set stays."""
     import tempfile

@@ -72,13 +72,16 @@ def test_torus_distance_closest_normal_uv() -> None:
     assert np.allclose(t.uv(x[:2])[:, 1], [0.0, np.pi / 2])
 
 
-@pytest.mark.parametrize("prim", [
-    Plane([0.1, 0.2, 0.5], unit(np.array([0.3, -0.2, -1.0]))),
-    Cylinder([0.0, 0.1, 0.6], unit(np.array([1.0, 0.2, 0.1])), 0.03),
-    Cone([0.0, 0.0, 0.4], unit(np.array([0.1, -1.0, 0.3])), 0.4),
-    Sphere([0.02, 0.0, 0.5], 0.04),
-    Torus([0.0, 0.0, 0.5], unit(np.array([0.2, 0.3, 1.0])), 0.05, 0.01),
-])
+@pytest.mark.parametrize(
+    "prim",
+    [
+        Plane([0.1, 0.2, 0.5], unit(np.array([0.3, -0.2, -1.0]))),
+        Cylinder([0.0, 0.1, 0.6], unit(np.array([1.0, 0.2, 0.1])), 0.03),
+        Cone([0.0, 0.0, 0.4], unit(np.array([0.1, -1.0, 0.3])), 0.4),
+        Sphere([0.02, 0.0, 0.5], 0.04),
+        Torus([0.0, 0.0, 0.5], unit(np.array([0.2, 0.3, 1.0])), 0.05, 0.01),
+    ],
+)
 def test_closest_point_lies_on_surface_and_roundtrips(prim) -> None:
     rng = np.random.default_rng(0)
     x = prim.origin + rng.normal(0, 0.05, (500, 3))

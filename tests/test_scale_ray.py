@@ -18,18 +18,17 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'v2c[ray]'): the Ray executor tests "
-                                        "need it")
+ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'v2c[ray]'): the Ray executor tests need it")
 
 # the imports below come after the skip on purpose: without Ray, none of this module runs
-from conftest import write_tiny_scan  # noqa: E402
-
 from v2c.atomic import TMP_TAG  # noqa: E402
 from v2c.commands.synth import command as synth_command  # noqa: E402
 from v2c.commands.to_step import _to_step_task  # noqa: E402
 from v2c.commands.to_step import command as to_step_command  # noqa: E402
 from v2c.executors import ExecutorConfig, run_tasks  # noqa: E402
 from v2c.synth.dataset import SynthConfig, generate_scan, scan_name  # noqa: E402
+
+from conftest import write_tiny_scan  # noqa: E402
 
 # One Ray instance for the whole file: with pytest-xdist (--dist loadgroup) these tests share one worker.
 pytestmark = pytest.mark.xdist_group("ray")
@@ -138,17 +137,19 @@ def _summary_lines(stdout: str, out: Path) -> list[str]:
 
 def test_synth_on_ray_equals_local(cluster, local_synth: Path, tmp_path: Path) -> None:
     out = tmp_path / "synth_ray"
-    res = _run(synth_command, [str(out), "--n", str(N_SYNTH), "--seed", str(SEED), "--size", SIZE, "--quiet",
-                               "--executor", "ray"])
+    res = _run(
+        synth_command,
+        [str(out), "--n", str(N_SYNTH), "--seed", str(SEED), "--size", SIZE, "--quiet", "--executor", "ray"],
+    )
     assert res.exit_code == 0, res.output
     assert sorted(p.name for p in out.iterdir()) == [scan_name(i) for i in range(N_SYNTH)]
     assert_same_outputs(local_synth, out)  # every file byte for byte, part.step included
     assert _no_temporaries(out) == []
 
 
-def test_to_step_on_ray_equals_local_and_reports_the_failed_scan(cluster, to_step_inputs: list[Path],
-                                                                  local_steps: tuple[Path, str],
-                                                                  tmp_path: Path) -> None:
+def test_to_step_on_ray_equals_local_and_reports_the_failed_scan(
+    cluster, to_step_inputs: list[Path], local_steps: tuple[Path, str], tmp_path: Path
+) -> None:
     out = tmp_path / "to_step_ray"
     res = _run(to_step_command, [*map(str, to_step_inputs), "-o", str(out), "--executor", "ray"])
     assert res.exit_code == 1
@@ -167,8 +168,9 @@ def test_bench_and_training_data_on_ray_equal_local(cluster, local_synth: Path, 
     from v2c.bench.run import BenchConfig, run_benchmark
     from v2c.segment.train import generate_training_data
 
-    cfg = BenchConfig(n=3, size=(160, 120), segmentations=("oracle",), ablations=("full",), jobs=1,
-                      scans_dir=local_synth)
+    cfg = BenchConfig(
+        n=3, size=(160, 120), segmentations=("oracle",), ablations=("full",), jobs=1, scans_dir=local_synth
+    )
     rows = {}
     for kind in ("local", "ray"):
         result = run_benchmark(replace(cfg, executor=kind), progress=False)
@@ -232,11 +234,11 @@ def _synth_killed_once(marker: Path, args: tuple):
     return generate_scan(*args)
 
 
-def test_to_step_worker_killed_midway_is_retried(cluster, to_step_inputs: list[Path],
-                                                 local_steps: tuple[Path, str], tmp_path: Path) -> None:
+def test_to_step_worker_killed_midway_is_retried(
+    cluster, to_step_inputs: list[Path], local_steps: tuple[Path, str], tmp_path: Path
+) -> None:
     scans, out, marker = to_step_inputs[:2], tmp_path / "out", tmp_path / "attempts.txt"
-    task = partial(_to_step_task, out=out, batch=True, frame="part", segmentation="learned", extras=True,
-                   roi=None)
+    task = partial(_to_step_task, out=out, batch=True, frame="part", segmentation="learned", extras=True, roi=None)
     victim = partial(_to_step_killed_once, marker, task)
     results = list(run_tasks(lambda s: victim(s) if s == scans[0] else task(s), scans, RAY))
     assert [exc for _, _, exc in results] == [None, None]
@@ -255,8 +257,7 @@ def test_synth_worker_killed_midway_is_retried(cluster, local_synth: Path, tmp_p
     out, marker = tmp_path / "synth", tmp_path / "attempts.txt"
     cfg = SynthConfig(width=160, height=120)
     tasks = [(out, SEED, i, cfg) for i in (2, 3)]
-    results = list(run_tasks(lambda a: _synth_killed_once(marker, a) if a[2] == 2 else generate_scan(*a),
-                             tasks, RAY))
+    results = list(run_tasks(lambda a: _synth_killed_once(marker, a) if a[2] == 2 else generate_scan(*a), tasks, RAY))
     assert [exc for _, _, exc in results] == [None, None]
     assert _attempts(marker) == 2
     assert sorted(p.name for p in out.iterdir()) == [scan_name(2), scan_name(3)]  # no temporary folder left

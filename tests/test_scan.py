@@ -9,9 +9,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import TINY, camera_dict, listing, real_scan_dirs, tiny_depth_m, write_tiny_scan
 
 from v2c.scan import ScanError, backproject, load_camera, load_scan, parse_roi
+
+from conftest import TINY, camera_dict, listing, real_scan_dirs, tiny_depth_m, write_tiny_scan
 
 # ------------------------------------------------------------------------------------------------------------------
 # a valid scan
@@ -130,8 +131,10 @@ def test_roi_restricts_validity_and_keeps_full_arrays(tiny_scan_dir: Path) -> No
     # the string form of the command line gives the same scan
     np.testing.assert_array_equal(load_scan(tiny_scan_dir, roi="10,5,30,25").valid, scan.valid)
     # whole-image ROI is allowed (x1, y1 exclusive)
-    assert load_scan(tiny_scan_dir, roi=(0, 0, TINY.width, TINY.height)).valid.sum() == load_scan(
-        tiny_scan_dir).valid.sum()
+    assert (
+        load_scan(tiny_scan_dir, roi=(0, 0, TINY.width, TINY.height)).valid.sum()
+        == load_scan(tiny_scan_dir).valid.sum()
+    )
 
 
 def test_parse_roi() -> None:
@@ -229,70 +232,178 @@ BAD_INPUTS = [
     ("missing-color", lambda f: (f / "color.png").unlink(), "color.png", "not found", None),
     ("missing-depth", lambda f: (f / "depth.png").unlink(), "depth.png", "not found", None),
     ("missing-camera", lambda f: (f / "camera.json").unlink(), "camera.json", "not found", None),
-    ("size-mismatch", lambda f: _write_png(f / "depth.png", np.full((H, W + 2), 5000, np.uint16)),
-     "depth.png", "differs from color.png", None),
-    ("depth-8bit", lambda f: _write_png(f / "depth.png", np.full((H, W), 100, np.uint8)),
-     "depth.png", "8-bit depth", None),
-    ("depth-3-channel", lambda f: _write_png(f / "depth.png", np.full((H, W, 3), 100, np.uint16)),
-     "depth.png", "one channel", None),
-    ("depth-all-zero", lambda f: _write_png(f / "depth.png", np.zeros((H, W), np.uint16)),
-     "depth.png", "all depth values are zero", None),
+    (
+        "size-mismatch",
+        lambda f: _write_png(f / "depth.png", np.full((H, W + 2), 5000, np.uint16)),
+        "depth.png",
+        "differs from color.png",
+        None,
+    ),
+    (
+        "depth-8bit",
+        lambda f: _write_png(f / "depth.png", np.full((H, W), 100, np.uint8)),
+        "depth.png",
+        "8-bit depth",
+        None,
+    ),
+    (
+        "depth-3-channel",
+        lambda f: _write_png(f / "depth.png", np.full((H, W, 3), 100, np.uint16)),
+        "depth.png",
+        "one channel",
+        None,
+    ),
+    (
+        "depth-all-zero",
+        lambda f: _write_png(f / "depth.png", np.zeros((H, W), np.uint16)),
+        "depth.png",
+        "all depth values are zero",
+        None,
+    ),
     ("depth-npy-nan", lambda f: _depth_npy(f, np.nan), "depth.npy", "non-finite", None),
     ("depth-npy-inf", lambda f: _depth_npy(f, np.inf), "depth.npy", "non-finite", None),
     ("depth-npy-negative", lambda f: _depth_npy(f, -0.5), "depth.npy", "negative", None),
-    ("depth-npy-truncated", lambda f: (_depth_npy(f, 0.0), _truncate(f / "depth.npy")), "depth.npy",
-     "cannot read", None),
+    (
+        "depth-npy-truncated",
+        lambda f: (_depth_npy(f, 0.0), _truncate(f / "depth.npy")),
+        "depth.npy",
+        "cannot read",
+        None,
+    ),
     ("both-depths", lambda f: np.save(f / "depth.npy", tiny_depth_m()), "depth.npy", "keep one", None),
-    ("K-2x3", lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62, 23.5]])), "camera.json",
-     "not 3x3", None),
-    ("K-ragged", lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62], [0, 0, 1]])), "camera.json",
-     "3x3 matrix", None),
-    ("K-9x1", lambda f: _camera(f, dict(camera_dict(), K=[[v] for v in TINY.K.reshape(-1)])), "camera.json",
-     "not 3x3", None),
+    (
+        "K-2x3",
+        lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62, 23.5]])),
+        "camera.json",
+        "not 3x3",
+        None,
+    ),
+    (
+        "K-ragged",
+        lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62], [0, 0, 1]])),
+        "camera.json",
+        "3x3 matrix",
+        None,
+    ),
+    (
+        "K-9x1",
+        lambda f: _camera(f, dict(camera_dict(), K=[[v] for v in TINY.K.reshape(-1)])),
+        "camera.json",
+        "not 3x3",
+        None,
+    ),
     ("K-string", lambda f: _camera(f, dict(camera_dict(), K="identity")), "camera.json", "3x3 matrix", None),
-    ("K-nan", lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62, 23.5], [0, 0, float("nan")]])),
-     "camera.json", "non-finite", None),
-    ("K-bottom-row", lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62, 23.5], [0, 1, 1]])),
-     "camera.json", "not a pinhole", None),
-    ("K-fx-zero", lambda f: _camera(f, dict(camera_dict(), K=[[0, 0, 31.5], [0, 62, 23.5], [0, 0, 1]])),
-     "camera.json", "non-positive focal length", None),
-    ("K-fy-negative", lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, -62, 23.5], [0, 0, 1]])),
-     "camera.json", "non-positive focal length", None),
-    ("K-open3d-row-major", lambda f: _camera(f, dict(camera_dict("open3d"),
-                                                      intrinsic_matrix=TINY.K.reshape(-1).tolist())),
-     "camera.json", "not a pinhole", None),
+    (
+        "K-nan",
+        lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62, 23.5], [0, 0, float("nan")]])),
+        "camera.json",
+        "non-finite",
+        None,
+    ),
+    (
+        "K-bottom-row",
+        lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, 62, 23.5], [0, 1, 1]])),
+        "camera.json",
+        "not a pinhole",
+        None,
+    ),
+    (
+        "K-fx-zero",
+        lambda f: _camera(f, dict(camera_dict(), K=[[0, 0, 31.5], [0, 62, 23.5], [0, 0, 1]])),
+        "camera.json",
+        "non-positive focal length",
+        None,
+    ),
+    (
+        "K-fy-negative",
+        lambda f: _camera(f, dict(camera_dict(), K=[[60, 0, 31.5], [0, -62, 23.5], [0, 0, 1]])),
+        "camera.json",
+        "non-positive focal length",
+        None,
+    ),
+    (
+        "K-open3d-row-major",
+        lambda f: _camera(f, dict(camera_dict("open3d"), intrinsic_matrix=TINY.K.reshape(-1).tolist())),
+        "camera.json",
+        "not a pinhole",
+        None,
+    ),
     ("K-missing", lambda f: _camera(f, {"width": W, "height": H}), "camera.json", "no intrinsics", None),
-    ("depth-scale-zero", lambda f: _camera(f, dict(camera_dict(), depth_scale=0)), "camera.json",
-     "depth_scale", None),
+    ("depth-scale-zero", lambda f: _camera(f, dict(camera_dict(), depth_scale=0)), "camera.json", "depth_scale", None),
     ("camera-size", lambda f: _camera(f, camera_dict(size=(640, 480))), "camera.json", "disagrees", None),
-    ("invalid-json", lambda f: _camera(f, '{"K": [[60, 0, 31.5], [0, 62, 23.5], [0, 0, 1]'), "camera.json",
-     "invalid JSON", None),
-    ("color-garbage", lambda f: (f / "color.png").write_bytes(b"this is not an image at all"), "color.png",
-     "not a PNG or JPEG", None),
+    (
+        "invalid-json",
+        lambda f: _camera(f, '{"K": [[60, 0, 31.5], [0, 62, 23.5], [0, 0, 1]'),
+        "camera.json",
+        "invalid JSON",
+        None,
+    ),
+    (
+        "color-garbage",
+        lambda f: (f / "color.png").write_bytes(b"this is not an image at all"),
+        "color.png",
+        "not a PNG or JPEG",
+        None,
+    ),
     ("color-empty", lambda f: (f / "color.png").write_bytes(b""), "color.png", "empty file", None),
     ("color-png-truncated", lambda f: _truncate(f / "color.png"), "color.png", "truncated PNG", None),
     ("depth-png-truncated", lambda f: _truncate(f / "depth.png", 0.9), "depth.png", "truncated PNG", None),
     ("color-png-corrupt", lambda f: _flip_png_byte(f / "color.png"), "color.png", "CRC", None),
     ("color-jpeg-truncated", _jpeg_truncated, "color.jpg", "truncated JPEG", None),
-    ("color-16bit", lambda f: _write_png(f / "color.png", np.full((H, W, 3), 300, np.uint16)), "color.png",
-     "8-bit", None),
-    ("mask-size", lambda f: _write_png(f / "mask.png", np.full((H - 1, W), 255, np.uint8)), "mask.png",
-     "differs", None),
-    ("mask-empty", lambda f: _write_png(f / "mask.png", np.zeros((H, W), np.uint8)), "mask.png",
-     "marks no pixel", None),
-    ("mask-truncated", lambda f: (_write_png(f / "mask.png", np.full((H, W), 255, np.uint8)),
-                                  _truncate(f / "mask.png")), "mask.png", "truncated", None),
+    (
+        "color-16bit",
+        lambda f: _write_png(f / "color.png", np.full((H, W, 3), 300, np.uint16)),
+        "color.png",
+        "8-bit",
+        None,
+    ),
+    (
+        "mask-size",
+        lambda f: _write_png(f / "mask.png", np.full((H - 1, W), 255, np.uint8)),
+        "mask.png",
+        "differs",
+        None,
+    ),
+    (
+        "mask-empty",
+        lambda f: _write_png(f / "mask.png", np.zeros((H, W), np.uint8)),
+        "mask.png",
+        "marks no pixel",
+        None,
+    ),
+    (
+        "mask-truncated",
+        lambda f: (_write_png(f / "mask.png", np.full((H, W), 255, np.uint8)), _truncate(f / "mask.png")),
+        "mask.png",
+        "truncated",
+        None,
+    ),
     ("roi-outside", None, "color.png", "outside the image", (10, 10, W + 1, 20)),
     ("roi-negative", None, "color.png", "outside the image", (-1, 0, 10, 10)),
     ("roi-beyond", None, "color.png", "outside the image", (W + 5, 0, W + 10, 10)),
     ("roi-empty", None, "ROI", "empty", (10, 10, 10, 20)),
     ("gt-faces-missing", lambda f: (f / "gt" / "faces.png").unlink(), "faces.png", "not found", None),
-    ("gt-faces-size", lambda f: _write_png(f / "gt" / "faces.png", np.ones((H, W - 1), np.uint16)), "faces.png",
-     "differs", None),
-    ("gt-primitives-json", lambda f: (f / "gt" / "primitives.json").write_text("[{"), "primitives.json",
-     "invalid JSON", None),
-    ("gt-face-without-primitive", lambda f: _write_png(f / "gt" / "faces.png", np.full((H, W), 9, np.uint16)),
-     "faces.png", "lists only 2 faces", None),
+    (
+        "gt-faces-size",
+        lambda f: _write_png(f / "gt" / "faces.png", np.ones((H, W - 1), np.uint16)),
+        "faces.png",
+        "differs",
+        None,
+    ),
+    (
+        "gt-primitives-json",
+        lambda f: (f / "gt" / "primitives.json").write_text("[{"),
+        "primitives.json",
+        "invalid JSON",
+        None,
+    ),
+    (
+        "gt-face-without-primitive",
+        lambda f: _write_png(f / "gt" / "faces.png", np.full((H, W), 9, np.uint16)),
+        "faces.png",
+        "lists only 2 faces",
+        None,
+    ),
 ]
 
 
@@ -368,8 +479,9 @@ def test_real_frame_with_roi(shared_data: Path, tmp_path: Path) -> None:
     dst = Path(shutil.copytree(src, tmp_path / "lm"))
     cam = json.loads((src / "camera.json").read_text())
     K = np.reshape(cam["cam_K"], (3, 3))
-    (dst / "camera.json").write_text(json.dumps({"width": 640, "height": 480,
-                                                 "intrinsic_matrix": K.T.reshape(-1).tolist()}))
+    (dst / "camera.json").write_text(
+        json.dumps({"width": 640, "height": 480, "intrinsic_matrix": K.T.reshape(-1).tolist()})
+    )
     scan2 = load_scan(dst, roi=(200, 150, 400, 300))
     np.testing.assert_allclose(scan2.K, scan.K)
     np.testing.assert_array_equal(scan2.depth, scan.depth)  # both 1 mm per unit

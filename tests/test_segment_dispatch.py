@@ -45,8 +45,9 @@ def test_default_method_is_learned() -> None:
     assert inspect.signature(segment).parameters["method"].default == "learned"
 
 
-def test_refine_and_ransac_settings_reach_the_refining_segmenter(tiny_scan_dir: Path,
-                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+def test_refine_and_ransac_settings_reach_the_refining_segmenter(
+    tiny_scan_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from v2c.fit import FitConfig
     from v2c.segment import geometric
     from v2c.segment.refine import RefineConfig

@@ -83,8 +83,7 @@ def test_type_tests_and_part_frame_on_exact_points() -> None:
     th = np.radians(20)
     h1 = np.cos(th) * fwd + np.sin(th) * left
     h2 = np.cross(up, h1)
-    fits = [_Fit(PrimitiveType.PLANE, h1, 500), _Fit(PrimitiveType.PLANE, -h2, 300),
-            _Fit(PrimitiveType.PLANE, up, 800)]
+    fits = [_Fit(PrimitiveType.PLANE, h1, 500), _Fit(PrimitiveType.PLANE, -h2, 300), _Fit(PrimitiveType.PLANE, up, 800)]
     frame = part_frame(fits, np.stack([fwd, left, up]))
     assert abs(frame[0] @ h1 - 1) < 1e-9  # X: the horizontal axis nearer the viewing direction, pointing away
     assert abs(abs(frame[1] @ h2) - 1) < 1e-9 and abs(frame[2] @ up - 1) < 1e-9

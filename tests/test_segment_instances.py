@@ -116,18 +116,19 @@ def _probs_of(labels: np.ndarray, p_own: float) -> np.ndarray:
     return probs
 
 
-def _three_faces(height: int, strip: tuple[int, int], strip_label: int, band: tuple[int, int]
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _three_faces(
+    height: int, strip: tuple[int, int], strip_label: int, band: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(faces, labels, boundary probability) of a (height, 60) map: face 1 (label 1) above, a strip (face 2, rows
     strip[0]:strip[1], label strip_label) and face 3 (label 3) below, all under one predicted boundary band (rows
     band[0]:band[1], probability 0.9)."""
     faces = np.zeros((height, 60), np.uint16)
-    faces[2:strip[0], 2:58] = 1
-    faces[strip[0]:strip[1], 2:58] = 2
-    faces[strip[1]:height - 2, 2:58] = 3
+    faces[2 : strip[0], 2:58] = 1
+    faces[strip[0] : strip[1], 2:58] = 2
+    faces[strip[1] : height - 2, 2:58] = 3
     labels = np.vectorize({0: 0, 1: 1, 2: strip_label, 3: 3}.get)(faces).astype(np.uint8)
     prob = np.zeros(faces.shape, np.float32)
-    prob[band[0]:band[1]] = 0.9
+    prob[band[0] : band[1]] = 0.9
     return faces, labels, prob
 
 

@@ -56,8 +56,7 @@ def test_split_piece_joins_the_rest_of_its_face() -> None:
     depth[wall] += 0.03
     inst = np.ones((H, W), np.int32)
     inst[40:80, 130:] = 2  # the network cut the wall at column 130 and gave columns 100-129 to the plane
-    seg = Segmentation(inst, np.array([0, PLANE_Z, CYL_Z], np.uint8), np.array([0, 0.9, 0.9], np.float32),
-                       "learned")
+    seg = Segmentation(inst, np.array([0, PLANE_Z, CYL_Z], np.uint8), np.array([0, 0.9, 0.9], np.float32), "learned")
     out = split_plane_outliers(seg, depth, K, _probs(np.where(wall, CYL_Z, PLANE_Z)), RefineConfig())
     assert out.num_instances == 2  # no new instance: the piece went to instance 2
     assert _iou(out.instances == 2, wall) > 0.99
@@ -88,8 +87,7 @@ def test_fragments_of_one_plane_are_merged_and_a_step_is_not() -> None:
     assert np.array_equal(out.instances == 1, inst <= 2) and np.array_equal(out.instances == 2, inst == 3)
     assert list(out.labels) == [0, PLANE_Z, PLANE_Z]  # ids renumbered: labels[k] stays instance k's
     # a fragment with another axis class on the same plane merges too, under the larger piece's label
-    other = Segmentation(inst, np.array([0, label_of("plane", "X"), PLANE_Z, PLANE_Z], np.uint8), seg.scores,
-                         "learned")
+    other = Segmentation(inst, np.array([0, label_of("plane", "X"), PLANE_Z, PLANE_Z], np.uint8), seg.scores, "learned")
     out = merge_coplanar(other, depth, K, RefineConfig())
     assert out.num_instances == 2 and np.array_equal(out.instances == 2, inst == 3)
     merged = out.labels[out.instances[0, 0]]
@@ -124,8 +122,10 @@ def test_narrow_chamfer_is_split_by_its_normals() -> None:
     probs = _probs(np.where(chamfer, plane_u, PLANE_Z))
     normals = np.moveaxis(estimate_normals(depth, K), 2, 0)
     by_distance = split_plane_outliers(seg, depth, K, probs, RefineConfig())
-    assert max((_iou(by_distance.instances == k, chamfer) for k in range(2, by_distance.num_instances + 1)),
-               default=0.0) < 0.5
+    assert (
+        max((_iou(by_distance.instances == k, chamfer) for k in range(2, by_distance.num_instances + 1)), default=0.0)
+        < 0.5
+    )
     out = split_plane_outliers(seg, depth, K, probs, RefineConfig(), normals=normals)
     assert out.num_instances == 2 and out.labels[2] == plane_u
     assert _iou(out.instances == 2, chamfer) > 0.7  # the normals' smoothing blurs a row or two at each side
@@ -147,7 +147,7 @@ def _shaft(step_m: float, noise_m: float, seed: int) -> tuple[np.ndarray, np.nda
     for r, on_right in ((0.05, False), (0.05 + step_m, True)):
         a = d[..., 1] ** 2 + 1.0
         b = -2.0 * z0
-        c = z0 ** 2 - r ** 2
+        c = z0**2 - r**2
         disc = b * b - 4 * a * c
         t = np.where(disc > 0, (-b - np.sqrt(np.maximum(disc, 0))) / (2 * a), 0.0)
         side = (t * d[..., 0] >= 0) == on_right
@@ -161,8 +161,12 @@ def test_coaxial_radius_step_is_split_and_a_plain_shaft_is_not() -> None:
 
     for step_m in (0.004, 0.0):  # a 4 mm step (0.01 part sizes), then none
         depth, part = _shaft(step_m, 0.0005, seed=5)
-        seg = Segmentation(part.astype(np.int32), np.array([0, label_of("cylinder", "X")], np.uint8),
-                           np.array([0, 0.9], np.float32), "learned")
+        seg = Segmentation(
+            part.astype(np.int32),
+            np.array([0, label_of("cylinder", "X")], np.uint8),
+            np.array([0, 0.9], np.float32),
+            "learned",
+        )
         out = split_coaxial_steps(seg, depth, K, RefineConfig())
         if step_m == 0.0:
             assert out is seg
@@ -173,8 +177,9 @@ def test_coaxial_radius_step_is_split_and_a_plain_shaft_is_not() -> None:
         assert max(_iou(out.instances == k, part & ~right) for k in (1, 2)) > 0.95
 
 
-def _stepped_shaft(radii: tuple[float, ...], cuts_m: tuple[float, ...], noise_m: float, seed: int,
-                   flying_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _stepped_shaft(
+    radii: tuple[float, ...], cuts_m: tuple[float, ...], noise_m: float, seed: int, flying_m: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(depth, part, section) of a horizontal shaft (axis along camera x at y = 0, z = 0.5 m) whose radius is
     radii[k] between cuts_m[k - 1] and cuts_m[k] along x (metres), with Gaussian depth noise; the pixels within
     3 px of the silhouette read flying_m too far (mixed pixels, as a sensor returns them); section: (H, W) index
@@ -188,7 +193,7 @@ def _stepped_shaft(radii: tuple[float, ...], cuts_m: tuple[float, ...], noise_m:
     edges = (-np.inf, *cuts_m, np.inf)
     for k, r in enumerate(radii):
         a = d[..., 1] ** 2 + 1.0
-        disc = 4 * z0 ** 2 - 4 * a * (z0 ** 2 - r ** 2)
+        disc = 4 * z0**2 - 4 * a * (z0**2 - r**2)
         t = np.where(disc > 0, (2 * z0 - np.sqrt(np.maximum(disc, 0))) / (2 * a), 0.0)
         x = t * d[..., 0]
         on = (disc > 0) & (x >= edges[k]) & (x < edges[k + 1])
@@ -209,12 +214,17 @@ def test_three_coaxial_sections_are_split_at_both_steps() -> None:
     from v2c.segment.refine import split_coaxial_steps
 
     depth, part, section = _stepped_shaft((0.044, 0.047, 0.050), (-0.065, 0.025), 0.0005, seed=7, flying_m=0.01)
-    seg = Segmentation(part.astype(np.int32), np.array([0, label_of("cylinder", "X")], np.uint8),
-                       np.array([0, 0.9], np.float32), "learned")
+    seg = Segmentation(
+        part.astype(np.int32),
+        np.array([0, label_of("cylinder", "X")], np.uint8),
+        np.array([0, 0.9], np.float32),
+        "learned",
+    )
 
     def matched(out: Segmentation) -> int:
-        return sum(max(_iou(out.instances == i, section == k) for i in range(1, out.num_instances + 1)) > 0.9
-                   for k in range(3))
+        return sum(
+            max(_iou(out.instances == i, section == k) for i in range(1, out.num_instances + 1)) > 0.9 for k in range(3)
+        )
 
     out = split_coaxial_steps(seg, depth, K, RefineConfig())
     assert out.num_instances == 3 and matched(out) == 3

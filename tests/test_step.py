@@ -20,12 +20,13 @@ from OCP.BRepCheck import BRepCheck_Analyzer
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SHELL
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopoDS import TopoDS
-from scenes.revolved import revolved_all_types
-from scenes.vbrep import box_corner, cylinder_upright
 
 from exporters import step
 from exporters.brep import BrepConfig, check_faces
 from v2c.vbrep.model import EdgeType
+
+from scenes.revolved import revolved_all_types
+from scenes.vbrep import box_corner, cylinder_upright
 
 EXAMPLES = {"box_corner": box_corner, "cylinder_upright": cylinder_upright, "revolved": revolved_all_types}
 

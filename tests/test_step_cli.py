@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import TINY, listing, write_tiny_scan
 from OCP.Bnd import Bnd_Box
 from OCP.BRepAdaptor import BRepAdaptor_Surface
 from OCP.BRepBndLib import BRepBndLib
@@ -19,6 +18,8 @@ from OCP.TopoDS import TopoDS
 from exporters.step import EDGE_COLORS, read_typed
 from v2c.commands.to_step import command as to_step
 from v2c.vbrep.model import VBRep
+
+from conftest import TINY, listing, write_tiny_scan
 
 
 def _run(args: list[str]):
@@ -104,5 +105,11 @@ def test_batch_into_an_output_folder(tmp_path: Path) -> None:
     res = _run([str(root / "a"), str(root / "b"), "--segmentation", "oracle", "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert "2 of 2 scans written." in res.output
-    assert sorted(p.name for p in out.iterdir()) == ["a.png", "a.step", "a.vbrep.json", "b.png", "b.step",
-                                                     "b.vbrep.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "a.png",
+        "a.step",
+        "a.vbrep.json",
+        "b.png",
+        "b.step",
+        "b.vbrep.json",
+    ]

@@ -16,10 +16,11 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from scenes.revolved import revolved_all_types
-from scenes.vbrep import box_corner, cylinder_upright
 
 from exporters import step
+
+from scenes.revolved import revolved_all_types
+from scenes.vbrep import box_corner, cylinder_upright
 
 FREECADCMD = shutil.which("freecadcmd")
 SCRIPT = Path(__file__).with_name("freecad_check.py")
@@ -34,9 +35,7 @@ FREECAD_SURFACE = {
     "revolution": "SurfaceOfRevolution",
 }
 
-pytestmark = pytest.mark.skipif(
-    FREECADCMD is None, reason="freecadcmd not installed (scripts/setup.sh as root)"
-)
+pytestmark = pytest.mark.skipif(FREECADCMD is None, reason="freecadcmd not installed (scripts/setup.sh as root)")
 
 
 def freecad_import(path: Path, home: Path) -> dict:
@@ -45,9 +44,7 @@ def freecad_import(path: Path, home: Path) -> dict:
     proc = subprocess.run(
         [FREECADCMD, str(SCRIPT)], env=env, capture_output=True, text=True, timeout=180, check=False
     )  # the JSON line says what went wrong
-    assert MARK in proc.stdout, (
-        f"freecadcmd rc={proc.returncode}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
-    )
+    assert MARK in proc.stdout, f"freecadcmd rc={proc.returncode}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
     return json.loads(proc.stdout.split(MARK, 1)[1].splitlines()[0])
 
 

@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepCheck import BRepCheck_Analyzer
-from scenes.vbrep import box_corner
 
 from exporters import step
 from exporters.brep import BrepConfig, build_brep, check_faces
@@ -15,6 +14,8 @@ from exporters.brep_edges import EdgeBuilder
 from exporters.frames import FrameMap
 from exporters.occ_surfaces import distance_to_surface
 from v2c.vbrep.model import EdgeType, VEdge, VertexKind, VVertex
+
+from scenes.vbrep import box_corner
 
 CAMERA = FrameMap(np.eye(3), np.zeros(3))  # camera frame, millimetres
 

@@ -9,12 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scenes.vbrep import box_corner, grid_triangles
 
 from exporters import step
 from exporters.brep_outline import mesh_area
 from exporters.readback import check_written
 from v2c.vbrep.model import EdgeType, VEdge
+
+from scenes.vbrep import box_corner, grid_triangles
 
 N = 21  # grid vertices per side of the test meshes
 
@@ -93,8 +94,7 @@ def test_nothing_written_outside_the_part_box(tmp_path: Path) -> None:
     written: the file's bounding box stays the part's."""
     vb = box_corner()
     far = np.array([1.2, -0.8, 2.5])
-    circle = far + 0.629 * np.stack([np.cos(np.linspace(0, 6, 40)), np.sin(np.linspace(0, 6, 40)),
-                                     np.zeros(40)], 1)
+    circle = far + 0.629 * np.stack([np.cos(np.linspace(0, 6, 40)), np.sin(np.linspace(0, 6, 40)), np.zeros(40)], 1)
     vb.edges.append(VEdge(len(vb.edges), EdgeType.INTERSECTION, 0.0, (), circle, 0, 1, None))
     path = tmp_path / "far.step"
     report = step.write(vb, path, frame="camera")

@@ -45,9 +45,7 @@ def test_pipeline_vbrep_exports_valid_and_typed(pipeline_vbrep, frame: str, tmp_
             # an outline-bounded face may be written in several pieces, each named after it
             for got in [g for g in back.faces if g.id == f.id]:
                 assert got.type.value == f.primitive["type"]
-                assert got.surface == f.primitive["type"] or (
-                    got.surface == "revolution" and got.type.value == "torus"
-                )
+                assert got.surface == f.primitive["type"] or (got.surface == "revolution" and got.type.value == "torus")
     assert all(g.type is not None for g in back.edges)  # every edge of the file is typed
     for e in vb.edges:
         t = EdgeType(e.type)
@@ -63,8 +61,9 @@ def test_pipeline_vbrep_exports_valid_and_typed(pipeline_vbrep, frame: str, tmp_
         expected = sum(e.id in held for held in report.face_edges.values())
         assert expected in [g.n_faces for g in back.edge(e.id)], (e.id, e.type)
         assert (expected == 0) == (e.id in report.free_edges)
-    n_shared = sum(max(g.n_faces for g in back.edge(e.id)) == 2
-                   for e in vb.edges_of_type(EdgeType.INTERSECTION) if back.edge(e.id))
+    n_shared = sum(
+        max(g.n_faces for g in back.edge(e.id)) == 2 for e in vb.edges_of_type(EdgeType.INTERSECTION) if back.edge(e.id)
+    )
     assert n_shared >= 1
     if shutil.which("freecadcmd"):
         fc = freecad_import(path, tmp_path)

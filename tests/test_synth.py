@@ -165,28 +165,62 @@ def test_part_step_read_back_matches_primitives(scans):
 
 
 def _hashes(folder: Path) -> dict[str, str]:
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 def test_same_seed_gives_identical_files_and_other_seeds_differ(scans, tmp_path):
     # Scans 1 and 2 of the fixture run again, alone, in two worker processes and in another folder: identical.
-    _run([str(tmp_path / "a"), "--n", "2", "--start", "1", "--seed", str(SEED), "--size", SIZE, "--families",
-          FAMILIES, "--jobs", "2", "--quiet"])
+    _run(
+        [
+            str(tmp_path / "a"),
+            "--n",
+            "2",
+            "--start",
+            "1",
+            "--seed",
+            str(SEED),
+            "--size",
+            SIZE,
+            "--families",
+            FAMILIES,
+            "--jobs",
+            "2",
+            "--quiet",
+        ]
+    )
     for k in (1, 2):
         again = _hashes(tmp_path / "a" / f"scan_{k:05d}")
         assert len(again) == 11
         assert again == _hashes(scans[k])
-    _run([str(tmp_path / "b"), "--n", "1", "--start", "1", "--seed", str(SEED + 1), "--size", SIZE, "--families",
-          FAMILIES, "--quiet"])
+    _run(
+        [
+            str(tmp_path / "b"),
+            "--n",
+            "1",
+            "--start",
+            "1",
+            "--seed",
+            str(SEED + 1),
+            "--size",
+            SIZE,
+            "--families",
+            FAMILIES,
+            "--quiet",
+        ]
+    )
     other = _hashes(tmp_path / "b" / "scan_00001")
     first = _hashes(scans[1])
     assert all(other[name] != first[name] for name in ("color.png", "depth.png", "gt/part.step", "gt/meta.json"))
 
 
 def test_paper_noise_profile(tmp_path):
-    _run([str(tmp_path), "--n", "1", "--seed", "5", "--size", SIZE, "--noise", "paper", "--families", "block",
-          "--quiet"])
+    _run(
+        [str(tmp_path), "--n", "1", "--seed", "5", "--size", SIZE, "--noise", "paper", "--families", "block", "--quiet"]
+    )
     folder = tmp_path / "scan_00000"
     cam = json.loads((folder / "camera.json").read_text())
     depth = _read(folder / "depth.png").astype(float) * cam["depth_scale"]
@@ -218,8 +252,22 @@ def test_sensor_noise_profile(scans):
 
 @pytest.mark.skipif(not (SHARED_CAD / "screw.step").is_file(), reason="../shared/data/cad is not present")
 def test_cad_import_screw(tmp_path):
-    _run([str(tmp_path), "--n", "1", "--seed", "2", "--size", SIZE, "--cad", str(SHARED_CAD / "screw.step"),
-          "--families", "cad", "--quiet"])
+    _run(
+        [
+            str(tmp_path),
+            "--n",
+            "1",
+            "--seed",
+            "2",
+            "--size",
+            SIZE,
+            "--cad",
+            str(SHARED_CAD / "screw.step"),
+            "--families",
+            "cad",
+            "--quiet",
+        ]
+    )
     folder = tmp_path / "scan_00000"
     meta = json.loads((folder / "gt" / "meta.json").read_text())
     assert meta["family"] == "cad" and meta["part"]["file"] == "screw.step"
@@ -243,8 +291,24 @@ def test_cad_import_screw(tmp_path):
 
 def test_printed_parts_change_colour_only(scans, tmp_path):
     # --print-share draws from its own generator: geometry, noise and labels stay those of the plain scan.
-    _run([str(tmp_path), "--n", "1", "--start", "1", "--seed", str(SEED), "--size", SIZE, "--families", FAMILIES,
-          "--print-share", "1", "--quiet"])
+    _run(
+        [
+            str(tmp_path),
+            "--n",
+            "1",
+            "--start",
+            "1",
+            "--seed",
+            str(SEED),
+            "--size",
+            SIZE,
+            "--families",
+            FAMILIES,
+            "--print-share",
+            "1",
+            "--quiet",
+        ]
+    )
     printed, plain = _hashes(tmp_path / "scan_00001"), _hashes(scans[1])
     for name in ("depth.png", "mask.png", "gt/faces.png", "gt/labels.png", "gt/depth_clean.npy", "gt/part.step"):
         assert printed[name] == plain[name], name
@@ -252,13 +316,29 @@ def test_printed_parts_change_colour_only(scans, tmp_path):
     # On the largest face of block scans at 320x240 (measured std 2.4-7.5 plain, 10.9-29.1 printed, seed 3):
     # a print varies the colour within a face where the plain material only shades.
     for ps in ("0", "1"):
-        _run([str(tmp_path / ps), "--n", "4", "--seed", "3", "--size", "320x240", "--families", "block",
-              "--print-share", ps, "--quiet"])
+        _run(
+            [
+                str(tmp_path / ps),
+                "--n",
+                "4",
+                "--seed",
+                "3",
+                "--size",
+                "320x240",
+                "--families",
+                "block",
+                "--print-share",
+                ps,
+                "--quiet",
+            ]
+        )
     ratios = []
     for k in range(4):
         faces = _read(tmp_path / "0" / f"scan_{k:05d}" / "gt" / "faces.png")
         big = faces == np.bincount(faces.ravel())[1:].argmax() + 1
-        spread = [_read(tmp_path / ps / f"scan_{k:05d}" / "color.png")[big].astype(float).std(axis=0).mean()
-                  for ps in ("0", "1")]
+        spread = [
+            _read(tmp_path / ps / f"scan_{k:05d}" / "color.png")[big].astype(float).std(axis=0).mean()
+            for ps in ("0", "1")
+        ]
         ratios.append(spread[1] / spread[0])
     assert min(ratios) > 1.5 and np.median(ratios) > 3.0, ratios

@@ -39,8 +39,10 @@ def pairs(tmp_path_factory) -> list[tuple[Path, Path]]:
     out = tmp_path_factory.mktemp("look")
     plain = SynthConfig(width=SIZE[0], height=SIZE[1], appearance="plain", framing="extent")
     rand = SynthConfig(width=SIZE[0], height=SIZE[1], appearance="random", framing="extent")
-    return [(generate_scan(out / "plain", SEED, i, plain), generate_scan(out / "random", SEED, i, rand))
-            for i in range(N_PAIRS)]
+    return [
+        (generate_scan(out / "plain", SEED, i, plain), generate_scan(out / "random", SEED, i, rand))
+        for i in range(N_PAIRS)
+    ]
 
 
 def _meta(folder: Path) -> dict:
@@ -148,8 +150,11 @@ def test_same_seed_same_files_other_seed_differs(tmp_path, pairs) -> None:
 def test_cli_appearance_and_framing(tmp_path) -> None:
     from v2c.commands.synth import command
 
-    res = CliRunner().invoke(command, [str(tmp_path / "a"), "--n", "1", "--size", "96x72", "--appearance", "random",
-                                       "--quiet"], catch_exceptions=False)
+    res = CliRunner().invoke(
+        command,
+        [str(tmp_path / "a"), "--n", "1", "--size", "96x72", "--appearance", "random", "--quiet"],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     meta = _meta(tmp_path / "a" / "scan_00000")
     assert meta["appearance"]["mode"] == "random" and meta["framing"]["mode"] == "extent"
@@ -170,8 +175,9 @@ def test_bench_and_recipe_take_appearance(tmp_path) -> None:
     plain = S.suite_cache_dir(S.SuiteConfig(bench=bench))
     rand = S.suite_cache_dir(S.SuiteConfig(bench=bench, appearance="random"))
     assert plain != rand and "random" in rand.name and "random" not in plain.name
-    scans, _ = S.plan_scans(S.SuiteConfig(bench=bench, appearance="random", parts=(), families=("feat_hex",),
-                                          family_scans=1))
+    scans, _ = S.plan_scans(
+        S.SuiteConfig(bench=bench, appearance="random", parts=(), families=("feat_hex",), family_scans=1)
+    )
     assert scans[0].synth.appearance == "random" and scans[0].synth.framing == "extent"
     res = CliRunner().invoke(command, ["--appearance", "random", "--n", "1"])
     assert res.exit_code != 0 and "--appearance belongs to --suite unseen" in res.output

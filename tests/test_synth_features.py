@@ -174,8 +174,9 @@ def test_feature_on_box(kind: str):
         raise AssertionError(f"no check for {kind}")
 
 
-@pytest.mark.parametrize("kind", ["groove", "dome", "ball_end", "fillet", "chamfer", "through_hole",
-                                  "circular_pattern"])
+@pytest.mark.parametrize(
+    "kind", ["groove", "dome", "ball_end", "fillet", "chamfer", "through_hole", "circular_pattern"]
+)
 def test_feature_on_turned_stock(kind: str):
     before, after, p = apply_first(kind, turned_work)
     new = added(before, after.shape)
@@ -313,8 +314,22 @@ def test_cli_families_groups_and_errors(tmp_path):
 def feature_scans(tmp_path_factory) -> list[Path]:
     out = tmp_path_factory.mktemp("feat")
     families = "feat_knob,feat_turned,feat_block,feat_hex"
-    result = _synth([str(out), "--n", "4", "--seed", "21", "--size", "160x120", "--noise", "none", "--families",
-                     families, "--quiet"])
+    result = _synth(
+        [
+            str(out),
+            "--n",
+            "4",
+            "--seed",
+            "21",
+            "--size",
+            "160x120",
+            "--noise",
+            "none",
+            "--families",
+            families,
+            "--quiet",
+        ]
+    )
     assert result.exit_code == 0, result.output
     return sorted(out.glob("scan_*"))
 

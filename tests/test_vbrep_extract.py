@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scenes.raycast import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
 
 from v2c.bench.vbrep import chamfer, edge_type_accuracy
 from v2c.camera import project
 from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.model import EdgeType, VertexKind
+
+from scenes.raycast import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
 
 NOISE_M = 0.0004  # depth noise of the scenes (metres), about a RealSense at 0.45 m
 
@@ -30,8 +31,7 @@ def _perturb(prim: dict, rng: np.random.Generator) -> dict:
 
 @pytest.fixture(scope="module", params=["exact", "perturbed"])
 def box(request):
-    inp = scene_inputs(box_scene(), noise_m=NOISE_M, seed=1,
-                       perturb=_perturb if request.param == "perturbed" else None)
+    inp = scene_inputs(box_scene(), noise_m=NOISE_M, seed=1, perturb=_perturb if request.param == "perturbed" else None)
     return inp, extract_vbrep(inp.scan, inp.seg, inp.fit)
 
 
@@ -259,8 +259,12 @@ def test_labelled_fallback_from_one_edge() -> None:
     inst[60:140, 100:220] = 1
     inst[140:150, 100:220] = 2
     depth = np.where(inst == 1, 0.5, 0.0)
-    fit = SimpleNamespace(primitives={1: Plane([0.0, 0.0, 0.5], [0.0, 0.0, -1.0])}, residuals={1: 0.0},
-                          axis_labels={1: "Z"}, frame=np.eye(3))
+    fit = SimpleNamespace(
+        primitives={1: Plane([0.0, 0.0, 0.5], [0.0, 0.0, -1.0])},
+        residuals={1: 0.0},
+        axis_labels={1: "Z"},
+        frame=np.eye(3),
+    )
     edge_y = (139.5 - 120.0) / 600.0 * 0.5  # metres: where the ledge meets the plane (between rows 139 and 140)
     for label, drawn in ((label_of("plane", "Y"), True), (label_of("plane", "U"), False)):
         seg = SimpleNamespace(instances=inst, labels=np.array([0, label_of("plane", "Z"), label], np.uint8))

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scenes.raycast import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
 
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.gt_types import gt_edge_samples
 from v2c.vbrep.model import EdgeType
+
+from scenes.raycast import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
 
 
 def _types_by_pair(gt):

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
-from scenes.raycast import box_scene, scene_inputs
 
 from v2c.camera import project
 from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.mesh import face_mesh
+
+from scenes.raycast import box_scene, scene_inputs
 
 K = np.array([[600.0, 0, 160], [0, 600.0, 120], [0, 0, 1]])
 H, W = 240, 320
@@ -26,8 +27,9 @@ def test_plane_through_the_camera_centre_gives_no_vertex_at_the_camera():
     # sensor benchmark set): every ray meets it at z = 0. Before the fix the whole face mesh sat at the camera
     # centre and, rendered, covered the image.
     n = np.array([0.99992700, 0.0, 0.01208298])
-    plane = from_dict({"type": "plane", "params": {"origin": (0.78 * np.array([-n[2], 0, n[0]])).tolist(),
-                                                   "normal": n.tolist()}})
+    plane = from_dict(
+        {"type": "plane", "params": {"origin": (0.78 * np.array([-n[2], 0, n[0]])).tolist(), "normal": n.tolist()}}
+    )
     region = _region(150, 60, 170, 180)
     verts, tris = face_mesh(plane, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02, np.inf)
     assert len(verts) == 0 or verts[:, 2].min() >= WINDOW[0]
@@ -38,8 +40,9 @@ def test_rays_missing_a_cylinder_leave_no_vertex_off_the_surface():
     # An upright cylinder (radius 5 cm at 0.8 m) and a region twice as wide as its image: the rays beside it
     # miss it; their closest-approach fallback is off the surface (up to 5 cm here) and must not become mesh
     # vertices: dropped beyond the tolerance, moved onto the surface within it.
-    cyl = from_dict({"type": "cylinder", "params": {"origin": [0.0, 0.0, 0.8], "axis": [0.0, 1.0, 0.0],
-                                                    "radius": 0.05}})
+    cyl = from_dict(
+        {"type": "cylinder", "params": {"origin": [0.0, 0.0, 0.8], "axis": [0.0, 1.0, 0.0], "radius": 0.05}}
+    )
     region = _region(80, 40, 240, 200)
     tol = 0.005
     verts, tris = face_mesh(cyl, 0, region, np.zeros((H, W), np.float32), K, WINDOW, 2, 0.02, tol)
@@ -119,7 +122,6 @@ def test_extracted_meshes_lie_in_front_of_the_camera_on_their_surfaces():
         mv = np.asarray(f.mesh_vertices, float)
         assert len(mv) and mv[:, 2].min() > 0.1
         assert np.abs(from_dict(f.primitive).signed_distance(mv)).max() <= 1e-7
-
 
 
 def test_edge_on_plane_keeps_long_triangles_inside_the_part_box_only():

@@ -6,9 +6,10 @@ import json
 
 import numpy as np
 import pytest
-from scenes.vbrep import box_corner, cylinder_upright, project
 
 from v2c.vbrep.model import FORMAT_VERSION, EdgeType, VBRep, VertexKind
+
+from scenes.vbrep import box_corner, cylinder_upright, project
 
 
 @pytest.mark.parametrize("make", [box_corner, cylinder_upright])

@@ -6,12 +6,13 @@ import cv2
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from scenes.raycast import box_scene, scene_inputs
 
 from v2c.bench.vbrep import chamfer, edge_type_accuracy
 from v2c.cli import main
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.model import VBRep
+
+from scenes.raycast import box_scene, scene_inputs
 
 
 @pytest.fixture(scope="module")

@@ -113,5 +113,4 @@ def test_tangent_edges_on_the_line_of_contact(name: str, tmp_path: Path) -> None
     back = step.read_typed(report.path)
     for e in blends:
         got = back.edge(e.id)
-        assert got and all(g.tangent and g.name.endswith(":tangent") and g.type is EdgeType.INTERSECTION
-                           for g in got)
+        assert got and all(g.tangent and g.name.endswith(":tangent") and g.type is EdgeType.INTERSECTION for g in got)

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scenes.raycast import box_scene, cylinder_scene, scene_inputs
 
 from exporters import step
 from v2c.primitives import Cone, Plane, Torus
@@ -16,6 +15,8 @@ from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.topology import check_topology, solve_on_surfaces, valid_primitive
 from v2c.vbrep.vertices import face_groups
+
+from scenes.raycast import box_scene, cylinder_scene, scene_inputs
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
@@ -66,8 +67,9 @@ def test_scene_vbrep_is_consistent(scene):
 # face now. Its face 8 (6,881 mm²) was built valid but OCCT's STEP reader split it and lost its name: the file
 # held it as two unnamed faces, and the loss went unseen. Faces a round trip changes are now written from their
 # outline. Every face of these samples is written at its reconstructed area (checked below).
-@pytest.mark.parametrize("name, max_fallback", [("bracket_planes_cylinders", 2), ("turned_unaligned", 1),
-                                                ("knob_cone_torus_sphere", 4)])
+@pytest.mark.parametrize(
+    "name, max_fallback", [("bracket_planes_cylinders", 2), ("turned_unaligned", 1), ("knob_cone_torus_sphere", 4)]
+)
 def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):
     from exporters.readback import check_written
     from v2c.pipeline import reconstruct

@@ -105,19 +105,23 @@ def scan_to_step(
     t = time.perf_counter()
     scan = load_scan(scan_dir, roi=roi)
     seconds["load"] = time.perf_counter() - t
-    log.info("%s: %d x %d px, %d valid pixels, loaded in %.2f s", scan_dir, scan.width, scan.height,
-             int(scan.valid.sum()), seconds["load"])
+    log.info(
+        "%s: %d x %d px, %d valid pixels, loaded in %.2f s",
+        scan_dir,
+        scan.width,
+        scan.height,
+        int(scan.valid.sum()),
+        seconds["load"],
+    )
     t = time.perf_counter()
-    vbrep, seg, _ = reconstruct(scan, segmentation=segmentation, ablation=ablation, config=config,
-                                return_stages=True)
+    vbrep, seg, _ = reconstruct(scan, segmentation=segmentation, ablation=ablation, config=config, return_stages=True)
     seconds["reconstruct"] = time.perf_counter() - t
     with OutputSet(force=force) as files:  # committed together on leaving the block; nothing changed on an exception
         t = time.perf_counter()
         tmp = files.temp(out)
         try:
             # straight into the set's own exclusive temporary (a nested one would outlive a killed worker)
-            report = write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem,
-                                       atomic=False)
+            report = write(vbrep, tmp, frame=frame, product=scan_dir.resolve().name or out.stem, atomic=False)
         except StepExportError as exc:  # name the destination, not our temporary
             raise StepExportError(f"{str(exc).replace(str(tmp), str(out))}; nothing written") from None
         report.path = out
@@ -128,8 +132,9 @@ def scan_to_step(
         readback.path = out
         seconds["readback"] = time.perf_counter() - t
         log.info("%s", readback.summary())
-        result = ScanExport(scan=scan_dir, step=out, report=report, warnings=list(report.warnings),
-                            seconds=seconds, readback=readback)
+        result = ScanExport(
+            scan=scan_dir, step=out, report=report, warnings=list(report.warnings), seconds=seconds, readback=readback
+        )
         if extras:
             t = time.perf_counter()
             json_path, png_path = extras_paths(out)
@@ -138,8 +143,13 @@ def scan_to_step(
             try:
                 # drawn from the file as read back: the figure shows what the user got
                 drawn = readback.drawn
-                result_figure(scan, seg.instances, drawn if drawn is not None else vbrep, files.temp(png_path),
-                              source="STEP as written" if drawn is not None else "VB-Rep")
+                result_figure(
+                    scan,
+                    seg.instances,
+                    drawn if drawn is not None else vbrep,
+                    files.temp(png_path),
+                    source="STEP as written" if drawn is not None else "VB-Rep",
+                )
                 result.figure = png_path
             except Exception as exc:  # noqa: BLE001 - the figure is a convenience: never lose the STEP over it
                 files.forget(png_path)

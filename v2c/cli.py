@@ -27,13 +27,20 @@ from v2c.version import version
 class V2cGroup(click.Group):
     """A click group that applies v2c's error policy (`v2c.cli_support.run_with_error_policy`)."""
 
-    def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
-             standalone_mode: bool = True, **extra: Any) -> Any:
+    def main(
+        self,
+        args: Any = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        **extra: Any,
+    ) -> Any:
         """Run the command line like `click.Group.main`, with v2c's error policy in standalone mode."""
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         code = run_with_error_policy(
-            lambda: super(V2cGroup, self).main(args, prog_name, complete_var, standalone_mode=False, **extra))
+            lambda: super(V2cGroup, self).main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        )
         raise SystemExit(code)
 
 
@@ -49,7 +56,6 @@ def main(verbose: int, quiet: bool) -> None:
 for _info in sorted(pkgutil.iter_modules(_commands.__path__), key=lambda m: m.name):
     _mod = importlib.import_module(f"v2c.commands.{_info.name}")
     main.add_command(_mod.command)
-
 
 
 def run() -> None:

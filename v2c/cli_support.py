@@ -128,8 +128,7 @@ def describe_error(e: BaseException, where: object = None) -> str:
     if isinstance(e, OSError) and e.filename:
         return f"{e.filename}: {e.strerror or type(e).__name__}"
     at = f"{where}: " if where is not None else ""
-    return (f"{at}internal error of v2c ({type(e).__name__}: {str(e)[:200]}); please report it (-vv shows the "
-            "traceback)")
+    return f"{at}internal error of v2c ({type(e).__name__}: {str(e)[:200]}); please report it (-vv shows the traceback)"
 
 
 def _parse_roi(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[int, int, int, int] | None:
@@ -143,9 +142,14 @@ def _parse_roi(ctx: click.Context, param: click.Parameter, value: str | None) ->
 
 def roi_option(f: Callable) -> Callable:
     """``--roi x0,y0,x1,y1``: the region of interest in pixels (x1/y1 exclusive), passed as ``roi``."""
-    return click.option("--roi", callback=_parse_roi, default=None, metavar="x0,y0,x1,y1",
-                        help="Region of interest in pixels (x1, y1 exclusive); restricts the valid pixels. A real "
-                             "frame needs it or a mask.png.")(f)
+    return click.option(
+        "--roi",
+        callback=_parse_roi,
+        default=None,
+        metavar="x0,y0,x1,y1",
+        help="Region of interest in pixels (x1, y1 exclusive); restricts the valid pixels. A real "
+        "frame needs it or a mask.png.",
+    )(f)
 
 
 def _set_max_pixels(ctx: click.Context, param: click.Parameter, value: int | None) -> None:
@@ -160,6 +164,12 @@ def max_pixels_option(f: Callable) -> Callable:
     from v2c.scan_checks import ScanLimits
 
     return click.option(
-        "--max-pixels", type=click.IntRange(min=1), default=None, expose_value=False, callback=_set_max_pixels,
-        metavar="N", help=f"Largest image in pixels (width x height) to accept; default "
-                          f"{ScanLimits.max_pixels:,} (2.1 megapixels: 1920x1080 fits).")(f)
+        "--max-pixels",
+        type=click.IntRange(min=1),
+        default=None,
+        expose_value=False,
+        callback=_set_max_pixels,
+        metavar="N",
+        help=f"Largest image in pixels (width x height) to accept; default "
+        f"{ScanLimits.max_pixels:,} (2.1 megapixels: 1920x1080 fits).",
+    )(f)

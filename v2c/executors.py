@@ -57,10 +57,17 @@ class ExecutorConfig:
     cpus_per_task: float = 1.0
 
 
-def run_tasks(fn: Callable[[T], R], items: Iterable[T], executor: str | ExecutorConfig = "local",
-              address: str | None = None, jobs: int | None = 1, initializer: Callable[..., Any] | None = None,
-              initargs: tuple = (), max_retries: int = 3,
-              cpus_per_task: float = 1.0) -> Iterator[tuple[T, R | None, BaseException | None]]:
+def run_tasks(
+    fn: Callable[[T], R],
+    items: Iterable[T],
+    executor: str | ExecutorConfig = "local",
+    address: str | None = None,
+    jobs: int | None = 1,
+    initializer: Callable[..., Any] | None = None,
+    initargs: tuple = (),
+    max_retries: int = 3,
+    cpus_per_task: float = 1.0,
+) -> Iterator[tuple[T, R | None, BaseException | None]]:
     """Run ``fn`` on every item; yield ``(item, result, None)`` or ``(item, None, exception)`` as tasks finish.
 
     ``executor`` is "local" or "ray" (then address / jobs / max_retries / cpus_per_task apply), or an
@@ -71,8 +78,9 @@ def run_tasks(fn: Callable[[T], R], items: Iterable[T], executor: str | Executor
     if isinstance(executor, ExecutorConfig):
         cfg = executor
     else:
-        cfg = ExecutorConfig(kind=executor, address=address, jobs=jobs, max_retries=max_retries,
-                             cpus_per_task=cpus_per_task)
+        cfg = ExecutorConfig(
+            kind=executor, address=address, jobs=jobs, max_retries=max_retries, cpus_per_task=cpus_per_task
+        )
     items = list(items)
     if cfg.kind == "local":
         if cfg.jobs is None or cfg.jobs <= 1:
@@ -98,11 +106,11 @@ def _run_here(fn: Callable[[T], R], items: list[T]) -> Iterator[tuple[T, R | Non
         yield item, result, None
 
 
-def _run_pool(fn: Callable[[T], R], items: list[T], jobs: int, initializer: Callable[..., Any] | None,
-              initargs: tuple) -> Iterator[tuple[T, R | None, BaseException | None]]:
+def _run_pool(
+    fn: Callable[[T], R], items: list[T], jobs: int, initializer: Callable[..., Any] | None, initargs: tuple
+) -> Iterator[tuple[T, R | None, BaseException | None]]:
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=initializer,
-                             initargs=initargs) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=initializer, initargs=initargs) as pool:
         futures = {pool.submit(fn, item): item for item in items}
         for fut in as_completed(futures):
             exc = fut.exception()  # BrokenProcessPool when a worker died (e.g. a crash inside OCCT)
@@ -117,8 +125,9 @@ def ray_module() -> Any:
     try:
         import ray
     except ImportError:
-        raise ExecutorError(f"--executor ray needs the Ray package, which is not installed: "
-                            f"{RAY_INSTALL_HINT}") from None
+        raise ExecutorError(
+            f"--executor ray needs the Ray package, which is not installed: {RAY_INSTALL_HINT}"
+        ) from None
     return ray
 
 
@@ -138,8 +147,10 @@ def connect_ray(ray: Any, address: str | None = None, probe_timeout_s: float = 5
     try:
         ray.init(address=address)
     except (ConnectionError, RuntimeError, ValueError) as exc:
-        raise ExecutorError(f"no Ray cluster at --ray-address {address}: {_first_line(exc)}; start one with "
-                            "`ray start --head` (docs/scale.md)") from None
+        raise ExecutorError(
+            f"no Ray cluster at --ray-address {address}: {_first_line(exc)}; start one with "
+            "`ray start --head` (docs/scale.md)"
+        ) from None
 
 
 def _first_line(exc: BaseException) -> str:
@@ -153,8 +164,10 @@ def _probe(address: str, timeout_s: float) -> None:
 
         resolved = canonicalize_bootstrap_address(address)
     except ConnectionError as exc:
-        raise ExecutorError(f"no Ray cluster at --ray-address {address}: {_first_line(exc)}; start one with "
-                            "`ray start --head` (docs/scale.md)") from None
+        raise ExecutorError(
+            f"no Ray cluster at --ray-address {address}: {_first_line(exc)}; start one with "
+            "`ray start --head` (docs/scale.md)"
+        ) from None
     except Exception:  # noqa: BLE001 - a Ray without this helper: let ray.init judge the address
         return
     if not resolved:
@@ -163,9 +176,11 @@ def _probe(address: str, timeout_s: float) -> None:
     try:
         socket.create_connection((host, int(port)), timeout=timeout_s).close()
     except (OSError, ValueError):
-        raise ExecutorError(f"no Ray cluster at --ray-address {address}: nothing answers at {resolved} "
-                            f"(a cluster stopped without `ray stop`?); start one with `ray start --head` "
-                            "(docs/scale.md)") from None
+        raise ExecutorError(
+            f"no Ray cluster at --ray-address {address}: nothing answers at {resolved} "
+            f"(a cluster stopped without `ray stop`?); start one with `ray start --head` "
+            "(docs/scale.md)"
+        ) from None
 
 
 #: Initializers already run in this (worker) process, by (module, name, initargs).
@@ -203,11 +218,17 @@ def _unwrap(ray: Any, exc: BaseException) -> BaseException:
     return exc
 
 
-def _run_ray(ray: Any, fn: Callable[[T], R], items: list[T], cfg: ExecutorConfig,
-             initializer: Callable[..., Any] | None,
-             initargs: tuple) -> Iterator[tuple[T, R | None, BaseException | None]]:
-    remote = ray.remote(_ray_call).options(num_cpus=cfg.cpus_per_task, max_retries=cfg.max_retries,
-                                           retry_exceptions=False)
+def _run_ray(
+    ray: Any,
+    fn: Callable[[T], R],
+    items: list[T],
+    cfg: ExecutorConfig,
+    initializer: Callable[..., Any] | None,
+    initargs: tuple,
+) -> Iterator[tuple[T, R | None, BaseException | None]]:
+    remote = ray.remote(_ray_call).options(
+        num_cpus=cfg.cpus_per_task, max_retries=cfg.max_retries, retry_exceptions=False
+    )
     if cfg.jobs:
         window = cfg.jobs
     else:
@@ -241,4 +262,3 @@ def _run_ray(ray: Any, fn: Callable[[T], R], items: list[T], cfg: ExecutorConfig
         for ref in pending:  # the caller stopped early: do not leave tasks running for nobody
             with contextlib.suppress(Exception):
                 ray.cancel(ref)
-

@@ -148,8 +148,7 @@ def temp_path(dest: Path) -> Path:
     if dest.is_dir():
         raise OutputError(f"{dest}: cannot write the output: a folder of that name is in the way")
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.{os.getpid()}.", suffix=f".tmp{dest.suffix}",
-                                    dir=dest.parent)
+        fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.{os.getpid()}.", suffix=f".tmp{dest.suffix}", dir=dest.parent)
     except OSError as e:
         raise OutputError(f"{dest.parent}: cannot write into the output folder ({_describe(e)})") from None
     os.close(fd)
@@ -284,8 +283,10 @@ class OutputSet:
                     raise
             self.committed = True
         except OSError as e:
-            raise OutputError(f"{e.filename or self.destinations[0]}: cannot write ({_describe(e)}); the previous "
-                              "files were left as they were") from None
+            raise OutputError(
+                f"{e.filename or self.destinations[0]}: cannot write ({_describe(e)}); the previous "
+                "files were left as they were"
+            ) from None
         finally:
             for bak in backups.values():
                 _unlink_quietly(bak)
@@ -298,8 +299,9 @@ class OutputSet:
     def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         if exc_type is None:
             self.commit()
         else:

@@ -41,21 +41,38 @@ class PipelineConfig:
 
 
 @overload
-def reconstruct(scan: Scan | str | Path, segmentation: str | Segmentation = ..., ablation: str = ...,
-                config: PipelineConfig | None = ..., *, roi: str | tuple[int, int, int, int] | None = ...,
-                return_stages: Literal[False] = ...) -> VBRep: ...
+def reconstruct(
+    scan: Scan | str | Path,
+    segmentation: str | Segmentation = ...,
+    ablation: str = ...,
+    config: PipelineConfig | None = ...,
+    *,
+    roi: str | tuple[int, int, int, int] | None = ...,
+    return_stages: Literal[False] = ...,
+) -> VBRep: ...
 
 
 @overload
-def reconstruct(scan: Scan | str | Path, segmentation: str | Segmentation = ..., ablation: str = ...,
-                config: PipelineConfig | None = ..., *, roi: str | tuple[int, int, int, int] | None = ...,
-                return_stages: Literal[True]) -> tuple[VBRep, Segmentation, FitResult]: ...
+def reconstruct(
+    scan: Scan | str | Path,
+    segmentation: str | Segmentation = ...,
+    ablation: str = ...,
+    config: PipelineConfig | None = ...,
+    *,
+    roi: str | tuple[int, int, int, int] | None = ...,
+    return_stages: Literal[True],
+) -> tuple[VBRep, Segmentation, FitResult]: ...
 
 
-def reconstruct(scan: Scan | str | Path, segmentation: str | Segmentation = DEFAULT_SEGMENTATION,
-                ablation: str = DEFAULT_ABLATION, config: PipelineConfig | None = None, *,
-                roi: str | tuple[int, int, int, int] | None = None,
-                return_stages: bool = False) -> VBRep | tuple[VBRep, Segmentation, FitResult]:
+def reconstruct(
+    scan: Scan | str | Path,
+    segmentation: str | Segmentation = DEFAULT_SEGMENTATION,
+    ablation: str = DEFAULT_ABLATION,
+    config: PipelineConfig | None = None,
+    *,
+    roi: str | tuple[int, int, int, int] | None = None,
+    return_stages: bool = False,
+) -> VBRep | tuple[VBRep, Segmentation, FitResult]:
     """Reconstruct the VB-Rep of one scan (camera frame, metres).
 
     scan: a loaded `Scan` or a scan folder (loaded with ``roi``: "x0,y0,x1,y1" pixels or a tuple; ignored for a

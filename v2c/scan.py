@@ -38,8 +38,21 @@ from v2c.scan_checks import (
     scan_limits,
 )
 
-__all__ = ["Camera", "GroundTruth", "Scan", "ScanError", "ScanLimits", "backproject", "load_camera", "load_scan",
-           "parse_camera", "parse_roi", "read_image", "roi_to_mask", "scan_limits"]
+__all__ = [
+    "Camera",
+    "GroundTruth",
+    "Scan",
+    "ScanError",
+    "ScanLimits",
+    "backproject",
+    "load_camera",
+    "load_scan",
+    "parse_camera",
+    "parse_roi",
+    "read_image",
+    "roi_to_mask",
+    "scan_limits",
+]
 
 COLOR_NAMES = ("color.png", "color.jpg", "color.jpeg")
 DEPTH_NAMES = ("depth.png", "depth.npy")
@@ -72,13 +85,15 @@ class GroundTruth:
         return None if v is None else float(v)
 
     def __repr__(self) -> str:
-        return (f"GroundTruth({len(self.primitives)} faces, {self.faces.shape[1]}x{self.faces.shape[0]}, "
-                f"step={str(self.step_path)!r})")
+        return (
+            f"GroundTruth({len(self.primitives)} faces, {self.faces.shape[1]}x{self.faces.shape[0]}, "
+            f"step={str(self.step_path)!r})"
+        )
 
     def visible_face_ids(self) -> np.ndarray:
         """Sorted 0-based face indices that cover at least one pixel of faces.png."""
         vals = np.unique(self.faces)
-        return (vals[vals > 0].astype(np.int64) - 1)
+        return vals[vals > 0].astype(np.int64) - 1
 
 
 @dataclass
@@ -151,9 +166,11 @@ class Scan:
         return backproject(self.depth, self.K)
 
     def __repr__(self) -> str:
-        return (f"Scan({str(self.path)!r}, {self.width}x{self.height}, fx={self.fx:.2f}, "
-                f"mask={'yes' if self.mask is not None else 'no'}, roi={self.roi}, "
-                f"gt={'yes' if self.gt is not None else 'no'})")
+        return (
+            f"Scan({str(self.path)!r}, {self.width}x{self.height}, fx={self.fx:.2f}, "
+            f"mask={'yes' if self.mask is not None else 'no'}, roi={self.roi}, "
+            f"gt={'yes' if self.gt is not None else 'no'})"
+        )
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -243,18 +260,23 @@ def _read_depth_png(path: Path, scale_m: float, limits: ScanLimits) -> tuple[np.
     if raw.dtype != np.uint16:
         raise ScanError(f"{path}: depth image must be 16-bit unsigned, got {raw.dtype}")
     if raw.size and (raw == np.iinfo(np.uint16).max).all():
-        raise ScanError(f"{path}: every depth value is 65535, the 16-bit maximum (saturated or a 'no reading' "
-                        "marker); expected distances, 0 = no reading")
-    return check_depth_values(raw.astype(np.float64) * scale_m, path, limits,
-                              f"{scale_m:g} m per unit from camera.json")
+        raise ScanError(
+            f"{path}: every depth value is 65535, the 16-bit maximum (saturated or a 'no reading' "
+            "marker); expected distances, 0 = no reading"
+        )
+    return check_depth_values(
+        raw.astype(np.float64) * scale_m, path, limits, f"{scale_m:g} m per unit from camera.json"
+    )
 
 
 def _read_depth_npy(path: Path, limits: ScanLimits) -> tuple[np.ndarray, list[str]]:
     """depth.npy (float metres) -> (float32 metres, notes); integer arrays are refused (units unknown)."""
     arr = read_npy(path, limits)
     if arr.dtype.kind in "iub":
-        raise ScanError(f"{path}: depth.npy holds {arr.dtype} numbers; expected float metres (for integer depth "
-                        "units write a 16-bit depth.png and give depth_scale in camera.json)")
+        raise ScanError(
+            f"{path}: depth.npy holds {arr.dtype} numbers; expected float metres (for integer depth "
+            "units write a 16-bit depth.png and give depth_scale in camera.json)"
+        )
     return check_depth_values(arr.astype(np.float64), path, limits, "float metres")
 
 
@@ -280,13 +302,12 @@ def _pick(folder: Path, names: tuple[str, ...], what: str) -> Path:
 
 def _check_size(arr: np.ndarray, h: int, w: int, path: Path, ref: Path) -> None:
     if arr.shape[:2] != (h, w):
-        raise ScanError(
-            f"{path}: size {arr.shape[1]}x{arr.shape[0]} differs from {ref.name} {w}x{h} (width x height)"
-        )
+        raise ScanError(f"{path}: size {arr.shape[1]}x{arr.shape[0]} differs from {ref.name} {w}x{h} (width x height)")
 
 
-def load_ground_truth(folder: Path, height: int, width: int, depth_scale: float,
-                      depth_is_npy: bool = False) -> GroundTruth:
+def load_ground_truth(
+    folder: Path, height: int, width: int, depth_scale: float, depth_is_npy: bool = False
+) -> GroundTruth:
     """Load ``folder`` (a scan's gt/) and check every image against the scan size (height, width in pixels).
 
     depth_clean.png is read with camera.json's depth_scale (metres per unit), like depth.png; depth_clean.npy
@@ -322,8 +343,9 @@ def load_ground_truth(folder: Path, height: int, width: int, depth_scale: float,
     else:
         dc = read_image(dc_path, cv2.IMREAD_UNCHANGED, limits)
         if dc.ndim != 2 or dc.dtype != np.uint16:
-            raise ScanError(f"{dc_path}: noise-free depth must be a one-channel 16-bit image, got {dc.dtype} "
-                            f"with shape {dc.shape}")
+            raise ScanError(
+                f"{dc_path}: noise-free depth must be a one-channel 16-bit image, got {dc.dtype} with shape {dc.shape}"
+            )
         dc = dc.astype(np.float64) * depth_scale
     if not np.isfinite(dc).all() or (dc < 0).any():
         raise ScanError(f"{dc_path}: noise-free depth holds negative or non-finite values; expected metres >= 0")
@@ -342,12 +364,14 @@ def load_ground_truth(folder: Path, height: int, width: int, depth_scale: float,
     fmax = int(faces.max()) if faces.size else 0
     if fmax > n_faces:
         raise ScanError(f"{faces_p}: face value {fmax} but {prim_p.name} lists only {n_faces} faces")
-    return GroundTruth(faces=faces, labels=labels, primitives=prims, depth_clean=depth_clean, meta=meta,
-                       step_path=step_p)
+    return GroundTruth(
+        faces=faces, labels=labels, primitives=prims, depth_clean=depth_clean, meta=meta, step_path=step_p
+    )
 
 
-def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = None,
-              limits: ScanLimits | None = None) -> Scan:
+def load_scan(
+    path: str | Path, roi: tuple[int, int, int, int] | str | None = None, limits: ScanLimits | None = None
+) -> Scan:
     """Load and validate a scan folder (SCAN_FORMAT.md).
 
     path: the folder. roi: optional (x0, y0, x1, y1) pixels, x1/y1 exclusive, or the string "x0,y0,x1,y1"; it
@@ -380,9 +404,7 @@ def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = No
             "(width x height); depth must be registered to colour"
         )
     if (cam.width is not None and cam.width != w) or (cam.height is not None and cam.height != h):
-        raise ScanError(
-            f"{cam_p}: width x height {cam.width}x{cam.height} disagrees with the images ({w}x{h})"
-        )
+        raise ScanError(f"{cam_p}: width x height {cam.width}x{cam.height} disagrees with the images ({w}x{h})")
     check_intrinsics_plausible(cam.K, w, h, cam_p, limits)
 
     mask = None
@@ -408,10 +430,19 @@ def load_scan(path: str | Path, roi: tuple[int, int, int, int] | str | None = No
     if (folder / GT_DIR).is_dir():
         gt = load_ground_truth(folder / GT_DIR, h, w, cam.depth_scale, depth_is_npy=depth_p.suffix == ".npy")
 
-    scan = Scan(path=folder, color=color, depth=depth, K=cam.K.astype(np.float64), mask=mask, roi=roi_t, gt=gt,
-                depth_scale=1.0 if depth_p.suffix == ".npy" else cam.depth_scale, camera_format=cam.format,
-                files={"color": color_p, "depth": depth_p, "camera": cam_p}
-                | ({"mask": mask_p} if mask is not None else {}), notes=notes)
+    scan = Scan(
+        path=folder,
+        color=color,
+        depth=depth,
+        K=cam.K.astype(np.float64),
+        mask=mask,
+        roi=roi_t,
+        gt=gt,
+        depth_scale=1.0 if depth_p.suffix == ".npy" else cam.depth_scale,
+        camera_format=cam.format,
+        files={"color": color_p, "depth": depth_p, "camera": cam_p} | ({"mask": mask_p} if mask is not None else {}),
+        notes=notes,
+    )
     valid = scan.valid
     where = " and ".join(x for x, on in (("mask.png", mask is not None), (f"ROI {roi_t}", roi_t)) if on)
     if not valid.any():

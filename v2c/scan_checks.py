@@ -149,8 +149,9 @@ def check_pixels(path: Path, width: int, height: int, limits: ScanLimits) -> Non
 def _check_file_size(path: Path, size: int, width: int, height: int, limits: ScanLimits) -> None:
     cap = limits.max_file_bytes_per_pixel * width * height + limits.file_overhead_bytes
     if size > cap:
-        raise ScanError(f"{path}: file of {size} bytes for a {width}x{height} image (expected at most "
-                        f"{int(cap)} bytes)")
+        raise ScanError(
+            f"{path}: file of {size} bytes for a {width}x{height} image (expected at most {int(cap)} bytes)"
+        )
 
 
 def _verify_png(fp: BinaryIO, path: Path, limits: ScanLimits, size: int) -> None:
@@ -226,8 +227,9 @@ def read_npy(path: Path, limits: ScanLimits | None = None) -> np.ndarray:
     with fp:
         try:
             version = np.lib.format.read_magic(fp)
-            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                           else np.lib.format.read_array_header_2_0)
+            read_header = (
+                np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            )
             shape, fortran, dtype = read_header(fp)
         except Exception:  # noqa: BLE001 - numpy raises ValueError/EOFError/OSError for a bad header
             raise ScanError(f"{path}: cannot read .npy (not a NumPy array file, or its header is damaged)") from None
@@ -285,8 +287,10 @@ def check_depth_values(depth: np.ndarray, path: Path, limits: ScanLimits, unit: 
         raise ScanError(f"{path}: {int(bad.sum())} non-finite depth values (NaN/inf); use 0 for no reading")
     neg = depth < 0
     if neg.any():
-        raise ScanError(f"{path}: {int(neg.sum())} negative depth values (min {_fmt(float(depth.min()))}); "
-                        "depth is metres, 0 = no reading")
+        raise ScanError(
+            f"{path}: {int(neg.sum())} negative depth values (min {_fmt(float(depth.min()))}); "
+            "depth is metres, 0 = no reading"
+        )
     has = depth > 0
     n = int(has.sum())
     if n == 0:
@@ -296,25 +300,32 @@ def check_depth_values(depth: np.ndarray, path: Path, limits: ScanLimits, unit: 
     notes: list[str] = []
     if n_out:
         vals = depth[out]
-        what = (f"{n_out} of {n} readings ({100.0 * n_out / n:.3g} %) lie outside {limits.min_depth_m:g} .. "
-                f"{limits.max_depth_m:g} m (range {_fmt(float(vals.min()))} .. {_fmt(float(vals.max()))} m, "
-                f"{unit})")
+        what = (
+            f"{n_out} of {n} readings ({100.0 * n_out / n:.3g} %) lie outside {limits.min_depth_m:g} .. "
+            f"{limits.max_depth_m:g} m (range {_fmt(float(vals.min()))} .. {_fmt(float(vals.max()))} m, "
+            f"{unit})"
+        )
         if n_out > limits.max_out_of_range_share * n:
-            raise ScanError(f"{path}: {what}; expected depth in metres within {limits.min_depth_m:g} .. "
-                            f"{limits.max_depth_m:g} m: wrong depth_scale or unit?")
+            raise ScanError(
+                f"{path}: {what}; expected depth in metres within {limits.min_depth_m:g} .. "
+                f"{limits.max_depth_m:g} m: wrong depth_scale or unit?"
+            )
         depth = np.where(out, 0.0, depth)
         notes.append(f"{path.name}: {what}: dropped as no reading")
     return depth.astype(np.float32), notes
 
 
-def check_depth_surface(depth: np.ndarray, valid: np.ndarray, K: np.ndarray, path: Path, limits: ScanLimits,
-                        where: str) -> None:
+def check_depth_surface(
+    depth: np.ndarray, valid: np.ndarray, K: np.ndarray, path: Path, limits: ScanLimits, where: str
+) -> None:
     """Refuse depth that cannot make one face: too few valid readings, noise instead of surfaces, or points
     spread wider than a part. depth: (H, W) float32 metres; valid: (H, W) bool; K: (3, 3) pixels."""
     n = int(valid.sum())
     if n < limits.min_valid_pixels:
-        raise ScanError(f"{path}: only {n} pixel{'' if n == 1 else 's'} with depth{where}; at least "
-                        f"{limits.min_valid_pixels} are needed to make one face")
+        raise ScanError(
+            f"{path}: only {n} pixel{'' if n == 1 else 's'} with depth{where}; at least "
+            f"{limits.min_valid_pixels} are needed to make one face"
+        )
     d = np.where(valid, depth, 0.0).astype(np.float64)
     steps = []
     for a, b in ((d[:, 1:], d[:, :-1]), (d[1:, :], d[:-1, :])):
@@ -322,19 +333,25 @@ def check_depth_surface(depth: np.ndarray, valid: np.ndarray, K: np.ndarray, pat
         steps.append(np.abs(a[both] - b[both]) / np.minimum(a[both], b[both]))
     step = np.concatenate(steps)
     if step.size < limits.min_valid_pixels:
-        raise ScanError(f"{path}: the {n} readings{where} are scattered ({step.size} neighbouring pairs); "
-                        f"at least {limits.min_valid_pixels} are needed to make one face")
+        raise ScanError(
+            f"{path}: the {n} readings{where} are scattered ({step.size} neighbouring pairs); "
+            f"at least {limits.min_valid_pixels} are needed to make one face"
+        )
     med = float(np.median(step))
     if med > limits.max_median_depth_step:
-        raise ScanError(f"{path}: depth looks like noise{where}: neighbouring readings differ by a median "
-                        f"{100 * med:.1f} % of their depth (expected under {100 * limits.max_median_depth_step:g} "
-                        "% for surfaces)")
+        raise ScanError(
+            f"{path}: depth looks like noise{where}: neighbouring readings differ by a median "
+            f"{100 * med:.1f} % of their depth (expected under {100 * limits.max_median_depth_step:g} "
+            "% for surfaces)"
+        )
     pts = backproject(d, K)[valid]
     lo, hi = np.percentile(pts, [1.0, 99.0], axis=0)
     size = float(np.linalg.norm(hi - lo))
     if not math.isfinite(size) or size > limits.max_part_size_m:
-        raise ScanError(f"{path}: the points{where} span {_fmt(size)} m (1st-99th percentile box diagonal); "
-                        f"expected a part under {limits.max_part_size_m:g} m: give mask.png or --roi")
+        raise ScanError(
+            f"{path}: the points{where} span {_fmt(size)} m (1st-99th percentile box diagonal); "
+            f"expected a part under {limits.max_part_size_m:g} m: give mask.png or --roi"
+        )
 
 
 # ------------------------------------------------------------------------------------------------ camera.json
@@ -430,9 +447,12 @@ def _scan_error(path: Path, err: ValidationError, data: dict) -> ScanError:
 
 def _select_bop_entry(d: dict) -> dict:
     """A whole BOP scene_camera.json keyed by image id: {"0": {"cam_K": ...}, ...} -> its first entry."""
-    if d and not any(k in d for k in ("K", "intrinsic_matrix", "cam_K")) and all(
-        isinstance(v, dict) and "cam_K" in v for v in d.values()
+    if (
+        d
+        and not any(k in d for k in ("K", "intrinsic_matrix", "cam_K"))
+        and all(isinstance(v, dict) and "cam_K" in v for v in d.values())
     ):
+
         def _key(k: str) -> tuple[int, Any]:
             return (0, int(k)) if str(k).lstrip("-").isdigit() else (1, str(k))
 
@@ -478,8 +498,11 @@ def parse_camera(d: Any, path: Path, limits: ScanLimits | None = None) -> Camera
     else:
         scale, unit = 1e-3 * m.depth_scale, "BOP: millimetres per unit"
     if not limits.min_depth_scale_m <= scale <= limits.max_depth_scale_m:
-        hint = (f"; {d['depth_scale']!r} looks like units per metre: use {1.0 / d['depth_scale']:g}"
-                if fmt == "v2c" and scale > 1.0 else "")
+        hint = (
+            f"; {d['depth_scale']!r} looks like units per metre: use {1.0 / d['depth_scale']:g}"
+            if fmt == "v2c" and scale > 1.0
+            else ""
+        )
         raise ScanError(
             f"{path}: 'depth_scale' = {_short(d.get('depth_scale'))} ({unit}) gives {scale:g} m per depth unit: "
             f"expected {limits.min_depth_scale_m:g} .. {limits.max_depth_scale_m:g} m per unit{hint}"
@@ -493,8 +516,9 @@ def check_pinhole(K: np.ndarray, path: Path) -> None:
     if K.shape != (3, 3):
         raise ScanError(f"{path}: K must be 3x3, got shape {K.shape}")
     if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ScanError(f"{path}: K has a non-positive focal length (fx={K[0, 0]:g}, fy={K[1, 1]:g}); "
-                        "expected positive pixels")
+        raise ScanError(
+            f"{path}: K has a non-positive focal length (fx={K[0, 0]:g}, fy={K[1, 1]:g}); expected positive pixels"
+        )
     if abs(K[1, 0]) > 1e-9 or abs(K[2, 0]) > 1e-9 or abs(K[2, 1]) > 1e-9 or abs(K[2, 2] - 1.0) > 1e-9:
         raise ScanError(
             f"{path}: K is not a pinhole intrinsic matrix (need [[fx, s, cx], [0, fy, cy], [0, 0, 1]]); "
@@ -502,8 +526,9 @@ def check_pinhole(K: np.ndarray, path: Path) -> None:
         )
 
 
-def check_intrinsics_plausible(K: np.ndarray, width: int, height: int, path: Path,
-                               limits: ScanLimits | None = None) -> None:
+def check_intrinsics_plausible(
+    K: np.ndarray, width: int, height: int, path: Path, limits: ScanLimits | None = None
+) -> None:
     """Focal lengths, principal point and skew (pixels) against an image of width x height pixels."""
     limits = limits or current_limits()
     fx, s, cx = (float(x) for x in K[0])
@@ -514,20 +539,28 @@ def check_intrinsics_plausible(K: np.ndarray, width: int, height: int, path: Pat
         if not lo <= fov <= hi:
             f_lo = n / 2.0 / math.tan(math.radians(hi) / 2.0)
             f_hi = n / 2.0 / math.tan(math.radians(lo) / 2.0)
-            raise ScanError(f"{path}: {name} = {f:g} px gives a field of view of {fov:.3g} degrees over {n} "
-                            f"pixels: expected {f_lo:.3g} .. {f_hi:.4g} px ({lo:g} .. {hi:g} degrees)")
+            raise ScanError(
+                f"{path}: {name} = {f:g} px gives a field of view of {fov:.3g} degrees over {n} "
+                f"pixels: expected {f_lo:.3g} .. {f_hi:.4g} px ({lo:g} .. {hi:g} degrees)"
+            )
     ratio = max(fx / fy, fy / fx)
     if ratio > limits.max_focal_ratio:
-        raise ScanError(f"{path}: fx = {fx:g} and fy = {fy:g} px differ by a factor {ratio:.3g}: expected at most "
-                        f"{limits.max_focal_ratio:g} (pixel aspect ratio)")
+        raise ScanError(
+            f"{path}: fx = {fx:g} and fy = {fy:g} px differ by a factor {ratio:.3g}: expected at most "
+            f"{limits.max_focal_ratio:g} (pixel aspect ratio)"
+        )
     m = limits.principal_point_margin
     for name, c, n in (("cx", cx, width), ("cy", cy, height)):
         if not -m * n <= c <= (1.0 + m) * n:
-            raise ScanError(f"{path}: {name} = {c:g} px: expected {-m * n:g} .. {(1.0 + m) * n:g} px for an "
-                            f"image {n} pixels across (principal point near the image)")
+            raise ScanError(
+                f"{path}: {name} = {c:g} px: expected {-m * n:g} .. {(1.0 + m) * n:g} px for an "
+                f"image {n} pixels across (principal point near the image)"
+            )
     if abs(s) > limits.max_skew_ratio * fx:
-        raise ScanError(f"{path}: skew K[0][1] = {s:g} px: expected |skew| <= {limits.max_skew_ratio * fx:g} px "
-                        f"({limits.max_skew_ratio:g} x fx; usually 0)")
+        raise ScanError(
+            f"{path}: skew K[0][1] = {s:g} px: expected |skew| <= {limits.max_skew_ratio * fx:g} px "
+            f"({limits.max_skew_ratio:g} x fx; usually 0)"
+        )
 
 
 def load_camera(path: Path, limits: ScanLimits | None = None) -> Camera:

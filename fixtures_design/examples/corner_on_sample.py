@@ -24,8 +24,7 @@ def main(out_dir: str | Path, sample: str | Path = SAMPLE) -> dict:
     """Design and write the corner locator of ``sample`` into ``out_dir``; its edge id, volume (mm^3), files."""
     vbrep = reconstruct(sample)
     print(explain_edges(vbrep))
-    fx = design_fixture(vbrep, "corner", CornerParams(clearance=0.2, wall=8.0, leg=20.0, length=50.0),
-                        frame="part")
+    fx = design_fixture(vbrep, "corner", CornerParams(clearance=0.2, wall=8.0, leg=20.0, length=50.0), frame="part")
     files = write_fixture(fx, out_dir, part=reconstructed_part(vbrep, fx.fmap))
     print(f"L block on edge e{fx.reference.edge_id}: {fx.volume_mm3:.0f} mm^3 -> {files.assembly}")
     return {"edge": fx.reference.edge_id, "volume_mm3": fx.volume_mm3, "files": files}

@@ -47,10 +47,20 @@ def main(out_dir: str | Path, samples: str | Path = SAMPLES) -> list[dict]:
             mating = check_mating(fx, truth, max_points_per_face=10 if kind is FixtureKind.NEST else 40)
             common, frac = interference(fx, truth)
             write_fixture(fx, out_dir / scan_dir.name, part=truth, part_label="true_part")
-            rows.append({"scan": scan_dir.name, "kind": kind.value, "max_mm": mating.max, "common_mm3": common,
-                         "common_frac": frac, "volume_mm3": fx.volume_mm3})
-            print(f"{scan_dir.name} {kind.value:6s}: mating faces within {mating.max:.3f} mm of the true part, "
-                  f"common volume {common:.3f} mm^3 = {100 * frac:.4f} % of {fx.volume_mm3:.0f} mm^3")
+            rows.append(
+                {
+                    "scan": scan_dir.name,
+                    "kind": kind.value,
+                    "max_mm": mating.max,
+                    "common_mm3": common,
+                    "common_frac": frac,
+                    "volume_mm3": fx.volume_mm3,
+                }
+            )
+            print(
+                f"{scan_dir.name} {kind.value:6s}: mating faces within {mating.max:.3f} mm of the true part, "
+                f"common volume {common:.3f} mm^3 = {100 * frac:.4f} % of {fx.volume_mm3:.0f} mm^3"
+            )
     return rows
 
 

@@ -16,9 +16,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from scenes.vbrep import K_DEFAULT, look_at
 from v2c.camera import pixel_rays
 from v2c.vbrep.raycast import intersect
+
+from scenes.vbrep import K_DEFAULT, look_at
 
 Bound = Callable[[np.ndarray], np.ndarray]
 
@@ -84,8 +85,12 @@ def render_scene(scene: Scene) -> SimpleNamespace:
     return SimpleNamespace(faces=fid.reshape(h, w), depth=depth, primitives=prims_cam, R=R, axes_cam=R.T.copy())
 
 
-def scene_inputs(scene: Scene, noise_m: float = 0.0, seed: int = 0,
-                 perturb: Callable[[dict, np.random.Generator], dict] | None = None) -> SimpleNamespace:
+def scene_inputs(
+    scene: Scene,
+    noise_m: float = 0.0,
+    seed: int = 0,
+    perturb: Callable[[dict, np.random.Generator], dict] | None = None,
+) -> SimpleNamespace:
     """Stage inputs from a scene: ``scan`` (a `Scan`: color, depth with Gaussian noise of ``noise_m`` metres, K,
     mask, ground truth without a STEP file), ``seg`` (oracle `Segmentation`), ``fit`` (a `FitResult`: primitives =
     the true ones, or ``perturb(dict, rng)`` of them; graph = build_edge_graph of the instance map; residuals =
@@ -118,18 +123,46 @@ def scene_inputs(scene: Scene, noise_m: float = 0.0, seed: int = 0,
     color = np.full((*r.faces.shape, 3), 40, np.uint8)
     shade = (80 + 150 * (r.faces.astype(float) / max(1, r.faces.max()))).astype(np.uint8)
     color[mask] = np.stack([shade, shade, shade], -1)[mask]
-    gt_prims = [{"id": k, "pixel_value": k + 1, "type": p["type"], "axis_label": scene.faces[k].axis_label,
-                 "params": p["params"]} for k, p in enumerate(r.primitives)]
-    gt = GroundTruth(faces=r.faces, labels=_labels_image(r.faces, scene), primitives=gt_prims,
-                     depth_clean=r.depth, meta={"part_size_m": scene.size, "axes_cam": r.axes_cam.tolist()},
-                     step_path=None)  # type: ignore[arg-type]  (no STEP for numpy scenes)
-    scan = Scan(path=None, color=color, depth=depth, K=scene.K.copy(), mask=mask, roi=None,  # type: ignore[arg-type]
-                gt=gt)
+    gt_prims = [
+        {
+            "id": k,
+            "pixel_value": k + 1,
+            "type": p["type"],
+            "axis_label": scene.faces[k].axis_label,
+            "params": p["params"],
+        }
+        for k, p in enumerate(r.primitives)
+    ]
+    gt = GroundTruth(
+        faces=r.faces,
+        labels=_labels_image(r.faces, scene),
+        primitives=gt_prims,
+        depth_clean=r.depth,
+        meta={"part_size_m": scene.size, "axes_cam": r.axes_cam.tolist()},
+        step_path=None,
+    )  # type: ignore[arg-type]  (no STEP for numpy scenes)
+    scan = Scan(
+        path=None,
+        color=color,
+        depth=depth,
+        K=scene.K.copy(),
+        mask=mask,
+        roi=None,  # type: ignore[arg-type]
+        gt=gt,
+    )
     seg = Segmentation(inst, labels, np.ones(len(labels), np.float32), "oracle")
     graph = build_edge_graph(inst)
-    fit = FitResult(primitives={k: from_dict(p) for k, p in prim_of.items()}, frame=r.R.T.copy(),
-                    axis_labels=axis_of, inliers={}, residuals={k: noise_m for k in prim_of},
-                    vertex_depths=np.zeros(len(graph.vertices)), graph=graph, scale=scene.size, timings={})
+    fit = FitResult(
+        primitives={k: from_dict(p) for k, p in prim_of.items()},
+        frame=r.R.T.copy(),
+        axis_labels=axis_of,
+        inliers={},
+        residuals={k: noise_m for k in prim_of},
+        vertex_depths=np.zeros(len(graph.vertices)),
+        graph=graph,
+        scale=scene.size,
+        timings={},
+    )
     return SimpleNamespace(scan=scan, seg=seg, fit=fit, render=r)
 
 
@@ -148,30 +181,38 @@ def _plane(o: tuple, n: tuple) -> dict:
 
 
 def _cyl(o: tuple, a: tuple, r: float) -> dict:
-    return {"type": "cylinder", "params": {"origin": list(map(float, o)), "axis": list(map(float, a)),
-                                           "radius": float(r)}}
+    return {
+        "type": "cylinder",
+        "params": {"origin": list(map(float, o)), "axis": list(map(float, a)), "radius": float(r)},
+    }
 
 
 def _box_bound(lo: np.ndarray, hi: np.ndarray, tol: float = 1e-7) -> Bound:
     return lambda p: np.all((p >= lo - tol) & (p <= hi + tol), axis=1)
 
 
-def box_scene(size: tuple[float, float, float] = (0.10, 0.08, 0.06), distance: float = 0.45,
-              view: tuple[float, float, float] = (1.0, 0.75, 0.85)) -> Scene:
+def box_scene(
+    size: tuple[float, float, float] = (0.10, 0.08, 0.06),
+    distance: float = 0.45,
+    view: tuple[float, float, float] = (1.0, 0.75, 0.85),
+) -> Scene:
     """A box on the ground (part frame: centred in x, y; bottom at z = 0) seen from its (+X, +Y, +Z) corner."""
     sx, sy, sz = size
     lo, hi = np.array([-sx / 2, -sy / 2, 0.0]), np.array([sx / 2, sy / 2, sz])
     b = _box_bound(lo, hi)
-    faces = [BoundedFace(_plane((sx / 2, 0, 0), (1, 0, 0)), b, 1, "X"),
-             BoundedFace(_plane((0, sy / 2, 0), (0, 1, 0)), b, 2, "Y"),
-             BoundedFace(_plane((0, 0, sz), (0, 0, 1)), b, 3, "Z")]
+    faces = [
+        BoundedFace(_plane((sx / 2, 0, 0), (1, 0, 0)), b, 1, "X"),
+        BoundedFace(_plane((0, sy / 2, 0), (0, 1, 0)), b, 2, "Y"),
+        BoundedFace(_plane((0, 0, sz), (0, 0, 1)), b, 3, "Z"),
+    ]
     target = np.array([0.0, 0.0, sz / 2])
     v = np.asarray(view, float)
     return Scene(faces, target + v / np.linalg.norm(v) * distance, target, float(max(size)))
 
 
-def cylinder_scene(radius: float = 0.035, height: float = 0.08, distance: float = 0.4,
-                   elevation_deg: float = 35.0) -> Scene:
+def cylinder_scene(
+    radius: float = 0.035, height: float = 0.08, distance: float = 0.4, elevation_deg: float = 35.0
+) -> Scene:
     """An upright cylinder standing on its base (axis +Z), seen from above and to the side."""
     el = np.deg2rad(elevation_deg)
     target = np.array([0.0, 0.0, height / 2])
@@ -182,14 +223,23 @@ def cylinder_scene(radius: float = 0.035, height: float = 0.08, distance: float 
     def top(p: np.ndarray) -> np.ndarray:
         return np.hypot(p[:, 0], p[:, 1]) <= radius + 1e-7
 
-    faces = [BoundedFace(_cyl((0, 0, 0), (0, 0, 1), radius), side, 7, "Z"),
-             BoundedFace(_plane((0, 0, height), (0, 0, 1)), top, 3, "Z")]
+    faces = [
+        BoundedFace(_cyl((0, 0, 0), (0, 0, 1), radius), side, 7, "Z"),
+        BoundedFace(_plane((0, 0, height), (0, 0, 1)), top, 3, "Z"),
+    ]
     eye = target + distance * np.array([np.cos(el) * 0.8, np.cos(el) * 0.6, np.sin(el)])
     return Scene(faces, eye, target, float(max(2 * radius, height)))
 
 
-def plate_feature_scene(kind: str, radius: float = 0.02, depth: float = 0.015, plate: float = 0.12,
-                        thickness: float = 0.02, distance: float = 0.35, elevation_deg: float = 50.0) -> Scene:
+def plate_feature_scene(
+    kind: str,
+    radius: float = 0.02,
+    depth: float = 0.015,
+    plate: float = 0.12,
+    thickness: float = 0.02,
+    distance: float = 0.35,
+    elevation_deg: float = 50.0,
+) -> Scene:
     """A square plate (top at z = 0) with a round ``kind`` = "hole" (blind, ``depth`` deep) or "boss" (``depth``
     high) of the same radius at its centre, seen obliquely from above. The cylinder face has the same image
     outline family either way; only the depth tells a hole (far wall seen from inside) from a boss."""
@@ -202,19 +252,25 @@ def plate_feature_scene(kind: str, radius: float = 0.02, depth: float = 0.015, p
     def rho(p: np.ndarray) -> np.ndarray:
         return np.hypot(p[:, 0], p[:, 1])
 
-    faces = [BoundedFace(_plane((0, 0, 0), (0, 0, 1)), lambda p: in_plate(p) & (rho(p) >= radius - 1e-7), 3, "Z"),
-             BoundedFace(_plane((half, 0, 0), (1, 0, 0)),
-                         lambda p: in_plate(p) & (p[:, 2] <= 1e-7) & (p[:, 2] >= -thickness), 1, "X"),
-             BoundedFace(_plane((0, half, 0), (0, 1, 0)),
-                         lambda p: in_plate(p) & (p[:, 2] <= 1e-7) & (p[:, 2] >= -thickness), 2, "Y")]
+    faces = [
+        BoundedFace(_plane((0, 0, 0), (0, 0, 1)), lambda p: in_plate(p) & (rho(p) >= radius - 1e-7), 3, "Z"),
+        BoundedFace(
+            _plane((half, 0, 0), (1, 0, 0)), lambda p: in_plate(p) & (p[:, 2] <= 1e-7) & (p[:, 2] >= -thickness), 1, "X"
+        ),
+        BoundedFace(
+            _plane((0, half, 0), (0, 1, 0)), lambda p: in_plate(p) & (p[:, 2] <= 1e-7) & (p[:, 2] >= -thickness), 2, "Y"
+        ),
+    ]
     if kind == "hole":
-        faces += [BoundedFace(_cyl((0, 0, 0), (0, 0, 1), radius), lambda p: (p[:, 2] <= 1e-7) & (p[:, 2] >= -depth),
-                              7, "Z"),
-                  BoundedFace(_plane((0, 0, -depth), (0, 0, 1)), lambda p: rho(p) <= radius + 1e-7, 3, "Z")]
+        faces += [
+            BoundedFace(_cyl((0, 0, 0), (0, 0, 1), radius), lambda p: (p[:, 2] <= 1e-7) & (p[:, 2] >= -depth), 7, "Z"),
+            BoundedFace(_plane((0, 0, -depth), (0, 0, 1)), lambda p: rho(p) <= radius + 1e-7, 3, "Z"),
+        ]
     elif kind == "boss":
-        faces += [BoundedFace(_cyl((0, 0, 0), (0, 0, 1), radius), lambda p: (p[:, 2] >= -1e-7) & (p[:, 2] <= depth),
-                              7, "Z"),
-                  BoundedFace(_plane((0, 0, depth), (0, 0, 1)), lambda p: rho(p) <= radius + 1e-7, 3, "Z")]
+        faces += [
+            BoundedFace(_cyl((0, 0, 0), (0, 0, 1), radius), lambda p: (p[:, 2] >= -1e-7) & (p[:, 2] <= depth), 7, "Z"),
+            BoundedFace(_plane((0, 0, depth), (0, 0, 1)), lambda p: rho(p) <= radius + 1e-7, 3, "Z"),
+        ]
     else:
         raise ValueError(f"kind must be 'hole' or 'boss', not {kind!r}")
     target = np.zeros(3)

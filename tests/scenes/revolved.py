@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes.vbrep import IMAGE_SIZE, K_DEFAULT, grid_triangles, look_at, project
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
+
+from scenes.vbrep import IMAGE_SIZE, K_DEFAULT, grid_triangles, look_at, project
 
 _MM = 1e-3
 
@@ -50,9 +51,7 @@ def _profiles() -> list[tuple[str, callable]]:
     ]
 
 
-def revolved_all_types(
-    distance: float = 0.35, elevation_deg: float = 35.0, sector_deg: float = 140.0
-) -> VBRep:
+def revolved_all_types(distance: float = 0.35, elevation_deg: float = 35.0, sector_deg: float = 140.0) -> VBRep:
     """The part of the module docstring as a VB-Rep (camera frame, metres)."""
     el = np.deg2rad(elevation_deg)
     target = np.array([0.0, 0.0, 0.035])
@@ -164,9 +163,7 @@ def revolved_all_types(
     prims = [
         {
             "type": p["type"],
-            "params": {
-                k: (np.asarray(v).tolist() if np.ndim(v) else float(v)) for k, v in p["params"].items()
-            },
+            "params": {k: (np.asarray(v).tolist() if np.ndim(v) else float(v)) for k, v in p["params"].items()},
         }
         for p in prims
     ]
@@ -202,9 +199,7 @@ def revolved_all_types(
         for a in range(na):
             i0, i1 = 1 + r * na + a, 1 + r * na + (a + 1) % na
             tris += [[i0, i0 + na, i1 + na], [i0, i1 + na, i1]]
-    faces.append(
-        VFace(4, 5, prims[4], "Z", [[(4, False), (5, False)]], cam(disc), np.asarray(tris, np.int64), 0.95)
-    )
+    faces.append(VFace(4, 5, prims[4], "Z", [[(4, False), (5, False)]], cam(disc), np.asarray(tris, np.int64), 0.95))
     return VBRep(
         faces,
         edges,

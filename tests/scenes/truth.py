@@ -25,9 +25,10 @@ from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_Ind
 
 from fixtures_design.model import transformed
 from fixtures_design.occ import M_PER_MM, edge_curve, face_mesh, face_primitive, faces_the_camera, occt_faces
-from scenes.vbrep import K_DEFAULT, look_at, project
 from v2c.labels import axis_class
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
+
+from scenes.vbrep import K_DEFAULT, look_at, project
 
 
 def vbrep_from_shape(
@@ -59,8 +60,7 @@ def vbrep_from_shape(
             continue
         d = np.asarray(prim["params"].get("normal", prim["params"].get("axis")), float)
         face_of[i] = len(faces)
-        faces.append(VFace(len(faces), i + 1, prim, axis_class(d, axes_cam).value, [], v * M_PER_MM, t,
-                           confidence))
+        faces.append(VFace(len(faces), i + 1, prim, axis_class(d, axes_cam).value, [], v * M_PER_MM, t, confidence))
     emap = TopTools_IndexedDataMapOfShapeListOfShape()
     TopExp.MapShapesAndAncestors_s(shape.wrapped, TopAbs_EDGE, TopAbs_FACE, emap)
     edges: list[VEdge] = []
@@ -81,14 +81,22 @@ def vbrep_from_shape(
             etype, conf, curve = EdgeType.SILHOUETTE, 0.9, None
         v0 = len(vertices)
         closed = np.linalg.norm(poly[0] - poly[-1]) < 1e-9
-        for p in (poly[:1] if closed else (poly[0], poly[-1])):
+        for p in poly[:1] if closed else (poly[0], poly[-1]):
             p = np.asarray(p).reshape(3)
             vertices.append(VVertex(len(vertices), VertexKind.OTHER, p, project(p)[0]))
         edges.append(VEdge(len(edges), etype, conf, ids, poly, v0, v0 if closed else v0 + 1, curve))
     pts = np.concatenate([f.mesh_vertices for f in faces]) if faces else np.zeros((1, 3))
     size = part_size_m if part_size_m is not None else float(np.ptp(pts @ np.asarray(axes_cam).T, axis=0).max())
-    return VBRep(faces, edges, vertices, frame=np.asarray(axes_cam, float), K=K_DEFAULT.copy(),
-                 image_size=(640, 480), scale=size, meta={"source": "ground truth"})
+    return VBRep(
+        faces,
+        edges,
+        vertices,
+        frame=np.asarray(axes_cam, float),
+        K=K_DEFAULT.copy(),
+        image_size=(640, 480),
+        scale=size,
+        meta={"source": "ground truth"},
+    )
 
 
 def posed_part(
@@ -153,8 +161,13 @@ def vbrep_from_scan(scan_dir: str | Path, confidence: float = 0.95) -> tuple[VBR
     if faces_png is None:
         raise FileNotFoundError(f"{gt / 'faces.png'}: missing or unreadable")
     meta = json.loads((gt / "meta.json").read_text())
-    vb = vbrep_from_shape(shape, np.asarray(meta["axes_cam"], float), visible_faces_of_scan(faces_png),
-                          confidence, float(meta["part_size_m"]))
+    vb = vbrep_from_shape(
+        shape,
+        np.asarray(meta["axes_cam"], float),
+        visible_faces_of_scan(faces_png),
+        confidence,
+        float(meta["part_size_m"]),
+    )
     vb.meta["scan"] = str(scan_dir)
     return vb, shape
 

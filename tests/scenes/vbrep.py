@@ -64,9 +64,7 @@ def _plane(origin: np.ndarray, normal: np.ndarray) -> dict:
     return {"type": "plane", "params": {"origin": origin.tolist(), "normal": normal.tolist()}}
 
 
-def box_corner(
-    size: tuple[float, float, float] = (0.10, 0.08, 0.06), distance: float = 0.5
-) -> VBRep:
+def box_corner(size: tuple[float, float, float] = (0.10, 0.08, 0.06), distance: float = 0.5) -> VBRep:
     """A box seen from its (+X, +Y, +Z) corner: see the module docstring. Part frame = box axes, centred."""
     h = np.asarray(size, float) / 2
     eye = np.array([1.0, 0.75, 0.85])
@@ -80,8 +78,13 @@ def box_corner(
         return cam(np.array([sx, sy, sz]) * h)[0]
 
     pts = {
-        "V0": corner(1, 1, 1), "A": corner(1, 1, -1), "B": corner(1, -1, 1), "C": corner(-1, 1, 1),
-        "D": corner(1, -1, -1), "E": corner(-1, 1, -1), "F": corner(-1, -1, 1),
+        "V0": corner(1, 1, 1),
+        "A": corner(1, 1, -1),
+        "B": corner(1, -1, 1),
+        "C": corner(-1, 1, 1),
+        "D": corner(1, -1, -1),
+        "E": corner(-1, 1, -1),
+        "F": corner(-1, -1, 1),
     }
     names = list(pts)
     vid = {n: i for i, n in enumerate(names)}
@@ -119,8 +122,9 @@ def box_corner(
         if t is EdgeType.INTERSECTION:
             d = (pb - pa) / np.linalg.norm(pb - pa)
             curve = {"kind": "line", "origin": pa.copy(), "direction": d}
-        edges.append(VEdge(i, t, 0.95 if t is EdgeType.INTERSECTION else 0.9, fs, _segment(pa, pb),
-                           vid[a], vid[b], curve))
+        edges.append(
+            VEdge(i, t, 0.95 if t is EdgeType.INTERSECTION else 0.9, fs, _segment(pa, pb), vid[a], vid[b], curve)
+        )
     loops = [
         [(0, False), (3, False), (4, False), (1, True)],
         [(2, False), (5, False), (6, False), (0, True)],
@@ -131,12 +135,21 @@ def box_corner(
         c = np.stack([pts[q] for q in quad])
         mv, mt = _quad_mesh(c)
         faces.append(VFace(k, inst, _plane(c[0], n), lab, [loops[k]], mv, mt, 0.95))
-    return VBRep(faces, edges, vertices, frame=axes_cam, K=K_DEFAULT.copy(), image_size=IMAGE_SIZE,
-                 scale=float(max(size)), meta={"example": "box_corner"})
+    return VBRep(
+        faces,
+        edges,
+        vertices,
+        frame=axes_cam,
+        K=K_DEFAULT.copy(),
+        image_size=IMAGE_SIZE,
+        scale=float(max(size)),
+        meta={"example": "box_corner"},
+    )
 
 
-def cylinder_upright(radius: float = 0.04, height: float = 0.08, distance: float = 0.45,
-                     elevation_deg: float = 35.0) -> VBRep:
+def cylinder_upright(
+    radius: float = 0.04, height: float = 0.08, distance: float = 0.45, elevation_deg: float = 35.0
+) -> VBRep:
     """An upright cylinder standing on its base (part frame: base centre at origin, axis +Z), seen from above
     and to the side; see the module docstring."""
     el = np.deg2rad(elevation_deg)
@@ -169,8 +182,16 @@ def cylinder_upright(radius: float = 0.04, height: float = 0.08, distance: float
     axis_cam = R @ np.array([0.0, 0.0, 1.0])
     center_top = cam(np.array([0.0, 0.0, height]))[0]
     edges = [
-        VEdge(0, EdgeType.INTERSECTION, 0.95, (0, 1), ring(front, height), 0, 1,
-              {"kind": "circle", "center": center_top, "axis": axis_cam, "radius": radius}),
+        VEdge(
+            0,
+            EdgeType.INTERSECTION,
+            0.95,
+            (0, 1),
+            ring(front, height),
+            0,
+            1,
+            {"kind": "circle", "center": center_top, "axis": axis_cam, "radius": radius},
+        ),
         VEdge(1, EdgeType.SILHOUETTE, 0.9, (1,), ring(back, height), 1, 0),
         VEdge(2, EdgeType.VISIBILITY, 0.85, (0,), _segment(top_l, bot_l), 0, 2),
         VEdge(3, EdgeType.VISIBILITY, 0.85, (0,), _segment(top_r, bot_r), 1, 3),
@@ -184,9 +205,14 @@ def cylinder_upright(radius: float = 0.04, height: float = 0.08, distance: float
     # Top disc: polar grid, centre vertex first.
     nr, na = 6, 48
     rr, aa = np.meshgrid(np.linspace(0, radius, nr)[1:], np.linspace(0, 2 * np.pi, na, endpoint=False))
-    disc = np.concatenate([[[0.0, 0.0, height]],
-                           np.stack([rr.T.ravel() * np.cos(aa.T.ravel()), rr.T.ravel() * np.sin(aa.T.ravel()),
-                                     np.full(rr.size, height)], 1)])
+    disc = np.concatenate(
+        [
+            [[0.0, 0.0, height]],
+            np.stack(
+                [rr.T.ravel() * np.cos(aa.T.ravel()), rr.T.ravel() * np.sin(aa.T.ravel()), np.full(rr.size, height)], 1
+            ),
+        ]
+    )
     top_v = cam(disc)
     tris = [[0, 1 + a, 1 + (a + 1) % na] for a in range(na)]
     for r in range(nr - 2):
@@ -195,11 +221,29 @@ def cylinder_upright(radius: float = 0.04, height: float = 0.08, distance: float
             tris += [[i0, i0 + na, i1 + na], [i0, i1 + na, i1]]
     top_t = np.asarray(tris, np.int64)
     faces = [
-        VFace(0, 1, {"type": "cylinder", "params": {"origin": cam(np.zeros(3))[0].tolist(),
-                                                    "axis": axis_cam.tolist(), "radius": radius}},
-              "Z", [[(0, False), (3, False), (4, True), (2, True)]], side_v, side_t, 0.9),
+        VFace(
+            0,
+            1,
+            {
+                "type": "cylinder",
+                "params": {"origin": cam(np.zeros(3))[0].tolist(), "axis": axis_cam.tolist(), "radius": radius},
+            },
+            "Z",
+            [[(0, False), (3, False), (4, True), (2, True)]],
+            side_v,
+            side_t,
+            0.9,
+        ),
         # The top disc's outward normal is the part's +Z (facing the camera, which looks down on it).
         VFace(1, 2, _plane(center_top, axis_cam), "Z", [[(0, False), (1, False)]], top_v, top_t, 0.95),
     ]
-    return VBRep(faces, edges, vertices, frame=R.T.copy(), K=K_DEFAULT.copy(), image_size=IMAGE_SIZE,
-                 scale=float(max(2 * radius, height)), meta={"example": "cylinder_upright"})
+    return VBRep(
+        faces,
+        edges,
+        vertices,
+        frame=R.T.copy(),
+        K=K_DEFAULT.copy(),
+        image_size=IMAGE_SIZE,
+        scale=float(max(2 * radius, height)),
+        meta={"example": "cylinder_upright"},
+    )

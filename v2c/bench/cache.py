@@ -39,8 +39,13 @@ def scan_cache_dir(cfg: BenchConfig) -> Path:
     from v2c.synth.dataset import GENERATOR
 
     cads = cad_files(cfg.cad_dir)
-    key = {"generator": GENERATOR, "noise": cfg.noise, "size": list(cfg.size), "seed": cfg.seed,
-           "cad": [[Path(f).name, Path(f).stat().st_size] for f in cads]}
+    key = {
+        "generator": GENERATOR,
+        "noise": cfg.noise,
+        "size": list(cfg.size),
+        "seed": cfg.seed,
+        "cad": [[Path(f).name, Path(f).stat().st_size] for f in cads],
+    }
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
     kind = "cad" if cads else "synth"
     name = f"{kind}_{cfg.noise}_{cfg.size[0]}x{cfg.size[1]}_s{cfg.seed}_{digest}"
@@ -69,16 +74,38 @@ def prepare_scans(cfg: BenchConfig, progress: bool = True) -> list[Path]:
     missing = [i for i, d in enumerate(dirs) if not scan_complete(d)]
     if missing:
         cads = cad_files(cfg.cad_dir)
-        synth = SynthConfig(width=cfg.size[0], height=cfg.size[1], noise=cfg.noise,
-                            **({"families": ("cad",), "cad_files": cads} if cads else {}))
+        synth = SynthConfig(
+            width=cfg.size[0],
+            height=cfg.size[1],
+            noise=cfg.noise,
+            **({"families": ("cad",), "cad_files": cads} if cads else {}),
+        )
         start = missing[0]
         if progress:
             print(f"generating scans {start}..{cfg.n - 1} into {folder}", file=sys.stderr)
-        generate_dataset(folder, cfg.n - start, cfg.seed, synth, jobs=max(1, cfg.jobs), progress=progress,
-                         start=start, executor=executor_of(cfg))
-        (folder / "manifest.json").write_text(json.dumps(
-            {"seed": cfg.seed, "noise": cfg.noise, "size": list(cfg.size), "cad": list(cads),
-             "n": max(cfg.n, _manifest_n(folder))}, indent=1) + "\n")
+        generate_dataset(
+            folder,
+            cfg.n - start,
+            cfg.seed,
+            synth,
+            jobs=max(1, cfg.jobs),
+            progress=progress,
+            start=start,
+            executor=executor_of(cfg),
+        )
+        (folder / "manifest.json").write_text(
+            json.dumps(
+                {
+                    "seed": cfg.seed,
+                    "noise": cfg.noise,
+                    "size": list(cfg.size),
+                    "cad": list(cads),
+                    "n": max(cfg.n, _manifest_n(folder)),
+                },
+                indent=1,
+            )
+            + "\n"
+        )
     return dirs
 
 

@@ -105,11 +105,20 @@ def scan_metrics(scan: Scan, seg: Segmentation, res: FitResult) -> dict[str, Any
             if m.any():
                 c = clean[m].mean(axis=0)
                 off.append(abs(float(p.signed_distance(c[None])[0])) / size)
-    return {"scan": str(scan.path), "n_primitives": len(res.primitives), "alignment": align,
-            "radius_err_size": rad_size, "radius_err_rel": rad_rel, "plane_offset_err": off,
-            "torus_major_err_rel": tor_major, "torus_minor_err_rel": tor_minor, "torus_minor_err_mm": tor_minor_mm,
-            "time_s": float(res.timings["total"]), "cpu_s": float(res.timings["total_cpu"]),
-            "scale_est_over_gt": float(res.scale / size)}
+    return {
+        "scan": str(scan.path),
+        "n_primitives": len(res.primitives),
+        "alignment": align,
+        "radius_err_size": rad_size,
+        "radius_err_rel": rad_rel,
+        "plane_offset_err": off,
+        "torus_major_err_rel": tor_major,
+        "torus_minor_err_rel": tor_minor,
+        "torus_minor_err_mm": tor_minor_mm,
+        "time_s": float(res.timings["total"]),
+        "cpu_s": float(res.timings["total_cpu"]),
+        "scale_est_over_gt": float(res.scale / size),
+    }
 
 
 def _summary(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
@@ -118,8 +127,10 @@ def _summary(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
 
     per_scan_align = [float(np.mean(r["alignment"])) for r in rows if r["alignment"]]
     rad, rel, off = pooled("radius_err_size"), pooled("radius_err_rel"), pooled("plane_offset_err")
-    tmaj, tmin, tmm = (pooled(k) if all(k in r for r in rows) else np.zeros(0)
-                       for k in ("torus_major_err_rel", "torus_minor_err_rel", "torus_minor_err_mm"))
+    tmaj, tmin, tmm = (
+        pooled(k) if all(k in r for r in rows) else np.zeros(0)
+        for k in ("torus_major_err_rel", "torus_minor_err_rel", "torus_minor_err_mm")
+    )
     return {
         "scans": len(rows),
         "alignment": float(np.mean(per_scan_align)) if per_scan_align else float("nan"),
@@ -144,8 +155,12 @@ def _summary(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
     }
 
 
-def fit_benchmark(scans: Sequence[str | Path], ablations: Sequence[str] = ABLATIONS,
-                  config: FitConfig | None = None, log: Callable[[str], None] | None = None) -> dict[str, Any]:
+def fit_benchmark(
+    scans: Sequence[str | Path],
+    ablations: Sequence[str] = ABLATIONS,
+    config: FitConfig | None = None,
+    log: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
     """Run fit_scan with oracle segmentation on every scan folder for every ablation; ``log`` gets one line per
     scan (alignment and seconds per ablation).
 
@@ -163,27 +178,36 @@ def fit_benchmark(scans: Sequence[str | Path], ablations: Sequence[str] = ABLATI
             res = fit_scan(scan, seg, config, a)
             rows[a].append(scan_metrics(scan, seg, res))
         if log:
-            log(f"{path.name}: " + "  ".join(
-                f"{a} {np.mean(rows[a][-1]['alignment']) if rows[a][-1]['alignment'] else float('nan'):.4f}"
-                f"/{rows[a][-1]['time_s']:.2f}s" for a in ablations))
+            log(
+                f"{path.name}: "
+                + "  ".join(
+                    f"{a} {np.mean(rows[a][-1]['alignment']) if rows[a][-1]['alignment'] else float('nan'):.4f}"
+                    f"/{rows[a][-1]['time_s']:.2f}s"
+                    for a in ablations
+                )
+            )
     return {"summary": {a: _summary(r) for a, r in rows.items() if r}, "rows": rows}
 
 
 def format_table(summary: dict[str, dict[str, float]]) -> str:
     """Markdown table of the per-ablation summary."""
-    head = ("| ablation | scans | alignment (mean) | pairs | radius err (median, % size) | radius err (% r) "
-            "| plane offset err (median, % size) | torus R / r err (median, % R / % r) "
-            "| torus r err (median / max, mm) | fit time median: wall / CPU (s) |")
+    head = (
+        "| ablation | scans | alignment (mean) | pairs | radius err (median, % size) | radius err (% r) "
+        "| plane offset err (median, % size) | torus R / r err (median, % R / % r) "
+        "| torus r err (median / max, mm) | fit time median: wall / CPU (s) |"
+    )
     lines = [head, "|" + " --- |" * 10]
     for a, s in summary.items():
-        lines.append(f"| {a} | {s['scans']} | {s['alignment']:.4f} | {s['pairs']} | "
-                     f"{s['radius_err_median_pct_size']:.2f} | {s['radius_err_median_pct_radius']:.2f} | "
-                     f"{s['plane_offset_err_median_pct']:.2f} | "
-                     f"{s.get('torus_major_err_median_pct', float('nan')):.1f} / "
-                     f"{s.get('torus_minor_err_median_pct', float('nan')):.1f} ({s.get('torus_count', 0)}) | "
-                     f"{s.get('torus_minor_err_median_mm', float('nan')):.2f} / "
-                     f"{s.get('torus_minor_err_max_mm', float('nan')):.2f} | "
-                     f"{s['time_median_s']:.2f} / {s['cpu_median_s']:.2f} |")
+        lines.append(
+            f"| {a} | {s['scans']} | {s['alignment']:.4f} | {s['pairs']} | "
+            f"{s['radius_err_median_pct_size']:.2f} | {s['radius_err_median_pct_radius']:.2f} | "
+            f"{s['plane_offset_err_median_pct']:.2f} | "
+            f"{s.get('torus_major_err_median_pct', float('nan')):.1f} / "
+            f"{s.get('torus_minor_err_median_pct', float('nan')):.1f} ({s.get('torus_count', 0)}) | "
+            f"{s.get('torus_minor_err_median_mm', float('nan')):.2f} / "
+            f"{s.get('torus_minor_err_max_mm', float('nan')):.2f} | "
+            f"{s['time_median_s']:.2f} / {s['cpu_median_s']:.2f} |"
+        )
     return "\n".join(lines)
 
 
@@ -198,8 +222,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     single_thread()
-    out = fit_benchmark(args.scans, args.ablation or ABLATIONS, FitConfig(seed=args.seed),
-                        log=lambda s: print(s, file=sys.stderr, flush=True))
+    out = fit_benchmark(
+        args.scans,
+        args.ablation or ABLATIONS,
+        FitConfig(seed=args.seed),
+        log=lambda s: print(s, file=sys.stderr, flush=True),
+    )
     print(format_table(out["summary"]))
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))

@@ -96,8 +96,7 @@ def predicted_axis_class(face: VFace, axes_cam: np.ndarray, tol_deg: float = AXI
     return None if a is None else axis_class(a, axes_cam, tol_deg).value
 
 
-def face_matching(vbrep: VBRep, scan: Scan, rendering: Rendering, config: MetricConfig | None = None
-                  ) -> dict[str, Any]:
+def face_matching(vbrep: VBRep, scan: Scan, rendering: Rendering, config: MetricConfig | None = None) -> dict[str, Any]:
     """Precision / recall at every IoU threshold of ``config``, and type accuracy, axis accuracy and primitive
     alignment over the pairs at the first threshold (module docstring). Counts are returned too. ``config``:
     None for the BENCHMARK.md defaults."""
@@ -107,16 +106,21 @@ def face_matching(vbrep: VBRep, scan: Scan, rendering: Rendering, config: Metric
     pred_map = rendering.face + 1  # 0 = nothing rendered
     n_faces = len(vbrep.faces)
     counts = rendering.pixel_counts(n_faces)
-    on_non = np.bincount(rendering.face[(rendering.face >= 0) & (faces_png > 0) & (gt_map == 0)],
-                         minlength=n_faces)[:n_faces]
+    on_non = np.bincount(rendering.face[(rendering.face >= 0) & (faces_png > 0) & (gt_map == 0)], minlength=n_faces)[
+        :n_faces
+    ]
     counted = np.flatnonzero((counts > 0) & (on_non <= config.ignore_share * counts)) + 1
     g_area = np.bincount(gt_map.ravel(), minlength=1)
     gt_all = np.flatnonzero(g_area > 0)
     gt_all = gt_all[gt_all > 0]
     gt_big = gt_all[g_area[gt_all] >= config.min_gt_px]
     nan = float("nan")
-    out: dict[str, Any] = {"n_pred": len(counted), "n_pred_rendered": int((counts > 0).sum()),
-                           "n_gt": len(gt_big), "n_gt_all": len(gt_all)}
+    out: dict[str, Any] = {
+        "n_pred": len(counted),
+        "n_pred_rendered": int((counts > 0).sum()),
+        "n_gt": len(gt_big),
+        "n_gt_all": len(gt_all),
+    }
     counted_set, big_set = set(counted.tolist()), set(gt_big.tolist())
     first_pairs: list[tuple[int, int, float]] = []
     for k, thr in enumerate(config.iou_thresholds):
@@ -142,11 +146,16 @@ def face_matching(vbrep: VBRep, scan: Scan, rendering: Rendering, config: Metric
         if pa is not None and ga is not None:
             align.append(axis_alignment(pa, ga))
     n = len(first_pairs)
-    out.update({
-        "type_accuracy": type_ok / n if n else nan, "axis_accuracy": axis_ok / n if n else nan,
-        "type_ok": type_ok, "axis_ok": axis_ok,
-        "alignment": float(np.mean(align)) if align else nan, "n_align_pairs": len(align),
-    })
+    out.update(
+        {
+            "type_accuracy": type_ok / n if n else nan,
+            "axis_accuracy": axis_ok / n if n else nan,
+            "type_ok": type_ok,
+            "axis_ok": axis_ok,
+            "alignment": float(np.mean(align)) if align else nan,
+            "n_align_pairs": len(align),
+        }
+    )
     return out
 
 
@@ -174,8 +183,9 @@ def runtime_split(vbrep: VBRep, extra: dict[str, float] | None = None) -> dict[s
 # ------------------------------------------------------------------------------------------------- one scan
 
 
-def scan_metrics(vbrep: VBRep, scan: Scan, config: MetricConfig | None = None,
-                 timings: dict[str, float] | None = None) -> dict[str, Any]:
+def scan_metrics(
+    vbrep: VBRep, scan: Scan, config: MetricConfig | None = None, timings: dict[str, float] | None = None
+) -> dict[str, Any]:
     """Every BENCHMARK.md metric of one VB-Rep against its synthetic scan's ground truth (module docstring).
     Lengths are divided by the ground-truth part size. ValueError without ground truth. ``config``: None for the
     BENCHMARK.md defaults; ``timings``: seconds per stage measured by the caller (`runtime_split`)."""
@@ -209,9 +219,11 @@ def scan_metrics(vbrep: VBRep, scan: Scan, config: MetricConfig | None = None,
             out["edge_labels"] = {
                 "type": [EdgeType(e.type).value for e in vbrep.edges],
                 "confidence": [float(e.confidence) for e in vbrep.edges],
-                "confidence_raw": [float(e.confidence if e.confidence_raw is None else e.confidence_raw)
-                                   for e in vbrep.edges],
-                "ok": [int(k) for k in ok]}
+                "confidence_raw": [
+                    float(e.confidence if e.confidence_raw is None else e.confidence_raw) for e in vbrep.edges
+                ],
+                "ok": [int(k) for k in ok],
+            }
         except Exception as exc:  # noqa: BLE001 - another stage's metric must not hide the others; reported
             out["edge_type_accuracy"] = float("nan")
             out["edge_type_error"] = f"{type(exc).__name__}: {exc}"
@@ -222,8 +234,9 @@ def scan_metrics(vbrep: VBRep, scan: Scan, config: MetricConfig | None = None,
 # ---------------------------------------------------------------------------------- ground-truth VB-Rep
 
 
-def _corner_mesh(region: np.ndarray, depth: np.ndarray, prim: dict | None, K: np.ndarray,
-                 window: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+def _corner_mesh(
+    region: np.ndarray, depth: np.ndarray, prim: dict | None, K: np.ndarray, window: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray]:
     """Mesh of one pixel region: every pixel becomes the quad of its four corners (u +- 0.5, v +- 0.5), each corner
     at the depth of the primitive's crossing nearest the mean clean depth of the region's pixels around it (that
     mean itself without a primitive or a crossing). Pixel centres fall strictly inside their quads, so rendering
@@ -238,8 +251,8 @@ def _corner_mesh(region: np.ndarray, depth: np.ndarray, prim: dict | None, K: np
     m = region.astype(float)
     for dv in (0, 1):
         for du in (0, 1):
-            dsum[dv:dv + h, du:du + w] += z
-            dcnt[dv:dv + h, du:du + w] += m
+            dsum[dv : dv + h, du : du + w] += z
+            dcnt[dv : dv + h, du : du + w] += m
     used = dcnt > 0
     cv, cu = np.nonzero(used)
     prior = dsum[cv, cu] / dcnt[cv, cu]
@@ -277,20 +290,32 @@ def vbrep_from_gt(scan: Scan, tilt: dict[int, tuple[np.ndarray, float]] | None =
         p = prims[v]
         region = (gt_map == v) & (clean > 0)
         verts, tris = _corner_mesh(region, clean, p, K, window)
-        prim = {"type": p["type"], "params": {k: (list(map(float, x)) if isinstance(x, (list, tuple)) else x)
-                                              for k, x in p["params"].items()}}
+        prim = {
+            "type": p["type"],
+            "params": {k: (list(map(float, x)) if isinstance(x, (list, tuple)) else x) for k, x in p["params"].items()},
+        }
         if tilt and v in tilt:
             axis, angle = tilt[v]
             key = "normal" if p["type"] == "plane" else "axis"
-            prim["params"][key] = _rotate(np.asarray(prim["params"][key], float), np.asarray(axis, float),
-                                          float(angle)).tolist()
+            prim["params"][key] = _rotate(
+                np.asarray(prim["params"][key], float), np.asarray(axis, float), float(angle)
+            ).tolist()
         a = _axis(prim)
         label = None if a is None else axis_class(a, axes_cam).value
-        faces.append(VFace(id=len(faces), instance=v, primitive=prim, axis_label=label, mesh_vertices=verts,
-                           mesh_triangles=tris))
+        faces.append(
+            VFace(id=len(faces), instance=v, primitive=prim, axis_label=label, mesh_vertices=verts, mesh_triangles=tris)
+        )
     h, w = clean.shape
-    return VBRep(faces=faces, edges=[], vertices=[], frame=axes_cam.copy(), K=K.copy(), image_size=(w, h),
-                 scale=part_size(scan), meta={"source": "ground truth"})
+    return VBRep(
+        faces=faces,
+        edges=[],
+        vertices=[],
+        frame=axes_cam.copy(),
+        K=K.copy(),
+        image_size=(w, h),
+        scale=part_size(scan),
+        meta={"source": "ground truth"},
+    )
 
 
 def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:

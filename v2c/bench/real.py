@@ -91,11 +91,18 @@ def box_angles(vbrep: VBRep, n_planes: int = 3, distinct_deg: float = 20.0) -> d
     for a in range(len(kept)):
         for b in range(a + 1, len(kept)):
             cos = abs(float(normals[kept[a]] @ normals[kept[b]]))
-            pairs.append({"faces": [planes[kept[a]].id, planes[kept[b]].id],
-                          "angle_deg": float(np.degrees(np.arccos(min(1.0, cos))))})
+            pairs.append(
+                {
+                    "faces": [planes[kept[a]].id, planes[kept[b]].id],
+                    "angle_deg": float(np.degrees(np.arccos(min(1.0, cos)))),
+                }
+            )
     corner = [p["angle_deg"] for p in pairs if p["angle_deg"] > 45.0]
-    return {"plane_faces": len(planes), "pairs": pairs,
-            "max_error_deg": float(max(abs(90.0 - a) for a in corner)) if corner else float("nan")}
+    return {
+        "plane_faces": len(planes),
+        "pairs": pairs,
+        "max_error_deg": float(max(abs(90.0 - a) for a in corner)) if corner else float("nan"),
+    }
 
 
 def can_radius(vbrep: VBRep) -> dict[str, Any]:
@@ -103,8 +110,11 @@ def can_radius(vbrep: VBRep) -> dict[str, Any]:
     cyl = sorted((f for f in vbrep.faces if f.primitive.get("type") == "cylinder"), key=face_area, reverse=True)
     if not cyl:
         return {"cylinder_faces": 0, "radius_mm": float("nan")}
-    return {"cylinder_faces": len(cyl), "radius_mm": 1000.0 * float(cyl[0].primitive["params"]["radius"]),
-            "face": cyl[0].id}
+    return {
+        "cylinder_faces": len(cyl),
+        "radius_mm": 1000.0 * float(cyl[0].primitive["params"]["radius"]),
+        "face": cyl[0].id,
+    }
 
 
 def step_mesh(step_path: Path, deflection_mm: float = DEFLECTION_MM) -> tuple[np.ndarray, np.ndarray]:
@@ -118,8 +128,7 @@ def step_mesh(step_path: Path, deflection_mm: float = DEFLECTION_MM) -> tuple[np
     return fm.vertices, fm.triangles
 
 
-def distances_to_mesh(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
-                      near: float) -> np.ndarray:
+def distances_to_mesh(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, near: float) -> np.ndarray:
     """(N,) distances from ``points`` to the mesh (units of the inputs), each one exact or an upper bound, such
     that ``distance < near`` is exactly the true test: the nearest vertex (of the mesh subdivided to edges of at
     most near / 2) bounds the distance from above, and from below by its value minus the longest edge; points
@@ -153,8 +162,9 @@ def _surface_distances(points: np.ndarray, inst: np.ndarray, fit: FitResult) -> 
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir: Path,
-                  near_mm: float = NEAR_MM) -> dict[str, Any]:
+def measure_frame(
+    folder: Path, spec: dict[str, Any], segmentation: str, out_dir: Path, near_mm: float = NEAR_MM
+) -> dict[str, Any]:
     """Reconstruct one frame with its ROI, write its STEP (camera frame) and figure into ``out_dir``, read the STEP
     back and measure it (module docstring). Raises whatever the pipeline raises."""
     from exporters import result_figure, write
@@ -170,9 +180,15 @@ def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir
     step_path = out_dir / f"{stem}.step"
     report = write(vbrep, step_path, frame="camera", product=stem)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
-    entry: dict[str, Any] = {"ok": True, "error": None, "seconds": seconds, "cpu_seconds": cpu,
-                             "step": str(step_path),
-                             "stage_seconds": vbrep.meta.get("timings", {}), "warnings": list(report.warnings)}
+    entry: dict[str, Any] = {
+        "ok": True,
+        "error": None,
+        "seconds": seconds,
+        "cpu_seconds": cpu,
+        "step": str(step_path),
+        "stage_seconds": vbrep.meta.get("timings", {}),
+        "warnings": list(report.warnings),
+    }
     try:
         figure = out_dir / f"{stem}.png"
         result_figure(scan, seg.instances, vbrep, figure)
@@ -186,11 +202,12 @@ def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir
     n_sides = spec.get("visible_sides")
     entry["faces"] = len(typed.faces)
     entry["faces_per_side"] = len(typed.faces) / n_sides if n_sides else None
-    entry["face_types"] = {t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
-                           for t_ in ("plane", "cylinder", "cone", "sphere", "torus")}
+    entry["face_types"] = {
+        t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
+        for t_ in ("plane", "cylinder", "cone", "sphere", "torus")
+    }
     if spec["object"] == "box":
-        planes = sorted((f for f in vbrep.faces if f.primitive.get("type") == "plane"), key=face_area,
-                        reverse=True)
+        planes = sorted((f for f in vbrep.faces if f.primitive.get("type") == "plane"), key=face_area, reverse=True)
         box = box_angles(vbrep)
         # the two largest planes of distinct directions (box_angles' first pair): printed art splits a box side
         # into parallel pieces, counted by faces_per_side; the raw two largest planes are kept too
@@ -228,8 +245,14 @@ def measure_frame(folder: Path, spec: dict[str, Any], segmentation: str, out_dir
     return entry
 
 
-def real_bench(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentations: tuple[str, ...] = ("learned",),
-               out_dir: Path | None = None, progress: bool = True, start: bool = True) -> dict[str, Any]:
+def real_bench(
+    data_dir: Path,
+    rois_path: Path = DEFAULT_ROIS,
+    segmentations: tuple[str, ...] = ("learned",),
+    out_dir: Path | None = None,
+    progress: bool = True,
+    start: bool = True,
+) -> dict[str, Any]:
     """Every frame of ``rois_path`` found in ``data_dir``, with every segmentation method: `measure_frame`, a
     frame that fails reported with its error. ``start``: also measure the process start once."""
     from tqdm import tqdm
@@ -241,9 +264,15 @@ def real_bench(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentations: tu
     jobs = [(name, spec, m) for m in segmentations for name, spec in frames_spec.items()]
     for name, spec, method in tqdm(jobs, desc="real", unit="frame", disable=not progress):
         folder = Path(data_dir) / name
-        row: dict[str, Any] = {"frame": name, "segmentation": method, "object": spec["object"],
-                               "name": spec.get("name"), "roi": spec["roi"], "expected": spec.get("expected", {}),
-                               "visible_sides": spec.get("visible_sides")}
+        row: dict[str, Any] = {
+            "frame": name,
+            "segmentation": method,
+            "object": spec["object"],
+            "name": spec.get("name"),
+            "roi": spec["roi"],
+            "expected": spec.get("expected", {}),
+            "visible_sides": spec.get("visible_sides"),
+        }
         rows.append(row)
         if not folder.is_dir():
             row.update(ok=False, error=f"{folder}: not found")
@@ -255,8 +284,17 @@ def real_bench(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentations: tu
             row.update(ok=False, error=error_text(exc), seconds=time.perf_counter() - t)
     summary = {m: _summary([r for r in rows if r["segmentation"] == m]) for m in segmentations}
     start_s = process_start_seconds(list(segmentations)) if start else float("nan")
-    return jsonable({"data_dir": str(data_dir), "segmentations": list(segmentations), "out_dir": str(out_dir),
-                      "near_mm": NEAR_MM, "process_start_s": start_s, "frames": rows, "summary": summary})
+    return jsonable(
+        {
+            "data_dir": str(data_dir),
+            "segmentations": list(segmentations),
+            "out_dir": str(out_dir),
+            "near_mm": NEAR_MM,
+            "process_start_s": start_s,
+            "frames": rows,
+            "summary": summary,
+        }
+    )
 
 
 def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -268,14 +306,17 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         v = [x for x in v if x is not None and np.isfinite(x)]
         return float(np.mean(v)) if v else float("nan")
 
-    return {"frames": len(rows), "failed": len(rows) - len(ok),
-            "faces_per_side": mean([r["faces_per_side"] for r in ok if r.get("faces_per_side")]),
-            "box_angle_error_deg": mean([abs(90.0 - r["box"]["largest_two_deg"]) for r in boxes]),
-            "can_radius_error_pct": mean([abs(r["can"].get("error_pct", float("nan"))) for r in cans]),
-            "coverage_3mm": mean([r["coverage_3mm"] for r in ok]),
-            "depth_rms_mm": mean([r["depth_rms_mm"] for r in ok]),
-            "seconds_median": float(np.median([r["seconds"] for r in ok])) if ok else float("nan"),
-            "cpu_seconds_median": float(np.median([r["cpu_seconds"] for r in ok])) if ok else float("nan")}
+    return {
+        "frames": len(rows),
+        "failed": len(rows) - len(ok),
+        "faces_per_side": mean([r["faces_per_side"] for r in ok if r.get("faces_per_side")]),
+        "box_angle_error_deg": mean([abs(90.0 - r["box"]["largest_two_deg"]) for r in boxes]),
+        "can_radius_error_pct": mean([abs(r["can"].get("error_pct", float("nan"))) for r in cans]),
+        "coverage_3mm": mean([r["coverage_3mm"] for r in ok]),
+        "depth_rms_mm": mean([r["depth_rms_mm"] for r in ok]),
+        "seconds_median": float(np.median([r["seconds"] for r in ok])) if ok else float("nan"),
+        "cpu_seconds_median": float(np.median([r["cpu_seconds"] for r in ok])) if ok else float("nan"),
+    }
 
 
 def _f(v: Any, fmt: str = ".1f") -> str:
@@ -284,16 +325,22 @@ def _f(v: Any, fmt: str = ".1f") -> str:
 
 def format_table(report: dict[str, Any]) -> str:
     """Markdown table of `real_bench`, one row per frame and method, then a summary line per method."""
-    lines = [("| frame | object | seg. | faces | faces/side | measured | expected | depth RMS mm | "
-              "within 3 mm (object / faces) | s (CPU s) |"),
-             "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | ---: |"]
+    lines = [
+        (
+            "| frame | object | seg. | faces | faces/side | measured | expected | depth RMS mm | "
+            "within 3 mm (object / faces) | s (CPU s) |"
+        ),
+        "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | ---: |",
+    ]
     for r in report["frames"]:
         if not r.get("ok"):
             meas, exp = f"error: {r.get('error')}", ""
         elif r["object"] == "box":
             b = r["box"]
-            meas = f"two largest planes {_f(b['largest_two_deg'])} deg (3 planes: max error " \
-                   f"{_f(b['max_error_deg'])}; any direction {_f(b.get('largest_two_raw_deg'))})"
+            meas = (
+                f"two largest planes {_f(b['largest_two_deg'])} deg (3 planes: max error "
+                f"{_f(b['max_error_deg'])}; any direction {_f(b.get('largest_two_raw_deg'))})"
+            )
             exp = "90 deg"
         else:
             c = r["can"]
@@ -301,25 +348,34 @@ def format_table(report: dict[str, Any]) -> str:
             meas = f"radius {_f(c['radius_mm'])} mm" + (f" ({_f(c.get('error_pct'), '+.1f')} %)" if rad else "")
             exp = f"{rad:.1f} mm" if rad else ""
         cov = f"{_f(100 * r['coverage_3mm'])} / {_f(100 * r['coverage_3mm_faces'])} %" if r.get("ok") else ""
-        lines.append(f"| {r['frame']} | {r['object']} | {r['segmentation']} | {r.get('faces', '')} | "
-                     f"{_f(r.get('faces_per_side'))} | {meas} | {exp} | {_f(r.get('depth_rms_mm'), '.2f')} | "
-                     f"{cov} | {_f(r.get('seconds'))} ({_f(r.get('cpu_seconds'))}) |")
+        lines.append(
+            f"| {r['frame']} | {r['object']} | {r['segmentation']} | {r.get('faces', '')} | "
+            f"{_f(r.get('faces_per_side'))} | {meas} | {exp} | {_f(r.get('depth_rms_mm'), '.2f')} | "
+            f"{cov} | {_f(r.get('seconds'))} ({_f(r.get('cpu_seconds'))}) |"
+        )
     for m, s in report["summary"].items():
         lines.append("")
-        lines.append(f"{m}: {s['frames'] - s['failed']} of {s['frames']} frames ok; faces per visible side "
-                     f"{_f(s['faces_per_side'], '.2f')}; box angle error {_f(s['box_angle_error_deg'])} deg; can "
-                     f"radius error {_f(s['can_radius_error_pct'])} %; within {report['near_mm']:g} mm "
-                     f"{_f(100 * s['coverage_3mm'])} %; depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
-                     f"{_f(s['seconds_median'])} s ({_f(s['cpu_seconds_median'])} CPU s) per frame + "
-                     f"{_f(report['process_start_s'])} s process start")
+        lines.append(
+            f"{m}: {s['frames'] - s['failed']} of {s['frames']} frames ok; faces per visible side "
+            f"{_f(s['faces_per_side'], '.2f')}; box angle error {_f(s['box_angle_error_deg'])} deg; can "
+            f"radius error {_f(s['can_radius_error_pct'])} %; within {report['near_mm']:g} mm "
+            f"{_f(100 * s['coverage_3mm'])} %; depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
+            f"{_f(s['seconds_median'])} s ({_f(s['cpu_seconds_median'])} CPU s) per frame + "
+            f"{_f(report['process_start_s'])} s process start"
+        )
     return "\n".join(lines)
 
 
 # ----------------------------------------------------------------- the earlier report (`v2c.bench.run` had it)
 
 
-def real_frames_report(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentation: str = "learned",
-                       out_dir: Path | None = None, progress: bool = True) -> dict[str, Any]:
+def real_frames_report(
+    data_dir: Path,
+    rois_path: Path = DEFAULT_ROIS,
+    segmentation: str = "learned",
+    out_dir: Path | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
     """Run `v2c to-step` (`v2c.api.scan_to_step`, camera frame, with the VB-Rep JSON and figure) on every frame of
     ``rois_path`` found in ``data_dir`` with its region of interest; per frame: ok / error, seconds, faces, and the
     box angles (`box_angles`) or can radius (`can_radius`) against the expected value."""
@@ -334,22 +390,36 @@ def real_frames_report(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentat
     frames: dict[str, Any] = {}
     for name, spec in tqdm(rois.items(), desc="real", unit="frame", disable=not progress):
         folder = Path(data_dir) / name
-        entry: dict[str, Any] = {"object": spec["object"], "name": spec.get("name"), "roi": spec["roi"],
-                                 "expected": spec.get("expected", {})}
+        entry: dict[str, Any] = {
+            "object": spec["object"],
+            "name": spec.get("name"),
+            "roi": spec["roi"],
+            "expected": spec.get("expected", {}),
+        }
         frames[name] = entry
         if not folder.is_dir():
             entry.update(ok=False, error=f"{folder}: not found")
             continue
         t = time.perf_counter()
         try:
-            res = scan_to_step(folder, out_dir / f"{name}.step", frame="camera", segmentation=segmentation,
-                               roi=tuple(spec["roi"]))
-            entry.update(ok=True, error=None, step=str(res.step), figure=str(res.figure) if res.figure else None,
-                         warnings=res.warnings, seconds=time.perf_counter() - t, stage_seconds=res.seconds,
-                         step_faces=res.report.n_faces)
+            res = scan_to_step(
+                folder, out_dir / f"{name}.step", frame="camera", segmentation=segmentation, roi=tuple(spec["roi"])
+            )
+            entry.update(
+                ok=True,
+                error=None,
+                step=str(res.step),
+                figure=str(res.figure) if res.figure else None,
+                warnings=res.warnings,
+                seconds=time.perf_counter() - t,
+                stage_seconds=res.seconds,
+                step_faces=res.report.n_faces,
+            )
             vbrep = VBRep.load(res.vbrep_json)
-            entry["faces"] = {t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
-                              for t_ in ("plane", "cylinder", "cone", "sphere", "torus")}
+            entry["faces"] = {
+                t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
+                for t_ in ("plane", "cylinder", "cone", "sphere", "torus")
+            }
             if spec["object"] == "box":
                 entry["box"] = box_angles(vbrep)
             else:
@@ -359,18 +429,27 @@ def real_frames_report(data_dir: Path, rois_path: Path = DEFAULT_ROIS, segmentat
                     entry["can"]["error_mm"] = entry["can"]["radius_mm"] - float(exp)
         except Exception as exc:  # noqa: BLE001 - the report says which frame failed and why
             entry.update(ok=False, error=error_text(exc), seconds=time.perf_counter() - t)
-    return jsonable({"data_dir": str(data_dir), "segmentation": segmentation, "out_dir": str(out_dir),
-                      "frames": frames})
+    return jsonable(
+        {"data_dir": str(data_dir), "segmentation": segmentation, "out_dir": str(out_dir), "frames": frames}
+    )
 
 
 def format_real_table(report: dict[str, Any]) -> str:
     """Markdown table of `real_frames_report`."""
-    lines = ["| frame | object | ROI | ok | s | faces (plane/cyl/other) | measured | expected |",
-             "| --- | --- | --- | --- | ---: | --- | --- | --- |"]
+    lines = [
+        "| frame | object | ROI | ok | s | faces (plane/cyl/other) | measured | expected |",
+        "| --- | --- | --- | --- | ---: | --- | --- | --- |",
+    ]
     for name, e in report["frames"].items():
         faces = e.get("faces") or {}
-        fc = (f"{faces.get('plane', 0)}/{faces.get('cylinder', 0)}/"
-              f"{sum(v for k, v in faces.items() if k not in ('plane', 'cylinder'))}") if faces else ""
+        fc = (
+            (
+                f"{faces.get('plane', 0)}/{faces.get('cylinder', 0)}/"
+                f"{sum(v for k, v in faces.items() if k not in ('plane', 'cylinder'))}"
+            )
+            if faces
+            else ""
+        )
         if not e.get("ok"):
             meas, exp = f"error: {e.get('error')}", ""
         elif e["object"] == "box":
@@ -382,6 +461,8 @@ def format_real_table(report: dict[str, Any]) -> str:
             r = e.get("expected", {}).get("radius_mm")
             exp = f"{r:.1f} mm" if r else ""
         secs = f"{e['seconds']:.1f}" if e.get("seconds") is not None else ""
-        lines.append(f"| {name} | {e.get('name') or e['object']} | {','.join(map(str, e['roi']))} | "
-                     f"{'yes' if e.get('ok') else 'no'} | {secs} | {fc} | {meas} | {exp} |")
+        lines.append(
+            f"| {name} | {e.get('name') or e['object']} | {','.join(map(str, e['roi']))} | "
+            f"{'yes' if e.get('ok') else 'no'} | {secs} | {fc} | {meas} | {exp} |"
+        )
     return "\n".join(lines)

@@ -67,17 +67,50 @@ from v2c.bench.workers import (
 )
 
 __all__ = [
-    "ABLATIONS", "DEFAULT_ROIS", "ECE_BINS", "GT", "MEAN_OVER_OK", "NOISES", "PAPER", "SEGMENTATIONS", "STAGES",
-    "TABLE_ROWS", "ZERO_IF_FAILED", "BenchConfig", "MetricConfig", "box_angles", "cad_files", "calibration_summary",
-    "can_radius", "column_title", "columns_of", "default_cache_dir", "edge_label_arrays", "evaluate_dirs",
-    "evaluate_scan", "executor_of", "figure_grid", "format_notes", "format_real_table", "format_table", "jsonable",
-    "limit_threads", "load_rois", "prepare_scans", "process_start_seconds", "real_frames_report", "run_benchmark",
-    "scan_cache_dir", "segment_scan", "summarise", "warm_up", "write_reliability",
+    "ABLATIONS",
+    "DEFAULT_ROIS",
+    "ECE_BINS",
+    "GT",
+    "MEAN_OVER_OK",
+    "NOISES",
+    "PAPER",
+    "SEGMENTATIONS",
+    "STAGES",
+    "TABLE_ROWS",
+    "ZERO_IF_FAILED",
+    "BenchConfig",
+    "MetricConfig",
+    "box_angles",
+    "cad_files",
+    "calibration_summary",
+    "can_radius",
+    "column_title",
+    "columns_of",
+    "default_cache_dir",
+    "edge_label_arrays",
+    "evaluate_dirs",
+    "evaluate_scan",
+    "executor_of",
+    "figure_grid",
+    "format_notes",
+    "format_real_table",
+    "format_table",
+    "jsonable",
+    "limit_threads",
+    "load_rois",
+    "prepare_scans",
+    "process_start_seconds",
+    "real_frames_report",
+    "run_benchmark",
+    "scan_cache_dir",
+    "segment_scan",
+    "summarise",
+    "warm_up",
+    "write_reliability",
 ]
 
 
-def run_benchmark(cfg: BenchConfig, progress: bool = True,
-                  log: Callable[[str], None] | None = None) -> dict[str, Any]:
+def run_benchmark(cfg: BenchConfig, progress: bool = True, log: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Prepare the scans, evaluate each in a process pool, summarise. Returns the JSON-able result: ``config``,
     ``scans`` (folders), ``columns``, ``summary`` {"seg/ablation": {...}}, ``rows`` (per scan and column),
     ``paper``, ``process_start_s``, ``wall_s`` (seconds), ``figure_grid``. ``log`` is not used (progress goes to
@@ -91,11 +124,27 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True,
         grid = figure_grid([r["figure"] for r in rows if r.get("figure")][:12], Path(cfg.figure_dir) / "grid.png")
     start = process_start_seconds([s for s in cfg.segmentations if s != GT], weights)
     cols = columns_of(cfg)
-    summary = {f"{s}/{a}": summarise([r for r in rows if r["segmentation"] == s and r["ablation"] == a], start)
-               for s, a in cols}
+    summary = {
+        f"{s}/{a}": summarise([r for r in rows if r["segmentation"] == s and r["ablation"] == a], start)
+        for s, a in cols
+    }
     conf = asdict(cfg)
-    conf.update(weights=weights, cad_dir=str(cfg.cad_dir) if cfg.cad_dir else None, cache_dir=str(scan_cache_dir(cfg))
-                if cfg.scans_dir is None else None, scans_dir=str(cfg.scans_dir) if cfg.scans_dir else None)
-    return jsonable({"config": conf, "scans": [str(d) for d in dirs], "columns": [f"{s}/{a}" for s, a in cols],
-                     "summary": summary, "paper": PAPER, "process_start_s": start,
-                     "wall_s": time.perf_counter() - t0, "figure_grid": grid, "rows": rows})
+    conf.update(
+        weights=weights,
+        cad_dir=str(cfg.cad_dir) if cfg.cad_dir else None,
+        cache_dir=str(scan_cache_dir(cfg)) if cfg.scans_dir is None else None,
+        scans_dir=str(cfg.scans_dir) if cfg.scans_dir else None,
+    )
+    return jsonable(
+        {
+            "config": conf,
+            "scans": [str(d) for d in dirs],
+            "columns": [f"{s}/{a}" for s, a in cols],
+            "summary": summary,
+            "paper": PAPER,
+            "process_start_s": start,
+            "wall_s": time.perf_counter() - t0,
+            "figure_grid": grid,
+            "rows": rows,
+        }
+    )

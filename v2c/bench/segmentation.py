@@ -71,7 +71,7 @@ def semantic_confusion(pred_labels: np.ndarray, gt_labels: np.ndarray) -> np.nda
     ok = gt_labels != IGNORE
     g = gt_labels[ok].astype(np.int64)
     p = np.minimum(pred_labels[ok].astype(np.int64), NUM_CLASSES - 1)
-    return np.bincount(g * NUM_CLASSES + p, minlength=NUM_CLASSES ** 2).reshape(NUM_CLASSES, NUM_CLASSES)
+    return np.bincount(g * NUM_CLASSES + p, minlength=NUM_CLASSES**2).reshape(NUM_CLASSES, NUM_CLASSES)
 
 
 def mean_iou(conf: np.ndarray) -> float:
@@ -82,8 +82,13 @@ def mean_iou(conf: np.ndarray) -> float:
     return float((inter[present] / union[present]).mean()) if present.any() else float("nan")
 
 
-def evaluate_instances(instances: np.ndarray, inst_labels: np.ndarray, gt_faces: np.ndarray,
-                       gt_labels: np.ndarray, cfg: SegMetricConfig = SegMetricConfig()) -> dict:
+def evaluate_instances(
+    instances: np.ndarray,
+    inst_labels: np.ndarray,
+    gt_faces: np.ndarray,
+    gt_labels: np.ndarray,
+    cfg: SegMetricConfig = SegMetricConfig(),
+) -> dict:
     """Metrics of one scan's instance map against its gt faces.
 
     instances: (H, W) int ids (0 = none); inst_labels: (N + 1,) label per id; gt_faces: (H, W) faces.png values;
@@ -126,8 +131,14 @@ def evaluate_instances(instances: np.ndarray, inst_labels: np.ndarray, gt_faces:
     sem = np.asarray(inst_labels)[inst]
     nan = float("nan")
     return {
-        "n_pred": len(counted), "n_gt": len(gt_big), "n_gt_all": len(gt_ids), "n_pairs": n_pairs,
-        "matched_pred": len(matched_pred), "matched_gt": len(matched_big), "type_ok": type_ok, "axis_ok": axis_ok,
+        "n_pred": len(counted),
+        "n_gt": len(gt_big),
+        "n_gt_all": len(gt_ids),
+        "n_pairs": n_pairs,
+        "matched_pred": len(matched_pred),
+        "matched_gt": len(matched_big),
+        "type_ok": type_ok,
+        "axis_ok": axis_ok,
         "precision": len(matched_pred) / len(counted) if len(counted) else nan,
         "recall": len(matched_big) / len(gt_big) if len(gt_big) else nan,
         "recall_all": n_pairs / len(gt_ids) if len(gt_ids) else nan,
@@ -163,8 +174,12 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def run(scan_dirs: list[Path], methods: list[str], segment_fn: Callable[[Scan, str], Segmentation] | None = None,
-        log: Callable[[str], None] = print) -> dict:
+def run(
+    scan_dirs: list[Path],
+    methods: list[str],
+    segment_fn: Callable[[Scan, str], Segmentation] | None = None,
+    log: Callable[[str], None] = print,
+) -> dict:
     """Segment every scan with every method, time it (seconds), and return {method: {"summary": ..., "scans":
     [...]}}. ``segment_fn(scan, method)``: the segmenter (default `v2c.segment.segment`); ``log`` gets a progress
     line every 25 scans."""
@@ -187,15 +202,26 @@ def run(scan_dirs: list[Path], methods: list[str], segment_fn: Callable[[Scan, s
             rows.append(r)
             if (i + 1) % 25 == 0:
                 log(f"{method}: {i + 1}/{len(scan_dirs)} {summarise(rows)}")
-        results[method] = {"summary": summarise(rows),
-                           "scans": [{k: v for k, v in r.items() if k != "confusion"} for r in rows]}
+        results[method] = {
+            "summary": summarise(rows),
+            "scans": [{k: v for k, v in r.items() if k != "confusion"} for r in rows],
+        }
     return results
 
 
 def format_table(results: dict) -> str:
     """Markdown table of the summaries of ``run``."""
-    cols = ("scans", "precision", "recall", "recall_all", "type_acc", "axis_acc", "miou", "seconds_median",
-            "cpu_seconds_median")
+    cols = (
+        "scans",
+        "precision",
+        "recall",
+        "recall_all",
+        "type_acc",
+        "axis_acc",
+        "miou",
+        "seconds_median",
+        "cpu_seconds_median",
+    )
     lines = ["| method | " + " | ".join(cols) + " |", "|" + " --- |" * (len(cols) + 1)]
     for m, r in results.items():
         s = r["summary"]

@@ -86,8 +86,11 @@ def band_of(n_faces: int, bands: BandConfig = BandConfig()) -> str:
 
 def band_labels(bands: BandConfig = BandConfig()) -> tuple[str, str, str]:
     """The three band labels, smallest first."""
-    return (band_of(bands.small_below - 1, bands), band_of(bands.small_below, bands),
-            band_of(bands.large_above + 1, bands))
+    return (
+        band_of(bands.small_below - 1, bands),
+        band_of(bands.small_below, bands),
+        band_of(bands.large_above + 1, bands),
+    )
 
 
 @dataclass(frozen=True)
@@ -200,15 +203,13 @@ def suite_cache_dir(cfg: SuiteConfig) -> Path:
     from v2c.synth.dataset import GENERATOR
 
     b = cfg.bench
-    key = {"generator": GENERATOR, "suite": SUITE_GENERATOR, "noise": b.noise, "size": list(b.size),
-           "seed": b.seed}
+    key = {"generator": GENERATOR, "suite": SUITE_GENERATOR, "noise": b.noise, "size": list(b.size), "seed": b.seed}
     look = ""
     if cfg.appearance != "plain":  # plain keeps the digest (and cache) it had before appearances existed
         key["appearance"] = cfg.appearance
         look = f"_{cfg.appearance}"
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
-    return (b.cache_dir or default_cache_dir()) / \
-        f"suite_{b.noise}_{b.size[0]}x{b.size[1]}_s{b.seed}{look}_{digest}"
+    return (b.cache_dir or default_cache_dir()) / f"suite_{b.noise}_{b.size[0]}x{b.size[1]}_s{b.seed}{look}_{digest}"
 
 
 @dataclass
@@ -237,8 +238,12 @@ def plan_scans(cfg: SuiteConfig) -> tuple[list[SuiteScan], list[str]]:
 
     b = cfg.bench
     root = suite_cache_dir(cfg)
-    base = SynthConfig(width=b.size[0], height=b.size[1], noise=b.noise,
-                       **({"appearance": cfg.appearance, "framing": "extent"} if cfg.appearance != "plain" else {}))
+    base = SynthConfig(
+        width=b.size[0],
+        height=b.size[1],
+        noise=b.noise,
+        **({"appearance": cfg.appearance, "framing": "extent"} if cfg.appearance != "plain" else {}),
+    )
     folder = Path(cfg.corpus_dir or default_corpus_dir())
     scans: list[SuiteScan] = []
     notes: list[str] = []
@@ -246,8 +251,10 @@ def plan_scans(cfg: SuiteConfig) -> tuple[list[SuiteScan], list[str]]:
         synth = replace(base, families=("cad",), cad_files=(str((folder / p.file).resolve()),))
         seed = derived_seed(b.seed, p.sha1)
         part_dir = root / CORPUS / f"{Path(p.file).stem}_{p.sha1[:8]}"
-        scans += [SuiteScan(part_dir / scan_name(v), CORPUS, p.file, v, seed, synth, p.n_faces,
-                            band_of(p.n_faces, cfg.bands)) for v in range(cfg.views)]
+        scans += [
+            SuiteScan(part_dir / scan_name(v), CORPUS, p.file, v, seed, synth, p.n_faces, band_of(p.n_faces, cfg.bands))
+            for v in range(cfg.views)
+        ]
     if cfg.suite in SUITES_WITH_FAMILIES:
         names = cfg.families
         if names is None:
@@ -257,13 +264,17 @@ def plan_scans(cfg: SuiteConfig) -> tuple[list[SuiteScan], list[str]]:
         known = known_families()
         for name in names:
             if name not in known:
-                notes.append(f"leave-out family {name!r} skipped: the generator does not know it "
-                             f"(known: {', '.join(sorted(known))})")
+                notes.append(
+                    f"leave-out family {name!r} skipped: the generator does not know it "
+                    f"(known: {', '.join(sorted(known))})"
+                )
                 continue
             synth = replace(base, families=(name,))
             seed = derived_seed(b.seed, f"family:{name}")
-            scans += [SuiteScan(root / FAMILY / name / scan_name(i), FAMILY, name, i, seed, synth)
-                      for i in range(cfg.family_scans)]
+            scans += [
+                SuiteScan(root / FAMILY / name / scan_name(i), FAMILY, name, i, seed, synth)
+                for i in range(cfg.family_scans)
+            ]
     return scans, notes
 
 
@@ -346,8 +357,9 @@ def run_suite(cfg: SuiteConfig, progress: bool = True) -> dict[str, Any]:
     weights = str(b.weights) if b.weights else None
     for s in scans:
         if s.label in render_errors:
-            rows += failed_rows((str(s.path), tuple(b.segmentations), tuple(b.ablations)),
-                                   f"render: {render_errors[s.label]}")
+            rows += failed_rows(
+                (str(s.path), tuple(b.segmentations), tuple(b.ablations)), f"render: {render_errors[s.label]}"
+            )
     by_path = {str(s.path): s for s in scans}
     order = {str(s.path): i for i, s in enumerate(scans)}
     rows.sort(key=lambda r: order.get(r["path"], 0))
@@ -357,18 +369,38 @@ def run_suite(cfg: SuiteConfig, progress: bool = True) -> dict[str, Any]:
     start = process_start_seconds([m for m in b.segmentations if m != GT], weights)
     cols = [f"{s}/{a}" for s, a in columns_of(b)]
     groups = group_names(cfg, scans)
-    summary = {c: {g: summarise_group([r for r in rows if _column(r) == c and in_group(r, g, cfg)], start)
-                   for g in groups} for c in cols}
+    summary = {
+        c: {g: summarise_group([r for r in rows if _column(r) == c and in_group(r, g, cfg)], start) for g in groups}
+        for c in cols
+    }
     conf = asdict(cfg)
     conf["bench"].update(weights=weights, cache_dir=str(suite_root(scans)))
     conf["corpus_dir"] = str(cfg.corpus_dir or default_corpus_dir())
     conf["corpus_split"] = cfg.corpus_split
-    return jsonable({
-        "config": conf, "suite": cfg.suite, "notes": notes,
-        "scans": [{"path": str(s.path), "source": s.source, "name": s.name, "view": s.view, "band": s.band,
-                   "n_faces": s.n_faces} for s in scans],
-        "columns": cols, "groups": groups, "summary": summary, "rows": rows, "process_start_s": start,
-        "wall_s": time.perf_counter() - t0})
+    return jsonable(
+        {
+            "config": conf,
+            "suite": cfg.suite,
+            "notes": notes,
+            "scans": [
+                {
+                    "path": str(s.path),
+                    "source": s.source,
+                    "name": s.name,
+                    "view": s.view,
+                    "band": s.band,
+                    "n_faces": s.n_faces,
+                }
+                for s in scans
+            ],
+            "columns": cols,
+            "groups": groups,
+            "summary": summary,
+            "rows": rows,
+            "process_start_s": start,
+            "wall_s": time.perf_counter() - t0,
+        }
+    )
 
 
 def _column(row: dict[str, Any]) -> str:
@@ -394,7 +426,7 @@ def in_group(row: dict[str, Any], group: str, cfg: SuiteConfig) -> bool:
     if group == "leave-out families":
         return row.get("source") == FAMILY
     if group.startswith("family "):
-        return row.get("source") == FAMILY and row.get("part") == group[len("family "):]
+        return row.get("source") == FAMILY and row.get("part") == group[len("family ") :]
     whole = f"corpus {cfg.corpus_split}"
     if row.get("source") != CORPUS or not group.startswith(whole):
         return False
@@ -452,13 +484,18 @@ def format_suite_tables(result: dict[str, Any]) -> str:
         out.append("| --- |" + " ---: |" * len(groups))
         for title, key, kind in SUITE_ROWS:
             out.append(f"| {title} | " + " | ".join(format_value(summ[g].get(key), kind) for g in groups) + " |")
-        out.append("| STEP faces bounded by their mesh outline / STEP faces | "
-                   + " | ".join(f"{summ[g]['fallback_faces']} / {summ[g]['step_faces']}" for g in groups) + " |")
-        out.append("| mesh-outline faces per scan (mean) | "
-                   + " | ".join(_f2(summ[g]["fallback_per_scan"]) for g in groups) + " |")
+        out.append(
+            "| STEP faces bounded by their mesh outline / STEP faces | "
+            + " | ".join(f"{summ[g]['fallback_faces']} / {summ[g]['step_faces']}" for g in groups)
+            + " |"
+        )
+        out.append(
+            "| mesh-outline faces per scan (mean) | "
+            + " | ".join(_f2(summ[g]["fallback_per_scan"]) for g in groups)
+            + " |"
+        )
         out.append("| failures (scans that raised) | " + " | ".join(str(summ[g]["failed"]) for g in groups) + " |")
-        out.append("| scans (parts) | " + " | ".join(f"{summ[g]['scans']} ({summ[g]['parts']})" for g in groups)
-                   + " |")
+        out.append("| scans (parts) | " + " | ".join(f"{summ[g]['scans']} ({summ[g]['parts']})" for g in groups) + " |")
         out.append("")
     return "\n".join(out).rstrip()
 
@@ -485,8 +522,10 @@ def format_suite_notes(result: dict[str, Any], worst: int = 8) -> str:
     """Lines under the tables: skipped sources, process start and wall time, every failure by scan, the worst
     scans per column."""
     out = list(result["notes"])
-    out.append(f"process start (once per set): {result['process_start_s'] or float('nan'):.2f} s; benchmark wall "
-               f"time {result['wall_s']:.0f} s")
+    out.append(
+        f"process start (once per set): {result['process_start_s'] or float('nan'):.2f} s; benchmark wall "
+        f"time {result['wall_s']:.0f} s"
+    )
     for col in result["columns"]:
         fails = [r for r in result["rows"] if _column(r) == col and not r.get("ok")]
         out.append(f"{col}: {len(fails)} failed" + (":" if fails else ""))
@@ -497,26 +536,30 @@ def format_suite_notes(result: dict[str, Any], worst: int = 8) -> str:
                 if not r.get("ok"):
                     continue
                 fv = format_value
-                out.append(f"  {r['label']}" + (f" [{r['band']}]" if r.get("band") else "")
-                           + f": precision {fv(r.get('precision'), 'pct')}, recall "
-                           f"{fv(r.get('recall'), 'pct')}, type {fv(r.get('type_accuracy'), 'pct')}, "
-                           f"alignment {fv(r.get('alignment'), 'f4')}, Chamfer {fv(r.get('chamfer'), 'f4')}, "
-                           f"mesh-outline faces {r.get('step_fallback_faces', '')} of {r.get('step_faces', '')}, "
-                           f"{fv(r.get('runtime', {}).get('to_step'), 's')} s")
+                out.append(
+                    f"  {r['label']}"
+                    + (f" [{r['band']}]" if r.get("band") else "")
+                    + f": precision {fv(r.get('precision'), 'pct')}, recall "
+                    f"{fv(r.get('recall'), 'pct')}, type {fv(r.get('type_accuracy'), 'pct')}, "
+                    f"alignment {fv(r.get('alignment'), 'f4')}, Chamfer {fv(r.get('chamfer'), 'f4')}, "
+                    f"mesh-outline faces {r.get('step_fallback_faces', '')} of {r.get('step_faces', '')}, "
+                    f"{fv(r.get('runtime', {}).get('to_step'), 's')} s"
+                )
     return "\n".join(out)
 
 
-def run_and_report(cfg: SuiteConfig, progress: bool = True,
-                   echo: Callable[[str], None] = print) -> dict[str, Any]:
+def run_and_report(cfg: SuiteConfig, progress: bool = True, echo: Callable[[str], None] = print) -> dict[str, Any]:
     """`run_suite`, then print its header, tables and notes through ``echo``."""
     result = run_suite(cfg, progress)
     b = cfg.bench
     n_corpus = sum(1 for s in result["scans"] if s["source"] == CORPUS)
     n_fam = len(result["scans"]) - n_corpus
-    echo(f"suite {cfg.suite}: {n_corpus} scans of {len({s['name'] for s in result['scans'] if s['source'] == CORPUS})}"
-         f" corpus {cfg.corpus_split} parts ({cfg.views} views each), {n_fam} leave-out family scans; {b.noise} "
-         f"noise, {b.size[0]}x{b.size[1]}, seed {b.seed}, appearance {cfg.appearance}, segmentation "
-         f"{','.join(b.segmentations)}")
+    echo(
+        f"suite {cfg.suite}: {n_corpus} scans of {len({s['name'] for s in result['scans'] if s['source'] == CORPUS})}"
+        f" corpus {cfg.corpus_split} parts ({cfg.views} views each), {n_fam} leave-out family scans; {b.noise} "
+        f"noise, {b.size[0]}x{b.size[1]}, seed {b.seed}, appearance {cfg.appearance}, segmentation "
+        f"{','.join(b.segmentations)}"
+    )
     echo(format_suite_tables(result))
     echo(format_suite_notes(result))
     return result

@@ -159,8 +159,15 @@ def visible_points(points: np.ndarray, caster: MeshCaster, eps: float) -> np.nda
 # ------------------------------------------------------------------------------------------------- chamfer
 
 
-def reconstruction_points(vbrep: VBRep, n: int, rng: np.random.Generator, caster: MeshCaster | None = None,
-                          visible_only: bool = True, eps: float = 0.0, max_rounds: int = 8) -> np.ndarray:
+def reconstruction_points(
+    vbrep: VBRep,
+    n: int,
+    rng: np.random.Generator,
+    caster: MeshCaster | None = None,
+    visible_only: bool = True,
+    eps: float = 0.0,
+    max_rounds: int = 8,
+) -> np.ndarray:
     """R: ``n`` points (camera metres) drawn area-uniformly on the face meshes; with ``visible_only`` only those
     the camera sees (draws again until ``n`` are found or ``max_rounds`` rounds are spent)."""
     V, T, _ = vbrep_mesh(vbrep)

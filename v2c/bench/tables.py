@@ -20,8 +20,15 @@ from v2c.bench.config import ABLATIONS, GT
 
 #: The paper's Table 1 (BENCHMARK.md): ablation -> metric -> value (fractions for percentages, seconds).
 PAPER: dict[str, dict[str, float]] = {
-    "full": {"chamfer": 0.0628, "alignment": 0.0693, "precision": 0.881, "recall": 0.913, "axis_accuracy": 0.945,
-             "type_accuracy": 0.992, "runtime": 50.0},
+    "full": {
+        "chamfer": 0.0628,
+        "alignment": 0.0693,
+        "precision": 0.881,
+        "recall": 0.913,
+        "axis_accuracy": 0.945,
+        "type_accuracy": 0.992,
+        "runtime": 50.0,
+    },
     "no-axis": {"chamfer": 0.101, "alignment": 0.251},
     "no-int": {"chamfer": 0.0768, "alignment": 0.0940},
     "fit-only": {"chamfer": 0.0819, "alignment": 0.244},
@@ -29,8 +36,16 @@ PAPER: dict[str, dict[str, float]] = {
 
 #: Per-scan metrics averaged over scans; failed scans count 0 in the first group, are left out of the second.
 ZERO_IF_FAILED = ("precision", "recall", "recall_all", "precision_75", "recall_75", "recall_all_75")
-MEAN_OVER_OK = ("chamfer", "chamfer_all", "alignment", "type_accuracy", "axis_accuracy", "depth_error",
-                "depth_coverage", "edge_type_accuracy")
+MEAN_OVER_OK = (
+    "chamfer",
+    "chamfer_all",
+    "alignment",
+    "type_accuracy",
+    "axis_accuracy",
+    "depth_error",
+    "depth_coverage",
+    "edge_type_accuracy",
+)
 STAGES = ("load", "segment", "fit", "vbrep", "step")
 ECE_BINS = 10  # equal-width confidence bins of the expected calibration error
 
@@ -57,8 +72,11 @@ def summarise(rows: list[dict[str, Any]], process_start_s: float = float("nan"))
     the other metrics leave it out), type/axis accuracy also pooled over all pairs, runtime medians (to-step
     total and per stage), counts."""
     ok = [r for r in rows if r.get("ok")]
-    out: dict[str, Any] = {"scans": len(rows), "failed": len(rows) - len(ok),
-                           "errors": sorted({r["error"] for r in rows if not r.get("ok")})[:10]}
+    out: dict[str, Any] = {
+        "scans": len(rows),
+        "failed": len(rows) - len(ok),
+        "errors": sorted({r["error"] for r in rows if not r.get("ok")})[:10],
+    }
     for k in ZERO_IF_FAILED:
         out[k] = _mean([r.get(k, np.nan) if r.get("ok") else 0.0 for r in rows])
     for k in MEAN_OVER_OK:
@@ -77,8 +95,9 @@ def summarise(rows: list[dict[str, Any]], process_start_s: float = float("nan"))
     out["runtime_fit_stages"] = {k[4:]: _median([x.get(k, np.nan) for x in rt]) for k in fit_sub}
     out.update(calibration_summary(ok))
     out["process_start_s"] = process_start_s
-    out["set_runtime_s"] = (process_start_s + float(np.nansum([x.get("to_step", np.nan) for x in rt]))
-                            if rt else float("nan"))
+    out["set_runtime_s"] = (
+        process_start_s + float(np.nansum([x.get("to_step", np.nan) for x in rt])) if rt else float("nan")
+    )
     return out
 
 
@@ -86,8 +105,10 @@ def edge_label_arrays(rows: list[dict[str, Any]]) -> dict[str, np.ndarray]:
     """The per-edge labels (`scan_metrics`' ``edge_labels``) of rows, pooled: type, confidence, confidence_raw,
     ok."""
     labs = [r["edge_labels"] for r in rows if r.get("edge_labels")]
-    return {"type": np.array([t for la in labs for t in la["type"]], object),
-            **{k: np.array([v for la in labs for v in la[k]], float) for k in ("confidence", "confidence_raw", "ok")}}
+    return {
+        "type": np.array([t for la in labs for t in la["type"]], object),
+        **{k: np.array([v for la in labs for v in la[k]], float) for k in ("confidence", "confidence_raw", "ok")},
+    }
 
 
 def calibration_summary(rows: list[dict[str, Any]], n_bins: int = ECE_BINS) -> dict[str, Any]:
@@ -99,11 +120,15 @@ def calibration_summary(rows: list[dict[str, Any]], n_bins: int = ECE_BINS) -> d
 
     a = edge_label_arrays(rows)
     s = a["type"] == "intersection"
-    return {"ece_intersection": ece(a["confidence"][s], a["ok"][s], n_bins),
-            "ece_intersection_raw": ece(a["confidence_raw"][s], a["ok"][s], n_bins),
-            "ece_all": ece(a["confidence"], a["ok"], n_bins), "ece_all_raw": ece(a["confidence_raw"], a["ok"], n_bins),
-            "calibration_edges": len(a["ok"]), "intersection_edges": int(s.sum()),
-            "intersection_right": float(a["ok"][s].mean()) if s.any() else float("nan")}
+    return {
+        "ece_intersection": ece(a["confidence"][s], a["ok"][s], n_bins),
+        "ece_intersection_raw": ece(a["confidence_raw"][s], a["ok"][s], n_bins),
+        "ece_all": ece(a["confidence"], a["ok"], n_bins),
+        "ece_all_raw": ece(a["confidence_raw"], a["ok"], n_bins),
+        "calibration_edges": len(a["ok"]),
+        "intersection_edges": int(s.sum()),
+        "intersection_right": float(a["ok"][s].mean()) if s.any() else float("nan"),
+    }
 
 
 def write_reliability(rows: list[dict[str, Any]], path: Path, title: str, n_bins: int = ECE_BINS) -> Path:
@@ -113,10 +138,17 @@ def write_reliability(rows: list[dict[str, Any]], path: Path, title: str, n_bins
 
     a = edge_label_arrays(rows)
     s = a["type"] == "intersection"
-    return reliability_diagram({"intersection, raw": (a["confidence_raw"][s], a["ok"][s]),
-                                "intersection, calibrated": (a["confidence"][s], a["ok"][s]),
-                                "all edges, raw": (a["confidence_raw"], a["ok"]),
-                                "all edges, calibrated": (a["confidence"], a["ok"])}, path, title, n_bins)
+    return reliability_diagram(
+        {
+            "intersection, raw": (a["confidence_raw"][s], a["ok"][s]),
+            "intersection, calibrated": (a["confidence"][s], a["ok"][s]),
+            "all edges, raw": (a["confidence_raw"], a["ok"]),
+            "all edges, calibrated": (a["confidence"], a["ok"]),
+        },
+        path,
+        title,
+        n_bins,
+    )
 
 
 def figure_grid(paths: Sequence[str | Path], out: Path, columns: int = 3, width: int = 480) -> Path | None:
@@ -124,14 +156,17 @@ def figure_grid(paths: Sequence[str | Path], out: Path, columns: int = 3, width:
     import cv2
 
     tiles = [cv2.imread(str(p)) for p in paths if p]
-    tiles = [cv2.resize(t, (width, round(t.shape[0] * width / t.shape[1])), interpolation=cv2.INTER_AREA)
-             for t in tiles if t is not None]
+    tiles = [
+        cv2.resize(t, (width, round(t.shape[0] * width / t.shape[1])), interpolation=cv2.INTER_AREA)
+        for t in tiles
+        if t is not None
+    ]
     if not tiles:
         return None
     h = max(t.shape[0] for t in tiles)
     tiles = [np.pad(t, ((0, h - t.shape[0]), (0, 0), (0, 0)), constant_values=255) for t in tiles]
     tiles += [np.full_like(tiles[0], 255)] * (-len(tiles) % columns)
-    rows = [np.concatenate(tiles[i:i + columns], 1) for i in range(0, len(tiles), columns)]
+    rows = [np.concatenate(tiles[i : i + columns], 1) for i in range(0, len(tiles), columns)]
     cv2.imwrite(str(out), np.concatenate(rows, 0), [cv2.IMWRITE_PNG_COMPRESSION, 9])
     return out
 
@@ -211,8 +246,10 @@ def format_table(result: dict[str, Any], paper: bool = True) -> str:
     heads = [column_title(c, n_seg) for c in cols] + ([f"paper {a}" for a in abl_order] if paper else [])
     lines = ["| metric | " + " | ".join(heads) + " |", "| --- |" + " ---: |" * len(heads)]
     for title, key, kind in TABLE_ROWS:
-        cells = [format_value(summ[c].get(key), kind) if not (c.startswith(GT) and key.startswith("runtime")) else ""
-                 for c in cols]
+        cells = [
+            format_value(summ[c].get(key), kind) if not (c.startswith(GT) and key.startswith("runtime")) else ""
+            for c in cols
+        ]
         if kind == "ece":  # calibrated (raw)
             cells = [f"{x} ({format_value(summ[c].get(key + '_raw'), kind)})" if x else "" for x, c in zip(cells, cols)]
         if paper:
@@ -220,8 +257,9 @@ def format_table(result: dict[str, Any], paper: bool = True) -> str:
         lines.append(f"| {title} | " + " | ".join(cells) + " |")
     for stage in STAGES:
         cells = [format_value(summ[c].get("runtime_stages", {}).get(stage), "s") for c in cols]
-        lines.append(f"| &nbsp;&nbsp;{stage} (median s) | " + " | ".join(cells + [""] * (len(heads) - len(cells)))
-                     + " |")
+        lines.append(
+            f"| &nbsp;&nbsp;{stage} (median s) | " + " | ".join(cells + [""] * (len(heads) - len(cells))) + " |"
+        )
     cells = [f"{summ[c]['scans'] - summ[c]['failed']} / {summ[c]['scans']}" for c in cols]
     lines.append("| scans reconstructed / run | " + " | ".join(cells + [""] * (len(heads) - len(cells))) + " |")
     return "\n".join(lines)
@@ -229,8 +267,12 @@ def format_table(result: dict[str, Any], paper: bool = True) -> str:
 
 def format_notes(result: dict[str, Any]) -> str:
     """Plain-text lines under the table: process start, set runtime, failures."""
-    out = [(f"process start (once per set): {result['process_start_s']:.2f} s; benchmark wall time "
-            f"{result['wall_s']:.0f} s")]
+    out = [
+        (
+            f"process start (once per set): {result['process_start_s']:.2f} s; benchmark wall time "
+            f"{result['wall_s']:.0f} s"
+        )
+    ]
     for c in result["columns"]:
         s = result["summary"][c]
         if s["failed"]:

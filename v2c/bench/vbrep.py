@@ -37,8 +37,14 @@ def chamfer(vbrep: VBRep, scan: Scan, n: int = 20000, seed: int = 0, visible_onl
     cfg = MetricConfig(n_points=n, seed=seed)
     size = part_size(scan)
     G = gt_points(scan, n, seed)
-    R = reconstruction_points(vbrep, n, np.random.default_rng(seed), visible_only=visible_only,
-                              eps=cfg.visibility_eps_rel * size, max_rounds=cfg.max_draw_rounds)
+    R = reconstruction_points(
+        vbrep,
+        n,
+        np.random.default_rng(seed),
+        visible_only=visible_only,
+        eps=cfg.visibility_eps_rel * size,
+        max_rounds=cfg.max_draw_rounds,
+    )
     return chamfer_distance(R, G, size)
 
 
@@ -79,8 +85,13 @@ def _edge_points(vbrep: VBRep, step_px: float = 0.5) -> tuple[np.ndarray, np.nda
     return np.concatenate(pts), np.concatenate(eid), np.concatenate(typ)
 
 
-def edge_type_accuracy(vbrep: VBRep, scan: Scan, tol_px: float = 3.0, gt: GTEdgeSamples | None = None,
-                       gt_config: GTTypeConfig | None = None) -> dict[str, Any]:
+def edge_type_accuracy(
+    vbrep: VBRep,
+    scan: Scan,
+    tol_px: float = 3.0,
+    gt: GTEdgeSamples | None = None,
+    gt_config: GTTypeConfig | None = None,
+) -> dict[str, Any]:
     """Edge-type accuracy against the ground-truth rule (v2c.vbrep.gt_types).
 
     Every ground-truth record (a boundary pixel crack and the face it bounds) looks for the nearest predicted edge
@@ -95,8 +106,9 @@ def edge_type_accuracy(vbrep: VBRep, scan: Scan, tol_px: float = 3.0, gt: GTEdge
     pred = np.full(n, "", dtype=object)
     for gface in np.unique(gt.face):
         pf = {fid for fid, g in fmap.items() if g == gface}
-        sel_e = np.array([any(f in pf for f in vbrep.edges[k].faces) for k in eid], bool) if len(eid) else \
-            np.zeros(0, bool)
+        sel_e = (
+            np.array([any(f in pf for f in vbrep.edges[k].faces) for k in eid], bool) if len(eid) else np.zeros(0, bool)
+        )
         rec = np.flatnonzero(gt.face == gface)
         if not sel_e.any():
             continue
@@ -118,8 +130,14 @@ def edge_type_accuracy(vbrep: VBRep, scan: Scan, tol_px: float = 3.0, gt: GTEdge
     return out
 
 
-def edge_correctness(vbrep: VBRep, scan: Scan, tol_px: float = 3.0, min_share: float = 0.5,
-                     gt: GTEdgeSamples | None = None, gt_config: GTTypeConfig | None = None) -> np.ndarray:
+def edge_correctness(
+    vbrep: VBRep,
+    scan: Scan,
+    tol_px: float = 3.0,
+    min_share: float = 0.5,
+    gt: GTEdgeSamples | None = None,
+    gt_config: GTTypeConfig | None = None,
+) -> np.ndarray:
     """Per predicted edge, whether its type is right (bool array, one per ``vbrep.edges``).
 
     The matching of `edge_type_accuracy` seen from the prediction: each point of the edge's projected polyline
@@ -168,9 +186,16 @@ def evaluate(scan_dirs: list[str], segmentation: str = "oracle", ablation: str =
         scan = load_scan(d)
         v = reconstruct(scan, segmentation, ablation)
         acc = edge_type_accuracy(v, scan)
-        rows.append({"scan": str(d), "family": scan.gt.meta.get("family"), "chamfer": chamfer(v, scan),
-                     "chamfer_all": chamfer(v, scan, visible_only=False), **acc,
-                     **{f"t_{k}": float(t) for k, t in v.meta["timings"].items()}})
+        rows.append(
+            {
+                "scan": str(d),
+                "family": scan.gt.meta.get("family"),
+                "chamfer": chamfer(v, scan),
+                "chamfer_all": chamfer(v, scan, visible_only=False),
+                **acc,
+                **{f"t_{k}": float(t) for k, t in v.meta["timings"].items()},
+            }
+        )
     return rows
 
 
@@ -199,9 +224,11 @@ if __name__ == "__main__":  # python -m v2c.bench.vbrep DIR [--n 30] [--json out
     dirs = sorted(p for p in a.folder.iterdir() if (p / "camera.json").exists())[: a.n]
     rows = evaluate([str(p) for p in dirs], a.segmentation)
     for r in rows:
-        print(f"{Path(r['scan']).name} {r['family'] or '':8s} chamfer {r['chamfer']:.4f} "
-              f"edge-type acc {r['matched_accuracy']:.3f} (strict {r['accuracy']:.3f}, coverage {r['coverage']:.3f})"
-              f" {r['t_total']:.1f} s")
+        print(
+            f"{Path(r['scan']).name} {r['family'] or '':8s} chamfer {r['chamfer']:.4f} "
+            f"edge-type acc {r['matched_accuracy']:.3f} (strict {r['accuracy']:.3f}, coverage {r['coverage']:.3f})"
+            f" {r['t_total']:.1f} s"
+        )
     s = summarize(rows)
     print(json.dumps(s, indent=1))
     if a.json:

@@ -64,9 +64,15 @@ def segment_scan(scan: Scan, method: str, weights: str | Path | None = None) -> 
     return segment(scan, method, **({"weights": weights} if method == "learned" and weights else {}))
 
 
-def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations: Sequence[str],
-                  metrics: MetricConfig | None = None, step: bool = True,
-                  figure_dir: str | Path | None = None, weights: str | None = None) -> list[dict[str, Any]]:
+def evaluate_scan(
+    scan_dir: str | Path,
+    segmentations: Sequence[str],
+    ablations: Sequence[str],
+    metrics: MetricConfig | None = None,
+    step: bool = True,
+    figure_dir: str | Path | None = None,
+    weights: str | None = None,
+) -> list[dict[str, Any]]:
     """Rows (one per segmentation x ablation, plus one ``gt`` row if asked) of one scan: every metric and the
     to-step time split by stage (seconds). A failing stage gives a row with ``ok`` False and its ``error``.
     ``figure_dir``: the result figure of the first (segmentation, ablation) goes there as ``<scan>.png``;
@@ -88,8 +94,7 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
         row = {**base, "segmentation": GT, "ablation": GT}
         try:
             # the ideal VB-Rep has no edges: edge-type accuracy is left out, not 0
-            row.update(scan_metrics(vbrep_from_gt(scan), scan, replace(metrics, edge_types=False)), ok=True,
-                       error=None)
+            row.update(scan_metrics(vbrep_from_gt(scan), scan, replace(metrics, edge_types=False)), ok=True, error=None)
         except Exception as exc:  # noqa: BLE001 - one bad scan must not stop a benchmark
             row.update(ok=False, error=error_text(exc))
         rows.append(row)
@@ -113,8 +118,12 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
                     c = time.process_time()
                     vbrep = reconstruct(scan, segmentation=seg, ablation=ablation)
                     tim = dict(vbrep.meta.get("timings", {}))
-                    split = {"load": t_load, "segment": t_seg, "fit": float(tim.get("fit", math.nan)),
-                             "vbrep": float(tim.get("vbrep", math.nan))}
+                    split = {
+                        "load": t_load,
+                        "segment": t_seg,
+                        "fit": float(tim.get("fit", math.nan)),
+                        "vbrep": float(tim.get("vbrep", math.nan)),
+                    }
                     # the pipeline got a ready segmentation: its own "segment" time is ~0; ours is t_seg
                     pipeline_rest = float(tim.get("total", 0.0)) - float(tim.get("segment", 0.0))
                     vbrep.meta.setdefault("timings", {})["segment"] = t_seg
@@ -122,8 +131,12 @@ def evaluate_scan(scan_dir: str | Path, segmentations: Sequence[str], ablations:
                         from exporters import write
 
                         t = time.perf_counter()
-                        report = write(vbrep, Path(tmp) / f"{scan_dir.name}_{method}_{ablation}.step",
-                                       frame="camera", product=scan_dir.name)
+                        report = write(
+                            vbrep,
+                            Path(tmp) / f"{scan_dir.name}_{method}_{ablation}.step",
+                            frame="camera",
+                            product=scan_dir.name,
+                        )
                         split["step"] = time.perf_counter() - t
                         row["step_faces"] = report.n_faces
                         row["step_warnings"] = len(report.warnings)
@@ -188,19 +201,30 @@ def process_start_seconds(segmentations: Sequence[str], weights: str | None = No
     for m in segmentations:
         if m == "learned":
             path = repr(weights or "")
-            code.append("from v2c.segment import learned as L\n"
-                        f"p = {path} or str(L.DEFAULT_WEIGHTS)\n"
-                        "if L.weights_available(p): L._model(p)")
+            code.append(
+                "from v2c.segment import learned as L\n"
+                f"p = {path} or str(L.DEFAULT_WEIGHTS)\n"
+                "if L.weights_available(p): L._model(p)"
+            )
         elif m in ("geometric", "oracle"):
             code.append(f"import v2c.segment.{m}")
     t = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", "\n".join(code)], check=False, capture_output=True,
-                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    proc = subprocess.run(
+        [sys.executable, "-c", "\n".join(code)],
+        check=False,
+        capture_output=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
     return time.perf_counter() - t if proc.returncode == 0 else float("nan")
 
 
-def evaluate_dirs(cfg: BenchConfig, dirs: Sequence[Path], progress: bool = True,
-                  figure_dirs: Sequence[Path | None] | None = None, desc: str = "bench") -> list[dict[str, Any]]:
+def evaluate_dirs(
+    cfg: BenchConfig,
+    dirs: Sequence[Path],
+    progress: bool = True,
+    figure_dirs: Sequence[Path | None] | None = None,
+    desc: str = "bench",
+) -> list[dict[str, Any]]:
     """`evaluate_scan` of every scan folder in a process pool of ``cfg.jobs`` workers (one thread each); the rows
     in the order of ``dirs``. A scan that raises anywhere (even while loading, or a worker that dies) gives
     failed rows naming the error: it never stops the run. ``figure_dirs``: the figure folder per scan (default:
@@ -210,13 +234,14 @@ def evaluate_dirs(cfg: BenchConfig, dirs: Sequence[Path], progress: bool = True,
     weights = str(cfg.weights) if cfg.weights else None
     if figure_dirs is None:
         figure_dirs = [cfg.figure_dir] * len(dirs)
-    tasks = [(str(d), tuple(cfg.segmentations), tuple(cfg.ablations), cfg.metrics, cfg.step,
-              str(f) if f else None, weights) for d, f in zip(dirs, figure_dirs, strict=True)]
+    tasks = [
+        (str(d), tuple(cfg.segmentations), tuple(cfg.ablations), cfg.metrics, cfg.step, str(f) if f else None, weights)
+        for d, f in zip(dirs, figure_dirs, strict=True)
+    ]
     rows: list[dict[str, Any]] = []
     where = executor_of(cfg)
     # local jobs > 1: spawned processes, a clean interpreter per worker (no forked torch / OCCT state)
-    results = run_tasks(_worker, tasks, where, initializer=_worker_init,
-                        initargs=(tuple(cfg.segmentations), weights))
+    results = run_tasks(_worker, tasks, where, initializer=_worker_init, initargs=(tuple(cfg.segmentations), weights))
     if where.kind == "local" and cfg.jobs <= 1:
         _worker_init(cfg.segmentations, weights)
     bar = tqdm(total=len(tasks), unit="scan", desc=desc, disable=not progress)

@@ -15,16 +15,25 @@ from v2c.choices import ABLATIONS, DEFAULT_ABLATION, DEFAULT_SEGMENTATION, SEGME
 
 def executor_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """Add ``--executor local|ray`` and ``--ray-address`` (parameters ``executor`` and ``ray_address``)."""
-    f = click.option("--ray-address", "ray_address", default=None, metavar="auto|HOST:PORT",
-                     help="Ray cluster to run on with --executor ray: 'auto' = the one `ray start` runs on this "
-                          "machine, HOST:PORT = its head node [default: $RAY_ADDRESS, else a new local instance].")(f)
-    return click.option("--executor", type=click.Choice(["local", "ray"]), default="local", show_default=True,
-                        help="Where the per-scan tasks run: local processes, or a Ray cluster (needs "
-                             "`pip install 'v2c[ray]'`; docs/scale.md).")(f)
+    f = click.option(
+        "--ray-address",
+        "ray_address",
+        default=None,
+        metavar="auto|HOST:PORT",
+        help="Ray cluster to run on with --executor ray: 'auto' = the one `ray start` runs on this "
+        "machine, HOST:PORT = its head node [default: $RAY_ADDRESS, else a new local instance].",
+    )(f)
+    return click.option(
+        "--executor",
+        type=click.Choice(["local", "ray"]),
+        default="local",
+        show_default=True,
+        help="Where the per-scan tasks run: local processes, or a Ray cluster (needs "
+        "`pip install 'v2c[ray]'`; docs/scale.md).",
+    )(f)
 
 
-def executor_config(executor: str, ray_address: str | None, jobs: int | None = 1,
-                    jobs_given: bool = True) -> Any:
+def executor_config(executor: str, ray_address: str | None, jobs: int | None = 1, jobs_given: bool = True) -> Any:
     """The `v2c.executors.ExecutorConfig` of the options; on Ray an unset --jobs means the whole cluster.
 
     Raises click.UsageError for --ray-address without --executor ray, ClickException when Ray is missing."""
@@ -49,13 +58,22 @@ def jobs_given(ctx: click.Context, name: str = "jobs") -> bool:
 def segmentation_option(dest: str = "segmentation") -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """``--segmentation`` as every reconstructing command takes it: one list of methods, one default
     (`v2c.choices`); the value reaches the command's ``dest`` parameter."""
-    return click.option("--segmentation", dest, default=DEFAULT_SEGMENTATION, show_default=True,
-                        type=click.Choice(SEGMENTATION_METHODS),
-                        help="Where the surface instances come from (oracle needs a synthetic scan's gt/).")
+    return click.option(
+        "--segmentation",
+        dest,
+        default=DEFAULT_SEGMENTATION,
+        show_default=True,
+        type=click.Choice(SEGMENTATION_METHODS),
+        help="Where the surface instances come from (oracle needs a synthetic scan's gt/).",
+    )
 
 
 def ablation_option(f: Callable[..., Any]) -> Callable[..., Any]:
     """``--ablation``: the geometry stage's ablation of the paper's Table 2 (`v2c.choices.ABLATIONS`)."""
-    return click.option("--ablation", default=DEFAULT_ABLATION, show_default=True, type=click.Choice(ABLATIONS),
-                        help="full: shared axis frame + intersection refinement; no-axis / no-int drop one; "
-                             "fit-only both.")(f)
+    return click.option(
+        "--ablation",
+        default=DEFAULT_ABLATION,
+        show_default=True,
+        type=click.Choice(ABLATIONS),
+        help="full: shared axis frame + intersection refinement; no-axis / no-int drop one; fit-only both.",
+    )(f)

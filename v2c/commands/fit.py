@@ -34,12 +34,25 @@ def _short_params(d: dict) -> str:
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(path_type=str))
 @segmentation_option("method")
 @ablation_option
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="JSON file to write (default: SCAN/fit.json).")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="JSON file to write (default: SCAN/fit.json).",
+)
 @roi_option
 @click.option("--seed", default=0, show_default=True, help="Seed of the RANSAC sampling.")
 @click.option("--force", is_flag=True, help="Replace an existing file that v2c did not write.")
-def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi: tuple[int, int, int, int] | None, seed: int, force: bool) -> None:
+def command(
+    scan_dir: str,
+    method: str,
+    ablation: str,
+    output: Path | None,
+    roi: tuple[int, int, int, int] | None,
+    seed: int,
+    force: bool,
+) -> None:
     """Fit primitives to the scan folder SCAN: print type, axis class, parameters, inliers and RMS of each, and
     write them (camera frame, metres) as JSON."""
     from v2c.fit import FitConfig, fit_scan
@@ -59,12 +72,18 @@ def command(scan_dir: str, method: str, ablation: str, output: Path | None, roi:
 
     data = {"generator": f"{v2c_origin()} fit", **res.to_json()}  # first key: v2c knows the file as its own
     data.update({"scan": str(scan.path), "segmentation": method})
-    click.echo(f"{len(res.primitives)} primitives, part size {1000 * res.scale:.1f} mm, ablation {ablation}, "
-               f"{res.timings['total']:.2f} s")
-    click.echo("frame (rows X, Y, Z in camera): "
-               + "; ".join("(" + ", ".join(f"{x:+.3f}" for x in row) + ")" for row in res.frame))
+    click.echo(
+        f"{len(res.primitives)} primitives, part size {1000 * res.scale:.1f} mm, ablation {ablation}, "
+        f"{res.timings['total']:.2f} s"
+    )
+    click.echo(
+        "frame (rows X, Y, Z in camera): "
+        + "; ".join("(" + ", ".join(f"{x:+.3f}" for x in row) + ")" for row in res.frame)
+    )
     for p in data["primitives"]:
-        click.echo(f"  #{p['instance']:<3d} {p['type']:<8} axis {p['axis_label'] or '-':<2} "
-                   f"inliers {p['inliers']:6d}  rms {1000 * p['rms_m']:.2f} mm  {_short_params(p)}")
+        click.echo(
+            f"  #{p['instance']:<3d} {p['type']:<8} axis {p['axis_label'] or '-':<2} "
+            f"inliers {p['inliers']:6d}  rms {1000 * p['rms_m']:.2f} mm  {_short_params(p)}"
+        )
     write_text_atomic(out, json.dumps(data, indent=1))
     click.echo(f"wrote {out}")

@@ -13,25 +13,65 @@ from v2c.commands import segmentation_option
 @click.command("fixture")
 @max_pixels_option
 @click.argument("scan", type=click.Path(path_type=Path))
-@click.option("--kind", type=click.Choice(["corner", "pin", "cradle", "nest"]), required=True,
-              help="corner: L block on a convex edge; pin: locating pin in a hole; cradle: U block under a "
-                   "horizontal cylinder; nest: plate with a pocket following the visible footprint.")
-@click.option("-o", "--output", "out", type=click.Path(path_type=Path), default=None,
-              help="Output folder. Default: SCAN/fixtures (or <stem>_fixtures next to a VB-Rep JSON or STEP).")
-@click.option("--frame", type=click.Choice(["part", "camera"]), default="part", show_default=True,
-              help="part: recovered axes on X/Y/Z, origin at the bottom centre of the visible part (as to-step); "
-                   "camera: the camera frame. Millimetres either way.")
-@click.option("--min-confidence", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
-              help="Intersection edges under this confidence are never used as references.")
+@click.option(
+    "--kind",
+    type=click.Choice(["corner", "pin", "cradle", "nest"]),
+    required=True,
+    help="corner: L block on a convex edge; pin: locating pin in a hole; cradle: U block under a "
+    "horizontal cylinder; nest: plate with a pocket following the visible footprint.",
+)
+@click.option(
+    "-o",
+    "--output",
+    "out",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Output folder. Default: SCAN/fixtures (or <stem>_fixtures next to a VB-Rep JSON or STEP).",
+)
+@click.option(
+    "--frame",
+    type=click.Choice(["part", "camera"]),
+    default="part",
+    show_default=True,
+    help="part: recovered axes on X/Y/Z, origin at the bottom centre of the visible part (as to-step); "
+    "camera: the camera frame. Millimetres either way.",
+)
+@click.option(
+    "--min-confidence",
+    type=click.FloatRange(0.0, 1.0),
+    default=0.5,
+    show_default=True,
+    help="Intersection edges under this confidence are never used as references.",
+)
 @segmentation_option()
-@click.option("--clearance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
-              help="Gap between fixture and part in millimetres (default: the fixture kind's, 0.1-0.2 mm). "
-                   "Raise it to absorb reconstruction error.")
-@click.option("--part", "part", type=click.Choice(["reconstructed", "true", "none"]), default="reconstructed",
-              show_default=True, help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).")
+@click.option(
+    "--clearance",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    metavar="MM",
+    help="Gap between fixture and part in millimetres (default: the fixture kind's, 0.1-0.2 mm). "
+    "Raise it to absorb reconstruction error.",
+)
+@click.option(
+    "--part",
+    "part",
+    type=click.Choice(["reconstructed", "true", "none"]),
+    default="reconstructed",
+    show_default=True,
+    help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).",
+)
 @roi_option
-def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence: float, segmentation: str,
-            clearance: float | None, part: str, roi: tuple[int, int, int, int] | None) -> None:
+def command(
+    scan: Path,
+    kind: str,
+    out: Path | None,
+    frame: str,
+    min_confidence: float,
+    segmentation: str,
+    clearance: float | None,
+    part: str,
+    roi: tuple[int, int, int, int] | None,
+) -> None:
     """Design a fixture for SCAN (a scan folder, a VB-Rep JSON, or a STEP written by `v2c to-step`) and write
     <kind> STEP, STL and assembly STEP. A STEP input keeps its own frame.
 
@@ -51,8 +91,17 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
     if clearance is not None:
         params = dataclasses.replace(DEFAULT_PARAMS[FixtureKind(kind)], clearance=clearance)
     try:
-        res = fixture_for_scan(scan, kind, out, frame=frame, min_confidence=min_confidence,
-                               segmentation=segmentation, part=part, params=params, roi=roi)
+        res = fixture_for_scan(
+            scan,
+            kind,
+            out,
+            frame=frame,
+            min_confidence=min_confidence,
+            segmentation=segmentation,
+            part=part,
+            params=params,
+            roi=roi,
+        )
     except (ScanError, NoReferenceError, FileNotFoundError) as exc:
         raise click.ClickException(str(exc)) from None
     except ValueError as exc:
@@ -70,7 +119,9 @@ def command(scan: Path, kind: str, out: Path | None, frame: str, min_confidence:
         what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f} = probability right{extra})"
     else:
         what = f"footprint ({len(ref.outlines)} outline(s))"
-    click.echo(f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces, "
-               f"clearance {fx.params.clearance:.2f} mm")
+    click.echo(
+        f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces, "
+        f"clearance {fx.params.clearance:.2f} mm"
+    )
     for p in (res.files.step, res.files.stl, res.files.assembly):
         click.echo(f"  {p}")

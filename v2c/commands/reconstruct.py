@@ -16,13 +16,26 @@ from v2c.commands import ablation_option, segmentation_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(path_type=Path))
 @segmentation_option("method")
 @ablation_option
-@click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder for reconstruction.vbrep.json and reconstruction.png (default: SCAN).")
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Folder for reconstruction.vbrep.json and reconstruction.png (default: SCAN).",
+)
 @click.option("--no-figure", is_flag=True, help="Write only the VB-Rep JSON.")
 @click.option("--force", is_flag=True, help="Replace existing files that v2c did not write.")
 @roi_option
-def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no_figure: bool,
-            force: bool, roi: tuple[int, int, int, int] | None) -> None:
+def command(
+    scan_dir: Path,
+    method: str,
+    ablation: str,
+    out_dir: Path | None,
+    no_figure: bool,
+    force: bool,
+    roi: tuple[int, int, int, int] | None,
+) -> None:
     """Reconstruct the VB-Rep of the scan folder SCAN: write reconstruction.vbrep.json (camera frame, metres)
     and reconstruction.png (input, segmentation, VB-Rep from the camera and from a turned view)."""
     from exporters import result_figure
@@ -43,8 +56,10 @@ def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no
     except (ValueError, FileNotFoundError) as e:  # oracle without gt/, learned without weights
         raise click.ClickException(str(e) if str(scan_dir) in str(e) else f"{scan_dir}: {e}") from None
     if not vbrep.faces:  # a VB-Rep without faces is no reconstruction: say so and write nothing
-        raise click.ClickException(f"{scan_dir}: no face could be reconstructed ({len(seg.labels) - 1} surface "
-                                   f"instances segmented); nothing written")
+        raise click.ClickException(
+            f"{scan_dir}: no face could be reconstructed ({len(seg.labels) - 1} surface "
+            f"instances segmented); nothing written"
+        )
     from v2c.io_safe import OutputSet
 
     out = out_dir or scan_dir
@@ -54,8 +69,10 @@ def command(scan_dir: Path, method: str, ablation: str, out_dir: Path | None, no
         if not no_figure:
             result_figure(scan, seg.instances, vbrep, files.temp(png))
     counts = {t: len(vbrep.edges_of_type(t)) for t in ("intersection", "visibility", "silhouette", "occluded")}
-    click.echo(f"{json_path}: {len(vbrep.faces)} faces, {len(vbrep.edges)} edges "
-               f"({', '.join(f'{n} {t}' for t, n in counts.items())}), {len(vbrep.vertices)} vertices; "
-               f"{vbrep.meta['timings']['total']:.2f} s")
+    click.echo(
+        f"{json_path}: {len(vbrep.faces)} faces, {len(vbrep.edges)} edges "
+        f"({', '.join(f'{n} {t}' for t, n in counts.items())}), {len(vbrep.vertices)} vertices; "
+        f"{vbrep.meta['timings']['total']:.2f} s"
+    )
     if not no_figure:
         click.echo(f"{png}")

@@ -30,9 +30,12 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
     given = [v.strip() for v in value.split(",") if v.strip()]
     unknown = [v for v in given if v not in KNOWN_FAMILIES and v not in FAMILY_GROUPS]
     if unknown or not given:
-        raise click.BadParameter(f"unknown family {', '.join(unknown) or '(none)'}; choose from "
-                                 f"{', '.join(KNOWN_FAMILIES)} or a group {', '.join(FAMILY_GROUPS)}",
-                                 ctx=ctx, param=param)
+        raise click.BadParameter(
+            f"unknown family {', '.join(unknown) or '(none)'}; choose from "
+            f"{', '.join(KNOWN_FAMILIES)} or a group {', '.join(FAMILY_GROUPS)}",
+            ctx=ctx,
+            param=param,
+        )
     # Groups expand in place; a family named twice is drawn once (order kept: it fixes which family a draw picks).
     return tuple(dict.fromkeys(f for v in given for f in FAMILY_GROUPS.get(v, (v,))))
 
@@ -40,42 +43,109 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
 @click.command("synth")
 @click.argument("out", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--n", "n", type=click.IntRange(min=1), default=10, show_default=True, help="Number of scans.")
-@click.option("--seed", type=int, default=0, show_default=True,
-              help="Run seed; scan i depends on (seed, i) only, so a seed always gives the same files.")
-@click.option("--noise", type=click.Choice(NOISE_PROFILES), default="sensor", show_default=True,
-              help="Depth noise profile (BENCHMARK.md).")
+@click.option(
+    "--seed",
+    type=int,
+    default=0,
+    show_default=True,
+    help="Run seed; scan i depends on (seed, i) only, so a seed always gives the same files.",
+)
+@click.option(
+    "--noise",
+    type=click.Choice(NOISE_PROFILES),
+    default="sensor",
+    show_default=True,
+    help="Depth noise profile (BENCHMARK.md).",
+)
 @click.option("--size", default="640x480", show_default=True, callback=_parse_size, help="Image size WxH (pixels).")
-@click.option("--cad", type=click.Path(exists=True, path_type=Path), default=None,
-              help="Directory of STEP files (or one STEP file) added as the part family 'cad'.")
-@click.option("--families", default=None, callback=_parse_families,
-              help=f"Comma-separated part families to draw from: {', '.join(KNOWN_FAMILIES)}, or groups: "
-                   "procedural (the six above), features (the feature-based training families), train (all "
-                   "training families), leave-out (never for training: feat_hex, feat_knob, feat_block) "
-                   "[default: the procedural ones, plus cad with --cad].")
-@click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes (with --executor ray: most scans in flight, default the whole cluster).")
-@click.option("--start", type=click.IntRange(min=0), default=0, show_default=True,
-              help="Index of the first scan (extends a set: scans start..start+n-1).")
-@click.option("--png-compression", type=click.IntRange(0, 9), default=1, show_default=True,
-              help="PNG compression level (9 = smallest files, slower).")
-@click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also write a PNG with color | depth | labels of the first (up to 4) scans.")
-@click.option("--print-share", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
-              help="Share of scans whose part carries a printed (packaging-like) texture.")
-@click.option("--appearance", type=click.Choice(["plain", "random"]), default="plain", show_default=True,
-              help="random: random, dark and shiny materials, printed art inside faces, clutter beside the part, "
-                   "textured backgrounds, lights and exposure (docs/synth.md); labels and part depth unchanged.")
-@click.option("--framing", type=click.Choice(["fill", "extent"]), default=None,
-              help="fill: the bounding sphere fills 0.3-0.7 of the image (as before); extent: the part's extent is "
-                   "30-70 % of the smaller image side (SCAN_FORMAT.md).  [default: extent with --appearance "
-                   "random, else fill]")
+@click.option(
+    "--cad",
+    type=click.Path(exists=True, path_type=Path),
+    default=None,
+    help="Directory of STEP files (or one STEP file) added as the part family 'cad'.",
+)
+@click.option(
+    "--families",
+    default=None,
+    callback=_parse_families,
+    help=f"Comma-separated part families to draw from: {', '.join(KNOWN_FAMILIES)}, or groups: "
+    "procedural (the six above), features (the feature-based training families), train (all "
+    "training families), leave-out (never for training: feat_hex, feat_knob, feat_block) "
+    "[default: the procedural ones, plus cad with --cad].",
+)
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Worker processes (with --executor ray: most scans in flight, default the whole cluster).",
+)
+@click.option(
+    "--start",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Index of the first scan (extends a set: scans start..start+n-1).",
+)
+@click.option(
+    "--png-compression",
+    type=click.IntRange(0, 9),
+    default=1,
+    show_default=True,
+    help="PNG compression level (9 = smallest files, slower).",
+)
+@click.option(
+    "--preview",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write a PNG with color | depth | labels of the first (up to 4) scans.",
+)
+@click.option(
+    "--print-share",
+    type=click.FloatRange(0.0, 1.0),
+    default=0.0,
+    show_default=True,
+    help="Share of scans whose part carries a printed (packaging-like) texture.",
+)
+@click.option(
+    "--appearance",
+    type=click.Choice(["plain", "random"]),
+    default="plain",
+    show_default=True,
+    help="random: random, dark and shiny materials, printed art inside faces, clutter beside the part, "
+    "textured backgrounds, lights and exposure (docs/synth.md); labels and part depth unchanged.",
+)
+@click.option(
+    "--framing",
+    type=click.Choice(["fill", "extent"]),
+    default=None,
+    help="fill: the bounding sphere fills 0.3-0.7 of the image (as before); extent: the part's extent is "
+    "30-70 % of the smaller image side (SCAN_FORMAT.md).  [default: extent with --appearance "
+    "random, else fill]",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @executor_options
 @click.pass_context
-def command(ctx: click.Context, out: Path, n: int, seed: int, noise: str, size: tuple[int, int], cad: Path | None,
-            families: tuple[str, ...] | None, jobs: int, start: int, png_compression: int, preview: Path | None,
-            print_share: float, appearance: str, framing: str | None, quiet: bool, executor: str,
-            ray_address: str | None) -> None:
+def command(
+    ctx: click.Context,
+    out: Path,
+    n: int,
+    seed: int,
+    noise: str,
+    size: tuple[int, int],
+    cad: Path | None,
+    families: tuple[str, ...] | None,
+    jobs: int,
+    start: int,
+    png_compression: int,
+    preview: Path | None,
+    print_share: float,
+    appearance: str,
+    framing: str | None,
+    quiet: bool,
+    executor: str,
+    ray_address: str | None,
+) -> None:
     """Render N synthetic scans of random CAD parts into OUT/scan_XXXXX (color, depth, camera, mask, gt/).
 
     Each scan is written to a temporary folder and renamed into place. With --executor ray every scan is one Ray
@@ -95,9 +165,17 @@ def command(ctx: click.Context, out: Path, n: int, seed: int, noise: str, size: 
         families = PROCEDURAL + (("cad",) if cad_files else ())
     if "cad" in families and not cad_files:
         raise click.ClickException("family 'cad' needs --cad DIR")
-    cfg = SynthConfig(width=size[0], height=size[1], noise=noise, families=families, cad_files=cad_files,
-                      png_compression=png_compression, scene=SceneConfig(print_share=print_share),
-                      appearance=appearance, framing=framing or ("extent" if appearance == "random" else "fill"))
+    cfg = SynthConfig(
+        width=size[0],
+        height=size[1],
+        noise=noise,
+        families=families,
+        cad_files=cad_files,
+        png_compression=png_compression,
+        scene=SceneConfig(print_share=print_share),
+        appearance=appearance,
+        framing=framing or ("extent" if appearance == "random" else "fill"),
+    )
     where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
     try:
         folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start, executor=where)

@@ -26,32 +26,61 @@ def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
     return out
 
 
-def _to_step_task(scan: Path, out: Path | None, batch: bool, frame: str, segmentation: str, extras: bool,
-                  roi: tuple[int, int, int, int] | None, force: bool = False) -> ScanExport:
+def _to_step_task(
+    scan: Path,
+    out: Path | None,
+    batch: bool,
+    frame: str,
+    segmentation: str,
+    extras: bool,
+    roi: tuple[int, int, int, int] | None,
+    force: bool = False,
+) -> ScanExport:
     """One scan's task (here, in a pool or on a Ray worker): reads SCAN, writes its outputs, returns the small
     `v2c.api.ScanExport` record."""
     from v2c.api import scan_to_step
 
-    return scan_to_step(scan, _output_for(scan, out, batch), frame=frame, segmentation=segmentation,
-                        extras=extras, roi=roi, force=force)
+    return scan_to_step(
+        scan, _output_for(scan, out, batch), frame=frame, segmentation=segmentation, extras=extras, roi=roi, force=force
+    )
 
 
 @click.command("to-step")
 @max_pixels_option
 @click.argument("scans", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--output", "out", type=click.Path(path_type=str), default=None,
-              help="STEP file (one scan), or folder: an existing one, one ending in / (made when missing), or "
-                   "several scans; <scan name>.step each. Default: SCAN/reconstruction.step.")
+@click.option(
+    "-o",
+    "--output",
+    "out",
+    type=click.Path(path_type=str),
+    default=None,
+    help="STEP file (one scan), or folder: an existing one, one ending in / (made when missing), or "
+    "several scans; <scan name>.step each. Default: SCAN/reconstruction.step.",
+)
 @click.option("--force", is_flag=True, help="Replace existing files that v2c did not write.")
-@click.option("--frame", type=click.Choice(["part", "camera"]), default="part", show_default=True,
-              help="part: recovered axes on X/Y/Z, origin at the bottom centre of the visible part; "
-                   "camera: the camera frame. Millimetres either way.")
+@click.option(
+    "--frame",
+    type=click.Choice(["part", "camera"]),
+    default="part",
+    show_default=True,
+    help="part: recovered axes on X/Y/Z, origin at the bottom centre of the visible part; "
+    "camera: the camera frame. Millimetres either way.",
+)
 @segmentation_option()
 @click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
 @roi_option
 @executor_options
-def command(scans: tuple[Path, ...], out: str | None, frame: str, segmentation: str, no_extras: bool,
-            roi: tuple[int, int, int, int] | None, force: bool, executor: str, ray_address: str | None) -> None:
+def command(
+    scans: tuple[Path, ...],
+    out: str | None,
+    frame: str,
+    segmentation: str,
+    no_extras: bool,
+    roi: tuple[int, int, int, int] | None,
+    force: bool,
+    executor: str,
+    ray_address: str | None,
+) -> None:
     """Reconstruct each SCAN folder (or every scan folder inside a folder) and write its STEP.
 
     One failing scan does not stop the others; the exit status is non-zero if any failed. With --executor ray
@@ -76,10 +105,20 @@ def command(scans: tuple[Path, ...], out: str | None, frame: str, segmentation: 
         names = [p.name for p in paths]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise click.ClickException(f"scans with the same folder name ({', '.join(dup)}) would write "
-                                       f"the same {out}/<name>.step; give them separately")
-    task = partial(_to_step_task, out=out, batch=into_folder, frame=frame, segmentation=segmentation,
-                   extras=not no_extras, roi=roi, force=force)
+            raise click.ClickException(
+                f"scans with the same folder name ({', '.join(dup)}) would write "
+                f"the same {out}/<name>.step; give them separately"
+            )
+    task = partial(
+        _to_step_task,
+        out=out,
+        batch=into_folder,
+        frame=frame,
+        segmentation=segmentation,
+        extras=not no_extras,
+        roi=roi,
+        force=force,
+    )
     try:
         results = run_tasks(task, paths, where)
     except ExecutorError as e:
@@ -104,8 +143,10 @@ def command(scans: tuple[Path, ...], out: str | None, frame: str, segmentation: 
         done.append(res)
         r = res.report
         outline = f", {len(r.fallback_faces)} bounded by their mesh outline" if r.fallback_faces else ""
-        tqdm.write(f"{res.step}: {r.n_faces} faces{outline}, {r.n_edges} edges ({len(r.free_edges)} free), "
-                   f"written in {r.seconds:.2f} s")
+        tqdm.write(
+            f"{res.step}: {r.n_faces} faces{outline}, {r.n_edges} edges ({len(r.free_edges)} free), "
+            f"written in {r.seconds:.2f} s"
+        )
         if res.readback is not None:
             tqdm.write(f"  {res.readback.summary()}")
         for w in res.warnings:

@@ -26,8 +26,13 @@ from v2c.primitives.directions import nearest_rotation, tangent_basis, unit
 AXIS_NAMES = ("X", "Y", "Z")
 
 
-def init_frame(axes: Sequence[np.ndarray], labels: Sequence[int], weights: Sequence[float], view_dir: np.ndarray,
-               outlier_deg: float) -> np.ndarray:
+def init_frame(
+    axes: Sequence[np.ndarray],
+    labels: Sequence[int],
+    weights: Sequence[float],
+    view_dir: np.ndarray,
+    outlier_deg: float,
+) -> np.ndarray:
     """Robust initial frame R (rows X, Y, Z, camera frame) from RANSAC axes with class labels 0/1/2.
 
     Per class: the axis agreeing (within ``outlier_deg``, sign ignored) with the largest total weight is the seed;
@@ -72,8 +77,9 @@ def init_frame(axes: Sequence[np.ndarray], labels: Sequence[int], weights: Seque
     return orient_frame(r, view_dir)
 
 
-def frame_from_axes(axes: Sequence[np.ndarray], weights: Sequence[float], view_dir: np.ndarray,
-                    tol_deg: float) -> np.ndarray | None:
+def frame_from_axes(
+    axes: Sequence[np.ndarray], weights: Sequence[float], view_dir: np.ndarray, tol_deg: float
+) -> np.ndarray | None:
     """A frame from unlabelled axes (weak labels: the geometric segmenter): the weighted-consensus direction, then
     the consensus direction among the axes orthogonal to it (within ``tol_deg``), completed by their cross product.
     Naming follows SCAN_FORMAT.md's conventions as far as a camera can tell: Z is the direction closest to the
@@ -114,9 +120,17 @@ def orient_frame(r: np.ndarray, view_dir: np.ndarray) -> np.ndarray:
     return r
 
 
-def align_fit(terms: Sequence[Term], frame0: np.ndarray, scale: float, loss: str, loss_scale: float,
-              max_nfev: int, ftol: float = 1e-8, jacobian: str = "analytic",
-              lsmr_tol: float = 1e-5) -> tuple[np.ndarray, list[Primitive]]:
+def align_fit(
+    terms: Sequence[Term],
+    frame0: np.ndarray,
+    scale: float,
+    loss: str,
+    loss_scale: float,
+    max_nfev: int,
+    ftol: float = 1e-8,
+    jacobian: str = "analytic",
+    lsmr_tol: float = 1e-5,
+) -> tuple[np.ndarray, list[Primitive]]:
     """Minimise E_recon over R and every primitive jointly (see module docstring). Returns (frame, primitives).
 
     jacobian: "analytic" (each primitive's `local_jacobian` and `rotation_gradient`, chained through the axis
@@ -142,11 +156,23 @@ def align_fit(terms: Sequence[Term], frame0: np.ndarray, scale: float, loss: str
         return j.toarray() if dense else j
 
     if jacobian == "fd":
-        jac_kw: dict = {"jac_sparsity": sparsity([(c, layout.columns(i)) for i, c in enumerate(counts)],
-                                                 layout.size)}
+        jac_kw: dict = {"jac_sparsity": sparsity([(c, layout.columns(i)) for i, c in enumerate(counts)], layout.size)}
     else:
-        jac_kw = {"jac": jac, "tr_solver": "exact"} if dense else {
-            "jac": jac, "tr_solver": "lsmr", "tr_options": {"atol": lsmr_tol, "btol": lsmr_tol}}
-    res = least_squares(fun, np.zeros(layout.size), method="trf", loss=loss, f_scale=loss_scale, x_scale="jac",
-                        max_nfev=max_nfev, ftol=ftol, xtol=ftol, **jac_kw)
+        jac_kw = (
+            {"jac": jac, "tr_solver": "exact"}
+            if dense
+            else {"jac": jac, "tr_solver": "lsmr", "tr_options": {"atol": lsmr_tol, "btol": lsmr_tol}}
+        )
+    res = least_squares(
+        fun,
+        np.zeros(layout.size),
+        method="trf",
+        loss=loss,
+        f_scale=loss_scale,
+        x_scale="jac",
+        max_nfev=max_nfev,
+        ftol=ftol,
+        xtol=ftol,
+        **jac_kw,
+    )
     return layout.primitives(res.x)

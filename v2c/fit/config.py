@@ -18,44 +18,44 @@ class FitConfig(RansacConfig):
     fit and the intersection refinement)."""
 
     # -- instances and labels -------------------------------------------------------------------------------------
-    min_instance_px: int = 30           # instances with fewer valid pixels are not fitted (pixels)
-    label_score_min: float = 0.6        # below this label confidence every type is tried ([0, 1]); the geometric
-                                        # segmenter's 0.5 counts as weak (docs/geometry.md)
+    min_instance_px: int = 30  # instances with fewer valid pixels are not fitted (pixels)
+    label_score_min: float = 0.6  # below this label confidence every type is tried ([0, 1]); the geometric
+    # segmenter's 0.5 counts as weak (docs/geometry.md)
     # -- model selection against near-degenerate primitives (geometry.selection.supported, docs/geometry.md) -----
     support_label_certain: float = 0.0  # a curved label at least this probable is kept even where its patch
-                                        # cannot show the curvature ([0, 1]); below it, the support and GRIC test
-                                        # can turn a labelled curved instance into a plane. 0: every label is kept
-                                        # (only the type search of weak labels is tested). Chosen on validation
-                                        # (40 scans, seed 9000, learned, full): 0.999 gave type 97.3 %, axis 96.5 %,
-                                        # alignment 0.0419; 0.9: 97.5 / 96.7 / 0.0389; 0: 99.2 / 98.2 / 0.0274
-                                        # (before the rule: 98.8 / 97.6 / 0.0366). It demoted true cylinders the
-                                        # learned segmenter labels at 0.6-0.9; on real frames 0.999 also set the
-                                        # tuna can's radius right (43.1 mm for 42.8; 36.5 mm at 0)
-    seed: int = 0                       # seed of all random sampling
+    # cannot show the curvature ([0, 1]); below it, the support and GRIC test
+    # can turn a labelled curved instance into a plane. 0: every label is kept
+    # (only the type search of weak labels is tested). Chosen on validation
+    # (40 scans, seed 9000, learned, full): 0.999 gave type 97.3 %, axis 96.5 %,
+    # alignment 0.0419; 0.9: 97.5 / 96.7 / 0.0389; 0: 99.2 / 98.2 / 0.0274
+    # (before the rule: 98.8 / 97.6 / 0.0366). It demoted true cylinders the
+    # learned segmenter labels at 0.6-0.9; on real frames 0.999 also set the
+    # tuna can's radius right (43.1 mm for 42.8; 36.5 mm at 0)
+    seed: int = 0  # seed of all random sampling
 
     # -- global aligned fit (shared frame R) ----------------------------------------------------------------------
-    align_points: int = 400             # points per primitive in the joint least squares (count)
-    frame_outlier_deg: float = 8.0      # frame init: labelled axes further than this from their class consensus
-                                        # are ignored (degrees)
-    label_keep_ratio: float = 0.9       # an axis label stands if the axis-constrained fit keeps this share of the
-                                        # free fit's inliers (fraction)
-    snap_deg: float = 3.0               # type-searched (weak label) axes within this of a frame axis join the frame
-    recon_weighting: str = "sample"      # "all": a subsampled point counts for the inliers it stands for, so E_recon
-                                        # is the paper's sum over all inliers; "sample": every point counts once
+    align_points: int = 400  # points per primitive in the joint least squares (count)
+    frame_outlier_deg: float = 8.0  # frame init: labelled axes further than this from their class consensus
+    # are ignored (degrees)
+    label_keep_ratio: float = 0.9  # an axis label stands if the axis-constrained fit keeps this share of the
+    # free fit's inliers (fraction)
+    snap_deg: float = 3.0  # type-searched (weak label) axes within this of a frame axis join the frame
+    recon_weighting: str = "sample"  # "all": a subsampled point counts for the inliers it stands for, so E_recon
+    # is the paper's sum over all inliers; "sample": every point counts once
     # (loss, loss_scale, max_nfev, ftol of the joint least squares: RansacConfig's)
-    jacobian: str = "analytic"          # "analytic" or "fd" (sparse finite differences) for the joint fits
-    lsmr_tol: float = 1e-5              # relative tolerance of the iterative (lsmr) trust-region steps
+    jacobian: str = "analytic"  # "analytic" or "fd" (sparse finite differences) for the joint fits
+    lsmr_tol: float = 1e-5  # relative tolerance of the iterative (lsmr) trust-region steps
 
     # -- iterative intersection refinement ------------------------------------------------------------------------
-    d_int: float = 0.05                 # vertex-to-surface distance for membership in I_i (part-size units), paper
-    d_int_second_factor: float = 0.2    # the second round uses d_int * this (paper: d_int / 5)
-    w_r: float = 1.0                    # weight of E_recon against E_int (paper: 0.1; see docs/geometry.md)
-    membership: str = "current"         # second round's I_i measured against "fitted" (before any intersection
-                                        # pull) or "current" surfaces (see intersect.py)
-    parallel_deg: float = 10.0          # planes with normals within this angle are never forced to meet (degrees)
-    coaxial_tol: float = 0.02           # nor are cylinders with parallel axes whose axis lines are closer than this
-                                        # (part-size units)
-    simplify_px: float = 1.0            # Douglas-Peucker tolerance of the edge graph (pixels)
-    edge_sample_px: float = 8.0         # intersection points are sampled along edges at this spacing (pixels)
-    depth_window_px: int = 2            # half window for the depth-map initialisation of vertex depths (pixels)
-    depth_search: float = 0.1           # vertex depth search range around the depth-map value (part-size units)
+    d_int: float = 0.05  # vertex-to-surface distance for membership in I_i (part-size units), paper
+    d_int_second_factor: float = 0.2  # the second round uses d_int * this (paper: d_int / 5)
+    w_r: float = 1.0  # weight of E_recon against E_int (paper: 0.1; see docs/geometry.md)
+    membership: str = "current"  # second round's I_i measured against "fitted" (before any intersection
+    # pull) or "current" surfaces (see intersect.py)
+    parallel_deg: float = 10.0  # planes with normals within this angle are never forced to meet (degrees)
+    coaxial_tol: float = 0.02  # nor are cylinders with parallel axes whose axis lines are closer than this
+    # (part-size units)
+    simplify_px: float = 1.0  # Douglas-Peucker tolerance of the edge graph (pixels)
+    edge_sample_px: float = 8.0  # intersection points are sampled along edges at this spacing (pixels)
+    depth_window_px: int = 2  # half window for the depth-map initialisation of vertex depths (pixels)
+    depth_search: float = 0.1  # vertex depth search range around the depth-map value (part-size units)

@@ -48,8 +48,9 @@ def _circle_axis(x: np.ndarray, a: np.ndarray) -> np.ndarray:
     return c2[0] * t1 + c2[1] * t2
 
 
-def start_with_axis(ptype: str, x: np.ndarray, n: np.ndarray, a: np.ndarray,
-                    by_points: bool = False) -> Primitive | None:
+def start_with_axis(
+    ptype: str, x: np.ndarray, n: np.ndarray, a: np.ndarray, by_points: bool = False
+) -> Primitive | None:
     """Closed-form primitive of ``ptype`` with axis direction ``a`` (unit, camera frame) for points/normals.
 
     by_points: place the axis line of a cylinder or torus by a circle fit of the projected points instead of the
@@ -81,15 +82,18 @@ def start_with_axis(ptype: str, x: np.ndarray, n: np.ndarray, a: np.ndarray,
     raise ValueError(ptype)
 
 
-def fit_with_axis(prim: Primitive, x: np.ndarray, n: np.ndarray, a: np.ndarray, scale: float,
-                  config: FitConfig) -> Primitive:
+def fit_with_axis(
+    prim: Primitive, x: np.ndarray, n: np.ndarray, a: np.ndarray, scale: float, config: FitConfig
+) -> Primitive:
     """``prim``'s type refitted to points ``x`` / normals ``n`` with its axis fixed to ``a`` (sign kept from
     the start where the type defines it). Spheres are returned unchanged."""
     if isinstance(prim, Sphere):
         return prim
     best, cost = prim, np.inf
-    starts = [start_with_axis(prim.type, x, n, a, by_points)
-              for by_points in ((False, True) if prim.type in ("cylinder", "torus", "cone") else (False,))]
+    starts = [
+        start_with_axis(prim.type, x, n, a, by_points)
+        for by_points in ((False, True) if prim.type in ("cylinder", "torus", "cone") else (False,))
+    ]
     if isinstance(prim, (Torus, Cone)):  # the free fit turned onto the axis: the closed-form cross-section circle
         # of a noisy arc can be far off (a 11 mm tube started at 27 mm), and so can a cone's half angle from the
         # normals of a small patch (64 degrees for a 5-degree taper), while the free fit's are good

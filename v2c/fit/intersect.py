@@ -46,8 +46,9 @@ class Lifted:
 def boundary_points(graph: EdgeGraph, term_of: dict[int, int], K: np.ndarray, spacing_px: float) -> Lifted:
     """The graph's vertices and samples along its part-part edges, with candidate terms (fitted instances)."""
     uv = [graph.vertices.reshape(-1, 2)]
-    cands: list[tuple[int, ...]] = [tuple(sorted(term_of[i] for i in vi if i in term_of))
-                                    for vi in graph.vertex_instances]
+    cands: list[tuple[int, ...]] = [
+        tuple(sorted(term_of[i] for i in vi if i in term_of)) for vi in graph.vertex_instances
+    ]
     vert = [np.arange(len(graph.vertices))]
     for e in graph.edges:
         if 0 in e.instances or not all(i in term_of for i in e.instances):
@@ -82,8 +83,9 @@ def _distances(prims: Sequence[Primitive], pts: np.ndarray, pi: np.ndarray, tj: 
     return out
 
 
-def init_depths(lifted: Lifted, prims: Sequence[Primitive], depth: np.ndarray, valid: np.ndarray, scale: float,
-                config: FitConfig) -> np.ndarray:
+def init_depths(
+    lifted: Lifted, prims: Sequence[Primitive], depth: np.ndarray, valid: np.ndarray, scale: float, config: FitConfig
+) -> np.ndarray:
     """z-depths (L,) metres: the median valid depth within depth_window_px of each point, then a 1D search within
     +-depth_search * scale for the depth closest to all candidate surfaces (truncated at d_int)."""
     if len(lifted.uv) == 0:
@@ -137,8 +139,14 @@ def never_meeting(prims: Sequence[Primitive], parallel_deg: float, coaxial_tol: 
     return out
 
 
-def memberships(lifted: Lifted, prims: Sequence[Primitive], scale: float, d_thresh: float,
-                parallel_deg: float, coaxial_tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def memberships(
+    lifted: Lifted,
+    prims: Sequence[Primitive],
+    scale: float,
+    d_thresh: float,
+    parallel_deg: float,
+    coaxial_tol: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
     """(point, term) pairs of I_i: candidates within d_thresh * scale of the lifted point, with parallel-plane
     rejection (of two surfaces in I_i that `never_meeting` flags, the farther is dropped). Only points with at
     least two members are kept (one surface alone gives no intersection). coaxial_tol: metres."""
@@ -166,17 +174,29 @@ def memberships(lifted: Lifted, prims: Sequence[Primitive], scale: float, d_thre
     return pi[ok], tj[ok]
 
 
-def refine_intersections(terms: Sequence[Term], frame0: np.ndarray, lifted: Lifted, scale: float,
-                         config: FitConfig, d_thresh: float, member_prims: Sequence[Primitive] | None = None,
-                         ) -> tuple[np.ndarray, list[Primitive], np.ndarray, int]:
+def refine_intersections(
+    terms: Sequence[Term],
+    frame0: np.ndarray,
+    lifted: Lifted,
+    scale: float,
+    config: FitConfig,
+    d_thresh: float,
+    member_prims: Sequence[Primitive] | None = None,
+) -> tuple[np.ndarray, list[Primitive], np.ndarray, int]:
     """One round: I_i at d_thresh (part-size units), then minimise E_int + w_r E_recon over s, the primitives and R.
 
     member_prims: the surfaces I_i is measured against (default: the terms' own, i.e. the current ones).
     Returns (frame, primitives, s, number of (point, surface) intersection residuals)."""
     layout = Layout(terms, frame0)
     _, prims0 = layout.primitives(np.zeros(layout.size))
-    pi, tj = memberships(lifted, prims0 if member_prims is None else member_prims, scale, d_thresh,
-                         config.parallel_deg, config.coaxial_tol * scale)
+    pi, tj = memberships(
+        lifted,
+        prims0 if member_prims is None else member_prims,
+        scale,
+        d_thresh,
+        config.parallel_deg,
+        config.coaxial_tol * scale,
+    )
     if len(pi) == 0:
         return frame0, prims0, lifted.s.copy(), 0
     pts_used = np.unique(pi)
@@ -223,8 +243,18 @@ def refine_intersections(terms: Sequence[Term], frame0: np.ndarray, lifted: Lift
         jac_kw: dict = {"jac_sparsity": sparsity(blocks, n0 + ns)}
     else:
         jac_kw = {"jac": jac, "tr_solver": "lsmr", "tr_options": {"atol": config.lsmr_tol, "btol": config.lsmr_tol}}
-    res = least_squares(fun, x0, method="trf", loss=config.loss, f_scale=config.loss_scale, x_scale="jac",
-                        max_nfev=config.max_nfev, ftol=config.ftol, xtol=config.ftol, **jac_kw)
+    res = least_squares(
+        fun,
+        x0,
+        method="trf",
+        loss=config.loss,
+        f_scale=config.loss_scale,
+        x_scale="jac",
+        max_nfev=config.max_nfev,
+        ftol=config.ftol,
+        xtol=config.ftol,
+        **jac_kw,
+    )
     frame, prims = layout.primitives(res.x[:n0])
     s = lifted.s.copy()
     s[pts_used] = res.x[n0:]

@@ -51,8 +51,20 @@ class FitResult:
         """JSON-ready summary: primitives in primitives.json form plus axis label, inlier count and RMS."""
         prims = []
         for i, p in sorted(self.primitives.items()):
-            prims.append({"instance": int(i), **p.to_dict(), "axis_label": self.axis_labels.get(i),
-                          "inliers": len(self.inliers.get(i, ())), "rms_m": float(self.residuals.get(i, 0.0))})
-        return {"ablation": self.ablation, "scale_m": float(self.scale), "frame": np.asarray(self.frame).tolist(),
-                "primitives": prims, "vertex_depths": np.asarray(self.vertex_depths).tolist(),
-                "timings_s": {k: float(v) for k, v in self.timings.items()}}
+            prims.append(
+                {
+                    "instance": int(i),
+                    **p.to_dict(),
+                    "axis_label": self.axis_labels.get(i),
+                    "inliers": len(self.inliers.get(i, ())),
+                    "rms_m": float(self.residuals.get(i, 0.0)),
+                }
+            )
+        return {
+            "ablation": self.ablation,
+            "scale_m": float(self.scale),
+            "frame": np.asarray(self.frame).tolist(),
+            "primitives": prims,
+            "vertex_depths": np.asarray(self.vertex_depths).tolist(),
+            "timings_s": {k: float(v) for k, v in self.timings.items()},
+        }

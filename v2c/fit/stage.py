@@ -70,9 +70,15 @@ def _canonical(prim: Primitive, x: np.ndarray) -> Primitive:
     return prim
 
 
-def _assign_axes(fits: dict[int, Primitive], want: dict[int, int | None | str], weights: dict[int, float],
-                 ipts: dict[int, InstancePoints], view_dir: np.ndarray, scale: float,
-                 config: FitConfig) -> tuple[np.ndarray, dict[int, int | None], dict[int, Primitive]]:
+def _assign_axes(
+    fits: dict[int, Primitive],
+    want: dict[int, int | None | str],
+    weights: dict[int, float],
+    ipts: dict[int, InstancePoints],
+    view_dir: np.ndarray,
+    scale: float,
+    config: FitConfig,
+) -> tuple[np.ndarray, dict[int, int | None], dict[int, Primitive]]:
     """Initial frame from the labelled axes, then each instance's final axis index (0/1/2, -1 free, None none).
 
     A label is tested, not trusted blindly: the instance is refitted with its axis held on the frame axis
@@ -82,12 +88,18 @@ def _assign_axes(fits: dict[int, Primitive], want: dict[int, int | None | str], 
     the frame axis nearest their own when it is within snap_deg. Returns (frame, axis indices, primitives, with
     the constrained refits in place)."""
     lab_ids = [i for i in fits if isinstance(want[i], int) and want[i] >= 0]
-    frame = init_frame([fits[i].axis_vector for i in lab_ids], [want[i] for i in lab_ids],
-                       [weights[i] for i in lab_ids], view_dir, config.frame_outlier_deg)
+    frame = init_frame(
+        [fits[i].axis_vector for i in lab_ids],
+        [want[i] for i in lab_ids],
+        [weights[i] for i in lab_ids],
+        view_dir,
+        config.frame_outlier_deg,
+    )
     if not lab_ids:  # no confident axis label: a frame from the type-searched axes themselves
         weak = [i for i in fits if want[i] == "?" and fits[i].axis_vector is not None]
-        found = frame_from_axes([fits[i].axis_vector for i in weak], [weights[i] for i in weak], view_dir,
-                                config.snap_deg)
+        found = frame_from_axes(
+            [fits[i].axis_vector for i in weak], [weights[i] for i in weak], view_dir, config.snap_deg
+        )
         frame = frame if found is None else found
     eps = config.d_inlier * scale
     out: dict[int, int | None] = {}
@@ -135,8 +147,7 @@ class _Fits:
     scores: dict[int, float] = field(default_factory=dict)  # label confidence of each instance ([0, 1])
 
 
-def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale: float,
-                      config: FitConfig) -> _Fits:
+def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale: float, config: FitConfig) -> _Fits:
     """Step 1: RANSAC per instance, typed by its label (or by the type search for weak labels)."""
     out = _Fits()
     for i, ip in ipts.items():  # loop over instances
@@ -156,8 +167,15 @@ def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale:
     return out
 
 
-def _planes_where_unsupported(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[int, int | None],
-                              frame: np.ndarray, use_frame: bool, scale: float, config: FitConfig) -> None:
+def _planes_where_unsupported(
+    fits: _Fits,
+    ipts: dict[int, InstancePoints],
+    axis_idx: dict[int, int | None],
+    frame: np.ndarray,
+    use_frame: bool,
+    scale: float,
+    config: FitConfig,
+) -> None:
     """Curved labels their patch does not support (`geometry.selection.supported`: a radius beyond
     support_extent_ratio patch extents, or a sagitta under the sensor noise), or whose fit does not beat a plane's
     by GRIC with the sensor's noise model (`geometry.selection.select_type`: a loose RANSAC inlier band lets a bent
@@ -172,8 +190,11 @@ def _planes_where_unsupported(fits: _Fits, ipts: dict[int, InstancePoints], axis
         f = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 3]))
         if f is None:
             continue
-        if supported(p, ip.points[fits.inliers[i]], config) and select_type(
-                {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config) != "plane":
+        if (
+            supported(p, ip.points[fits.inliers[i]], config)
+            and select_type({"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config)
+            != "plane"
+        ):
             continue
         q = _canonical(f.primitive, ip.points[f.inliers] if f.inliers.any() else ip.points)
         axis_idx[i] = -1
@@ -182,25 +203,35 @@ def _planes_where_unsupported(fits: _Fits, ipts: dict[int, InstancePoints], axis
         if cos[k] > np.cos(np.deg2rad(config.snap_deg)):
             axis_idx[i] = k
             if use_frame:
-                q = _canonical(fit_with_axis(q, ip.points, ip.normals, frame[k] * (np.sign(q.axis_vector @ frame[k])
-                                                                                    or 1.0), scale, config),
-                               ip.points)
+                q = _canonical(
+                    fit_with_axis(
+                        q, ip.points, ip.normals, frame[k] * (np.sign(q.axis_vector @ frame[k]) or 1.0), scale, config
+                    ),
+                    ip.points,
+                )
         fits.prims[i] = q
         fits.inliers[i] = _inliers(q, ip, scale, config)
         fits.want[i] = "?"
         fits.searched.append(i)
 
 
-def _joint_terms(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[int, int | None],
-                 frame: np.ndarray, use_frame: bool, config: FitConfig) -> tuple[list[int], list[Term]]:
+def _joint_terms(
+    fits: _Fits,
+    ipts: dict[int, InstancePoints],
+    axis_idx: dict[int, int | None],
+    frame: np.ndarray,
+    use_frame: bool,
+    config: FitConfig,
+) -> tuple[list[int], list[Term]]:
     """Step 2 set-up: one Term per fitted instance (subsampled inliers; frame axis or free axis)."""
     order = []
     terms: list[Term] = []
     for i in sorted(fits.prims):
         if not fits.prims[i].is_finite() or not np.all(np.isfinite(ipts[i].points)):
             # a degenerate fit (zero-length normal, NaN) would poison the joint solve for every face: drop it
-            log.warning("instance %d: its %s fit is degenerate (%r); the face is dropped", i,
-                        fits.prims[i].type, fits.prims[i])
+            log.warning(
+                "instance %d: its %s fit is degenerate (%r); the face is dropped", i, fits.prims[i].type, fits.prims[i]
+            )
             continue
         order.append(i)
         x = ipts[i].points[fits.inliers[i]]
@@ -218,17 +249,22 @@ def _joint_terms(fits: _Fits, ipts: dict[int, InstancePoints], axis_idx: dict[in
     return order, terms
 
 
-def _keep_plausible(new: list[Primitive], old: list[Primitive], terms: list[Term], frame: np.ndarray,
-                    scale: float, config: FitConfig) -> list[Primitive]:
+def _keep_plausible(
+    new: list[Primitive], old: list[Primitive], terms: list[Term], frame: np.ndarray, scale: float, config: FitConfig
+) -> list[Primitive]:
     """A joint solve has no bounds: a primitive it drove out of range (cone half angle beyond 90 degrees or a cone
     wider than max_radius at its points, negative radius, a torus outside its data-derived radius bounds
     `geometry.ransac.torus_limits`, a curvature its points no longer support, `geometry.selection.supported`) goes
     back to its value before the solve, its axis re-set from the current frame when aligned."""
     out = []
     for p, q, tm in zip(new, old, terms, strict=True):
-        if (p.is_finite() and plausible(p, scale, config) and torus_ok(p, tm.points, config, 1.2)
-                and cone_ok(p, tm.points, scale, config)
-                and (supported(p, tm.points, config) or not supported(q, tm.points, config))):
+        if (
+            p.is_finite()
+            and plausible(p, scale, config)
+            and torus_ok(p, tm.points, config, 1.2)
+            and cone_ok(p, tm.points, scale, config)
+            and (supported(p, tm.points, config) or not supported(q, tm.points, config))
+        ):
             out.append(p)
         elif tm.axis_index is not None and tm.axis_index >= 0:
             out.append(q.from_local(np.zeros(q.local_size), tm.axis_sign * frame[tm.axis_index]))
@@ -292,8 +328,17 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
     prims = [tm.prim for tm in terms]
     if ablation != "fit-only":
-        frame, prims = align_fit(terms, frame, scale, config.loss, config.loss_scale, config.max_nfev, config.ftol,
-                                 config.jacobian, config.lsmr_tol)
+        frame, prims = align_fit(
+            terms,
+            frame,
+            scale,
+            config.loss,
+            config.loss_scale,
+            config.max_nfev,
+            config.ftol,
+            config.jacobian,
+            config.lsmr_tol,
+        )
         prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
     timings["align"] = perf_counter() - t
     t = perf_counter()
@@ -332,6 +377,17 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     vd[lifted.vertex[vsel]] = lifted.s[vsel]
     timings["total"] = perf_counter() - t_start
     timings["total_cpu"] = process_time() - cpu_start  # CPU seconds of this process (all its threads)
-    return FitResult(primitives=out_prims, frame=frame, axis_labels=labels, inliers=inliers, residuals=resid,
-                     vertex_depths=vd, graph=graph, scale=scale, timings=timings, types_searched=fits.searched,
-                     n_intersections=n_int, ablation=ablation)
+    return FitResult(
+        primitives=out_prims,
+        frame=frame,
+        axis_labels=labels,
+        inliers=inliers,
+        residuals=resid,
+        vertex_depths=vd,
+        graph=graph,
+        scale=scale,
+        timings=timings,
+        types_searched=fits.searched,
+        n_intersections=n_int,
+        ablation=ablation,
+    )

@@ -16,5 +16,17 @@ from v2c.geometry.points import InstancePoints, estimate_part_size, instance_poi
 from v2c.geometry.ransac import RansacFit, circle_2d, inlier_mask, ransac_fit, refine_primitive
 from v2c.geometry.selection import fit_instance, select_type, supported
 
-__all__ = ["InstancePoints", "RansacConfig", "RansacFit", "circle_2d", "estimate_part_size", "fit_instance",
-           "inlier_mask", "instance_points", "ransac_fit", "refine_primitive", "select_type", "supported"]
+__all__ = [
+    "InstancePoints",
+    "RansacConfig",
+    "RansacFit",
+    "circle_2d",
+    "estimate_part_size",
+    "fit_instance",
+    "inlier_mask",
+    "instance_points",
+    "ransac_fit",
+    "refine_primitive",
+    "select_type",
+    "supported",
+]

@@ -38,8 +38,9 @@ def estimate_part_size(points: np.ndarray, trim: float = 0.01) -> float:
     return float(max(np.max(hi - lo), 1e-6))
 
 
-def instance_points(points: np.ndarray, valid: np.ndarray, instances: np.ndarray, ids: np.ndarray,
-                    config: RansacConfig) -> dict[int, InstancePoints]:
+def instance_points(
+    points: np.ndarray, valid: np.ndarray, instances: np.ndarray, ids: np.ndarray, config: RansacConfig
+) -> dict[int, InstancePoints]:
     """Points and depth-gradient normals of each instance in ``ids``.
 
     points: (H, W, 3) camera-frame point map (metres); valid: (H, W) bool pixels to use; instances: (H, W) ids.

@@ -89,8 +89,7 @@ def _hyp_spheres(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float) -> 
     return [Sphere(c[k], r[k]) for k in np.flatnonzero(ok)]
 
 
-def _hyp_cylinders(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float,
-                   min_sin: float) -> list[Primitive]:
+def _hyp_cylinders(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, min_sin: float) -> list[Primitive]:
     p1, p2, n1, n2 = x[idx[:, 0]], x[idx[:, 1]], n[idx[:, 0]], n[idx[:, 1]]
     ax = np.cross(n1, n2)
     ok = np.linalg.norm(ax, axis=1) > min_sin  # near-parallel normals give no axis
@@ -106,8 +105,9 @@ def _hyp_cylinders(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float,
     return [Cylinder(c[k], a[k], r[k]) for k in np.flatnonzero(ok)]
 
 
-def _hyp_cones(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, amin: float,
-               min_sin: float) -> list[Primitive]:
+def _hyp_cones(
+    x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, amin: float, min_sin: float
+) -> list[Primitive]:
     p, nn = x[idx], n[idx]  # (K, 3, 3)
     rhs = np.sum(p * nn, axis=2)
     det = np.linalg.det(nn)
@@ -124,8 +124,9 @@ def _hyp_cones(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, amin:
     return [Cone(apex[k], ax[k], ang[k]) for k in np.flatnonzero(ok)]
 
 
-def _hyp_tori(x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, extent: float,
-              config: RansacConfig) -> list[Primitive]:
+def _hyp_tori(
+    x: np.ndarray, n: np.ndarray, idx: np.ndarray, rmax: float, extent: float, config: RansacConfig
+) -> list[Primitive]:
     radii = extent * np.geomspace(*config.torus_minor_range, config.torus_radius_steps)
     max_off = np.sin(np.deg2rad(config.torus_normal_axis_deg))
     out: list[Primitive] = []
@@ -229,8 +230,12 @@ def torus_ok(prim: Primitive, x: np.ndarray, config: RansacConfig, slack: float 
     if not isinstance(prim, Torus) or len(x) < 3:
         return True
     r_lo, r_hi, big_lo, big_hi = torus_limits(prim, x, config)
-    return (r_lo / slack <= prim.minor_radius <= r_hi * slack and big_lo / slack <= prim.radius <= big_hi * slack
-            and prim.radius > config.torus_min_ratio * prim.minor_radius / slack and prim.radius > 0)
+    return (
+        r_lo / slack <= prim.minor_radius <= r_hi * slack
+        and big_lo / slack <= prim.radius <= big_hi * slack
+        and prim.radius > config.torus_min_ratio * prim.minor_radius / slack
+        and prim.radius > 0
+    )
 
 
 def cone_ok(prim: Primitive, x: np.ndarray, scale: float, config: RansacConfig) -> bool:
@@ -268,8 +273,9 @@ def clamp_torus(prim: Torus, x: np.ndarray, config: RansacConfig) -> Torus:
     return Torus(prim.origin, prim.axis, big, r)
 
 
-def hypotheses(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: RansacConfig,
-               rng: np.random.Generator) -> list[Primitive]:
+def hypotheses(
+    ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: RansacConfig, rng: np.random.Generator
+) -> list[Primitive]:
     """Candidate primitives of type ``ptype`` from minimal samples of points ``x`` / normals ``n`` (N, 3)."""
     k = config.ransac_hypotheses
     size = {"plane": 1, "sphere": 2, "cylinder": 2, "cone": 3, "torus": 3}[ptype]
@@ -291,8 +297,9 @@ def hypotheses(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: R
     return _hyp_tori(x, n, idx, rmax, extent, config) + [t for t in rings if plausible(t, scale, config)]
 
 
-def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: RansacConfig,
-                     axis: np.ndarray | None = None) -> Primitive:
+def refine_primitive(
+    prim: Primitive, x: np.ndarray, scale: float, config: RansacConfig, axis: np.ndarray | None = None
+) -> Primitive:
     """Robust least-squares refinement of ``prim`` on points ``x`` (N, 3): point-to-surface distances in part-size
     units, 'trf' with the soft-l1 loss (robust to the few outliers left after the inlier test) and the analytic
     Jacobian of `residuals.Layout`. The axis moves by two tangent coefficients (supplement's reparameterisation)
@@ -331,9 +338,19 @@ def refine_primitive(prim: Primitive, x: np.ndarray, scale: float, config: Ransa
             j = np.vstack([j, jp])
         return j
 
-    res = least_squares(fun, np.zeros(layout.size), jac=jac, method="trf", loss=config.loss,
-                        f_scale=config.loss_scale, x_scale="jac", max_nfev=config.max_nfev, ftol=config.ftol,
-                        xtol=config.ftol, bounds=(lb, ub))
+    res = least_squares(
+        fun,
+        np.zeros(layout.size),
+        jac=jac,
+        method="trf",
+        loss=config.loss,
+        f_scale=config.loss_scale,
+        x_scale="jac",
+        max_nfev=config.max_nfev,
+        ftol=config.ftol,
+        xtol=config.ftol,
+        bounds=(lb, ub),
+    )
     out = layout.primitives(res.x)[1][0]
     # a free torus axis moves the (rho, h) half-plane its bounds were measured in: re-check with some slack
     return out if plausible(out, scale, config) and torus_ok(out, x, config, 1.2) else prim
@@ -355,8 +372,9 @@ def plausible(prim: Primitive, scale: float, config: RansacConfig) -> bool:
     return True
 
 
-def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: RansacConfig,
-               rng: np.random.Generator) -> RansacFit | None:
+def ransac_fit(
+    ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: RansacConfig, rng: np.random.Generator
+) -> RansacFit | None:
     """Best primitive of type ``ptype`` for points ``x`` and normals ``n`` (N, 3, camera frame, metres).
 
     Inliers lie within d_inlier * scale and normal_angle_deg; the best hypothesis (most inliers on a random subset
@@ -378,11 +396,14 @@ def ransac_fit(ptype: str, x: np.ndarray, n: np.ndarray, scale: float, config: R
         ok = [h for h in hyps if torus_ok(h, xs[pre], config)]
         hyps = ok or [clamp_torus(h, xs[pre], config) for h in hyps]  # type: ignore[arg-type]
     if ptype == "torus":  # MSAC: the truncated squared distance, with the refinement's prior (module docstring)
+
         def score(h: Primitive, xq: np.ndarray, nq: np.ndarray) -> float:
             return -torus_msac(h, xq, scale, config)  # type: ignore[arg-type]
     else:
+
         def score(h: Primitive, xq: np.ndarray, nq: np.ndarray) -> float:
             return float(np.count_nonzero(inlier_mask(h, xq, nq, eps, cos_min)))
+
     counts = np.array([score(h, xs[pre], ns[pre]) for h in hyps])
     top = np.argsort(-counts, kind="stable")[: config.ransac_keep]
     counts = np.array([score(hyps[k], xs, ns) for k in top])

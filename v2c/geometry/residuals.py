@@ -74,8 +74,8 @@ class Layout:
         elif t.axis_index >= 0:
             axis = t.axis_sign * frame[t.axis_index]
         else:
-            axis = perturb_direction(t.prim.axis_vector, x[o + nl: o + nl + 2], self._bases[i])
-        return t.prim.from_local(x[o: o + nl], axis)
+            axis = perturb_direction(t.prim.axis_vector, x[o + nl : o + nl + 2], self._bases[i])
+        return t.prim.from_local(x[o : o + nl], axis)
 
     def columns(self, i: int) -> np.ndarray:
         """Parameter indices term ``i`` depends on."""
@@ -120,8 +120,11 @@ def left_jacobian(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + (1 - np.cos(th)) / th**2 * k + (th - np.sin(th)) / th**3 * (k @ k)
 
 
-def assemble(blocks: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], shape: tuple[int, int],
-             extra: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> csr_matrix:
+def assemble(
+    blocks: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    shape: tuple[int, int],
+    extra: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> csr_matrix:
     """Sparse matrix from dense blocks (row indices (m,), column indices (c,), values (m, c)) plus optional
     single entries ``extra`` = (rows (k,), cols (k,), values (k,))."""
     rows = [np.repeat(r, len(c)) for r, c, _ in blocks]
@@ -136,8 +139,9 @@ def assemble(blocks: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], shape:
     return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
 
 
-def recon_jacobian_blocks(layout: Layout, x: np.ndarray, prims: Sequence[Primitive], scale: float,
-                          row0: int = 0, factor: float = 1.0) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+def recon_jacobian_blocks(
+    layout: Layout, x: np.ndarray, prims: Sequence[Primitive], scale: float, row0: int = 0, factor: float = 1.0
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Jacobian blocks of `recon_residuals` (times ``factor``), rows starting at ``row0``."""
     out = []
     r = row0
@@ -160,8 +164,9 @@ def sparsity(blocks: Sequence[tuple[int, np.ndarray]], ncols: int) -> csr_matrix
         r += c
     if not rows:
         return csr_matrix((0, ncols), dtype=np.int8)
-    return csr_matrix((np.ones(sum(len(x) for x in rows), np.int8), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(r, ncols))
+    return csr_matrix(
+        (np.ones(sum(len(x) for x in rows), np.int8), (np.concatenate(rows), np.concatenate(cols))), shape=(r, ncols)
+    )
 
 
 def recon_residuals(prims: Sequence[Primitive], terms: Sequence[Term], scale: float) -> np.ndarray:

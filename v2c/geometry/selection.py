@@ -92,8 +92,9 @@ def supported(prim: Primitive, x: np.ndarray, config: RansacConfig) -> bool:
     return sag >= config.support_sagitta_sigma * sigma or turn >= np.deg2rad(config.support_sagitta_turn_deg)
 
 
-def fit_instance(x: np.ndarray, n: np.ndarray, ptype: str | None, scale: float, config: RansacConfig,
-                 rng: np.random.Generator) -> tuple[str, RansacFit | None]:
+def fit_instance(
+    x: np.ndarray, n: np.ndarray, ptype: str | None, scale: float, config: RansacConfig, rng: np.random.Generator
+) -> tuple[str, RansacFit | None]:
     """RANSAC with a known type, or (ptype None: missing/weak label) every type, chosen by `select_type`.
     The type search drops curved candidates their patch does not support (`supported`); a labelled type is
     checked later, once the part frame's axis has had its say (`v2c.fit.stage`, `supported` again).
@@ -123,9 +124,10 @@ def select_type(fits: dict[str, RansacFit], x: np.ndarray, scale: float, config:
         return max(fits, key=lambda t: fits[t].score - config.complexity_penalty * (TYPE_DOF[t] - TYPE_DOF["plane"]))
     d = {t: np.abs(f.primitive.signed_distance(x)) for t, f in fits.items()}
     # per point: the sensor model's depth sigma, at least the best candidate's robust residual level
-    sigma = np.maximum(max(1.4826 * min(float(np.median(v)) for v in d.values()), config.gric_min_sigma * scale),
-                       noise_sigma(x, config))
+    sigma = np.maximum(
+        max(1.4826 * min(float(np.median(v)) for v in d.values()), config.gric_min_sigma * scale),
+        noise_sigma(x, config),
+    )
     lam = np.log(3 * max(len(x), 1))
-    gric = {t: float(np.sum(np.minimum((v / sigma) ** 2, config.gric_trunc))) + lam * TYPE_DOF[t]
-            for t, v in d.items()}
+    gric = {t: float(np.sum(np.minimum((v / sigma) ** 2, config.gric_trunc))) + lam * TYPE_DOF[t] for t, v in d.items()}
     return min(fits, key=lambda t: (gric[t], TYPE_DOF[t]))

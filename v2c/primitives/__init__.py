@@ -17,7 +17,11 @@ from v2c.primitives.torus import Torus
 
 #: primitives.json type name -> class.
 PRIMITIVE_CLASSES: dict[str, type[Primitive]] = {
-    "plane": Plane, "cylinder": Cylinder, "cone": Cone, "sphere": Sphere, "torus": Torus,
+    "plane": Plane,
+    "cylinder": Cylinder,
+    "cone": Cone,
+    "sphere": Sphere,
+    "torus": Torus,
 }
 
 

@@ -77,13 +77,18 @@ class Torus(Primitive):
         w, _, _, e = self._tube_offset(x)
         nw = np.linalg.norm(w, axis=1, keepdims=True)
         n = np.where(nw > 1e-15, w / np.where(nw > 1e-15, nw, 1.0), e)
-        return np.stack([-(n @ t1), -(n @ t2), -(n @ ref.axis_vector), -np.sum(n * e, axis=1),
-                         np.full(len(n), -1.0)], axis=1)
+        return np.stack(
+            [-(n @ t1), -(n @ t2), -(n @ ref.axis_vector), -np.sum(n * e, axis=1), np.full(len(n), -1.0)], axis=1
+        )
 
     def params(self) -> dict[str, Any]:
         """primitives.json ``params``: origin (centre), axis, radius, minor_radius."""
-        return {"origin": self.origin.tolist(), "axis": self.axis.tolist(), "radius": self.radius,
-                "minor_radius": self.minor_radius}
+        return {
+            "origin": self.origin.tolist(),
+            "axis": self.axis.tolist(),
+            "radius": self.radius,
+            "minor_radius": self.minor_radius,
+        }
 
     @classmethod
     def from_params(cls, p: dict[str, Any]) -> Torus:

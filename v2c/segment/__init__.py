@@ -27,8 +27,14 @@ REFINING = ("learned",)
 DEFAULT_METHOD = "learned"
 
 
-def segment(scan: Scan, method: str = DEFAULT_METHOD, *, refine: RefineConfig | None = None,
-            ransac: RansacConfig | None = None, **kwargs: Any) -> Segmentation:
+def segment(
+    scan: Scan,
+    method: str = DEFAULT_METHOD,
+    *,
+    refine: RefineConfig | None = None,
+    ransac: RansacConfig | None = None,
+    **kwargs: Any,
+) -> Segmentation:
     """Segment ``scan`` with the named method ("learned", "geometric", "oracle").
 
     refine: the geometric check of the instances (`v2c.segment.refine.RefineConfig`); ransac: the instance points,

@@ -77,8 +77,8 @@ def estimate_normals(depth: np.ndarray, K: np.ndarray, cfg: FeatureConfig = Feat
     sm = cv2.GaussianBlur(pts * valid[..., None], (0, 0), s) / np.maximum(wsum, 1e-6)[..., None]
     k = cfg.diff_step_px
     pad = np.pad(sm, ((k, k), (k, k), (0, 0)), mode="edge")
-    du = pad[k:-k, 2 * k:] - pad[k:-k, : -2 * k]
-    dv = pad[2 * k:, k:-k] - pad[: -2 * k, k:-k]
+    du = pad[k:-k, 2 * k :] - pad[k:-k, : -2 * k]
+    dv = pad[2 * k :, k:-k] - pad[: -2 * k, k:-k]
     n = -np.cross(du, dv)
     norm = np.linalg.norm(n, axis=2, keepdims=True)
     n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-12), 0.0)
@@ -89,8 +89,9 @@ def estimate_normals(depth: np.ndarray, K: np.ndarray, cfg: FeatureConfig = Feat
     return n.astype(np.float32)
 
 
-def estimate_ground(depth: np.ndarray, K: np.ndarray, mask: np.ndarray | None = None,
-                    cfg: FeatureConfig = FeatureConfig()) -> Ground | None:
+def estimate_ground(
+    depth: np.ndarray, K: np.ndarray, mask: np.ndarray | None = None, cfg: FeatureConfig = FeatureConfig()
+) -> Ground | None:
     """RANSAC the ground plane from the depth (pixels of ``mask`` = part are excluded). None if not found.
 
     Among planes whose normal lies within ``ground_max_tilt_deg`` of the camera's up (-y), the one with the most
@@ -136,8 +137,7 @@ def estimate_ground(depth: np.ndarray, K: np.ndarray, mask: np.ndarray | None = 
     return Ground(up=up.astype(np.float64), offset=offset, share=float(inl.mean()))
 
 
-def gravity_frame(ground: Ground | None, K: np.ndarray, mask: np.ndarray | None, shape: tuple[int, int]
-                  ) -> np.ndarray:
+def gravity_frame(ground: Ground | None, K: np.ndarray, mask: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
     """(3, 3) rows (forward, left, up) in the camera frame.
 
     up: the ground normal (camera -y without ground); forward: the ray to the mask centroid (image centre without
@@ -159,8 +159,13 @@ def gravity_frame(ground: Ground | None, K: np.ndarray, mask: np.ndarray | None,
     return np.stack([fwd, left, up])
 
 
-def compute_features(color: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np.ndarray | None = None,
-                     cfg: FeatureConfig = FeatureConfig()) -> np.ndarray:
+def compute_features(
+    color: np.ndarray,
+    depth: np.ndarray,
+    K: np.ndarray,
+    mask: np.ndarray | None = None,
+    cfg: FeatureConfig = FeatureConfig(),
+) -> np.ndarray:
     """(NUM_INPUTS, H, W) float32 network input of one scan (see the module docstring for the channels).
 
     color: (H, W, 3) uint8 RGB; depth: (H, W) metres, 0 = none; K: (3, 3) pixels; mask: optional (H, W) bool
@@ -190,7 +195,7 @@ def depth_edges(depth: np.ndarray, gain: float) -> np.ndarray:
     pad = np.pad(depth, 1, mode="edge")
     jump = np.zeros_like(depth)
     for dv, du in ((0, 1), (2, 1), (1, 0), (1, 2)):
-        nb = pad[dv:dv + depth.shape[0], du:du + depth.shape[1]]
+        nb = pad[dv : dv + depth.shape[0], du : du + depth.shape[1]]
         both = (nb > 0) & (depth > 0)
         jump = np.maximum(jump, np.where(both, np.abs(nb - depth), 0.0))
     rel = jump / np.maximum(depth, 1e-3)
@@ -244,8 +249,9 @@ def find_scans(root: str | Path) -> list[Path]:
     return sorted(out)
 
 
-def build_cache(scans: list[Path], cache_dir: str | Path, cfg: FeatureConfig = FeatureConfig(),
-                log_every: int = 200) -> Path:
+def build_cache(
+    scans: list[Path], cache_dir: str | Path, cfg: FeatureConfig = FeatureConfig(), log_every: int = 200
+) -> Path:
     """Write features (uint8), labels and boundaries of ``scans`` to ``cache_dir`` (x.u8, y.u8, b.u8, index.json).
 
     Idempotent: an existing complete cache with the same scan list is reused.
@@ -260,8 +266,11 @@ def build_cache(scans: list[Path], cache_dir: str | Path, cfg: FeatureConfig = F
     cache_dir.mkdir(parents=True, exist_ok=True)
     entries = []
     off = 0
-    with open(cache_dir / "x.u8", "wb") as fx, open(cache_dir / "y.u8", "wb") as fy, \
-            open(cache_dir / "b.u8", "wb") as fb:
+    with (
+        open(cache_dir / "x.u8", "wb") as fx,
+        open(cache_dir / "y.u8", "wb") as fy,
+        open(cache_dir / "b.u8", "wb") as fb,
+    ):
         for i, p in enumerate(scans):
             scan = load_scan(p)
             assert scan.gt is not None
@@ -298,11 +307,12 @@ class CachedScans:
         """Quantised features (C, H, W) uint8, labels (H, W) uint8 and boundaries (H, W) uint8 of scan i."""
         e = self.entries[i]
         h, w, o = e["h"], e["w"], e["offset"]
-        x = self.x[o * NUM_INPUTS:(o + h * w) * NUM_INPUTS].reshape(NUM_INPUTS, h, w)
-        return x, self.y[o:o + h * w].reshape(h, w), self.b[o:o + h * w].reshape(h, w)
+        x = self.x[o * NUM_INPUTS : (o + h * w) * NUM_INPUTS].reshape(NUM_INPUTS, h, w)
+        return x, self.y[o : o + h * w].reshape(h, w), self.b[o : o + h * w].reshape(h, w)
 
-    def crop(self, i: int, size: int, rng: np.random.Generator, flip: bool, part_share: float = 0.75
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def crop(
+        self, i: int, size: int, rng: np.random.Generator, flip: bool, part_share: float = 0.75
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A random ``size`` x ``size`` crop of scan i (padded with ignore if smaller), optionally mirrored.
 
         A horizontal mirror keeps every label valid (types, and view-corrected axis classes since mirroring keeps
@@ -327,9 +337,9 @@ class CachedScans:
         ys = np.full((size, size), 255, np.uint8)
         bs = np.zeros((size, size), np.uint8)
         ch, cw = min(size, h), min(size, w)
-        xs[:, :ch, :cw] = x[:, v0:v0 + ch, u0:u0 + cw]
-        ys[:ch, :cw] = y[v0:v0 + ch, u0:u0 + cw]
-        bs[:ch, :cw] = b[v0:v0 + ch, u0:u0 + cw]
+        xs[:, :ch, :cw] = x[:, v0 : v0 + ch, u0 : u0 + cw]
+        ys[:ch, :cw] = y[v0 : v0 + ch, u0 : u0 + cw]
+        bs[:ch, :cw] = b[v0 : v0 + ch, u0 : u0 + cw]
         if flip:
             xs = xs[:, :, ::-1].copy()
             c = MIRROR_SIGN_CHANNEL  # q(-n) = 256 - q(n)

@@ -113,8 +113,9 @@ def _score(p: np.ndarray, n: np.ndarray, kind: str, hyp: tuple, tol: np.ndarray,
     return (d < tol[None]) & (ang > cos_t)
 
 
-def _local_samples(vv: np.ndarray, uu: np.ndarray, rest: np.ndarray, k: int, m: int, radius: int,
-                   rng: np.random.Generator) -> np.ndarray:
+def _local_samples(
+    vv: np.ndarray, uu: np.ndarray, rest: np.ndarray, k: int, m: int, radius: int, rng: np.random.Generator
+) -> np.ndarray:
     """(K', m) indices into the pixel list (vv, uu): a random seed pixel and m - 1 pixels within ``radius`` pixels
     of it that are still in ``rest`` (efficient-RANSAC style local sampling). Rows with a miss are dropped."""
     h, w = rest.shape
@@ -133,9 +134,17 @@ def _local_samples(vv: np.ndarray, uu: np.ndarray, rest: np.ndarray, k: int, m: 
     return idx[ok]
 
 
-def _best_hypothesis(vv: np.ndarray, uu: np.ndarray, rest: np.ndarray, P: np.ndarray, N: np.ndarray,
-                     tol_img: np.ndarray, sample: np.ndarray, cfg: GeometricConfig, rng: np.random.Generator
-                     ) -> tuple[str, tuple, int]:
+def _best_hypothesis(
+    vv: np.ndarray,
+    uu: np.ndarray,
+    rest: np.ndarray,
+    P: np.ndarray,
+    N: np.ndarray,
+    tol_img: np.ndarray,
+    sample: np.ndarray,
+    cfg: GeometricConfig,
+    rng: np.random.Generator,
+) -> tuple[str, tuple, int]:
     """Best (kind, params, inlier count on the sample) among plane, cylinder and sphere hypotheses."""
     cos_t = np.cos(np.deg2rad(cfg.inlier_angle_deg))
     allp, alln = P[vv, uu], N[vv, uu]
@@ -164,7 +173,7 @@ def _best_hypothesis(vv: np.ndarray, uu: np.ndarray, rest: np.ndarray, P: np.nda
         j = int(np.argmax(cnt))
         val = cnt[j] * (cfg.plane_bonus if kind == "plane" else 1.0)
         if val > best[2]:
-            best = (kind, tuple(h[j:j + 1] for h in hyp), val, int(cnt[j]))
+            best = (kind, tuple(h[j : j + 1] for h in hyp), val, int(cnt[j]))
     return best[0], best[1], best[3]
 
 
@@ -176,8 +185,14 @@ def _largest_component(mask: np.ndarray) -> np.ndarray:
     return cc == j
 
 
-def _peel_region(region: np.ndarray, P: np.ndarray, N: np.ndarray, tol_img: np.ndarray, cfg: GeometricConfig,
-                 rng: np.random.Generator) -> list[tuple[np.ndarray, str]]:
+def _peel_region(
+    region: np.ndarray,
+    P: np.ndarray,
+    N: np.ndarray,
+    tol_img: np.ndarray,
+    cfg: GeometricConfig,
+    rng: np.random.Generator,
+) -> list[tuple[np.ndarray, str]]:
     """(mask, kind) of the primitives peeled off one region (image-sized bool masks), largest inlier sets first."""
     out = []
     rest = region & (np.linalg.norm(N, axis=2) > 0.5)

@@ -143,8 +143,9 @@ def _mean_prob_of(ids: np.ndarray, label_of_id: np.ndarray, probs: np.ndarray) -
     return np.bincount(flat, weights=own, minlength=n) / np.maximum(np.bincount(flat, minlength=n), 1)
 
 
-def _merge_open(inst: np.ndarray, core: np.ndarray, labels: np.ndarray, probs: np.ndarray | None,
-                cfg: InstanceConfig) -> np.ndarray:
+def _merge_open(
+    inst: np.ndarray, core: np.ndarray, labels: np.ndarray, probs: np.ndarray | None, cfg: InstanceConfig
+) -> np.ndarray:
     """Union instances whose shared border is mostly open (both sides core pixels); with ``merge_same_type``,
     only instances whose majority labels are of one primitive type or of which one is unsure (``merge_sure_prob``,
     probs: (18, H, W) or None)."""
@@ -152,8 +153,10 @@ def _merge_open(inst: np.ndarray, core: np.ndarray, labels: np.ndarray, probs: n
     if n < 2:
         return inst
     keys, opens = [], []
-    for a, b, ca, cb in ((inst[:, :-1], inst[:, 1:], core[:, :-1], core[:, 1:]),
-                         (inst[:-1, :], inst[1:, :], core[:-1, :], core[1:, :])):
+    for a, b, ca, cb in (
+        (inst[:, :-1], inst[:, 1:], core[:, :-1], core[:, 1:]),
+        (inst[:-1, :], inst[1:, :], core[:-1, :], core[1:, :]),
+    ):
         m = (a > 0) & (b > 0) & (a != b)
         lo, hi = np.minimum(a[m], b[m]).astype(np.int64), np.maximum(a[m], b[m]).astype(np.int64)
         keys.append(lo * (n + 1) + hi)
@@ -228,8 +231,9 @@ def _markers(labels: np.ndarray, seeds: np.ndarray, split_px: int) -> np.ndarray
     return inst.astype(np.int32)
 
 
-def _band_markers(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs: np.ndarray | None,
-                  cfg: InstanceConfig) -> np.ndarray:
+def _band_markers(
+    inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs: np.ndarray | None, cfg: InstanceConfig
+) -> np.ndarray:
     """(H, W) int32 instances, numbered above ``inst``'s markers (0 elsewhere), of the faces the boundary band
     covers whole, which the flooding would hand to their neighbours: 4-connected components of one label among
     the part pixels no marker holds, of at least ``band_marker_px`` pixels, that touch no marker of their own label
@@ -242,8 +246,12 @@ def _band_markers(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs:
     area = np.bincount(band.ravel(), minlength=n + 1)
     lab_band, lab_inst = _majority_label(band, labels), _majority_label(inst, labels)  # one label per region
     same = np.zeros(n + 1, bool)  # band component touches a marker of its own label
-    for a, b in ((band[:, :-1], inst[:, 1:]), (band[:, 1:], inst[:, :-1]),
-                 (band[:-1, :], inst[1:, :]), (band[1:, :], inst[:-1, :])):
+    for a, b in (
+        (band[:, :-1], inst[:, 1:]),
+        (band[:, 1:], inst[:, :-1]),
+        (band[:-1, :], inst[1:, :]),
+        (band[1:, :], inst[:-1, :]),
+    ):
         m = (a > 0) & (b > 0)
         ids = a[m]
         same[ids[lab_band[ids] == lab_inst[b[m]]]] = True
@@ -254,8 +262,14 @@ def _band_markers(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs:
     return np.where(keep[band], band + int(inst.max()), 0).astype(np.int32)
 
 
-def _band_cores(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs: np.ndarray | None,
-                unmeasured: np.ndarray, cfg: InstanceConfig) -> np.ndarray:
+def _band_cores(
+    inst: np.ndarray,
+    labels: np.ndarray,
+    part: np.ndarray,
+    probs: np.ndarray | None,
+    unmeasured: np.ndarray,
+    cfg: InstanceConfig,
+) -> np.ndarray:
     """``inst`` with new markers (numbered above its own) where the part pixels no marker holds are, with one label,
     thicker than 2 x ``band_core_px`` + 1 pixels: the cores (pixels whose disk of that radius holds one band
     component) of at least ``band_core_min_px`` pixels, a mean probability of their label of at least
@@ -272,8 +286,9 @@ def _band_cores(inst: np.ndarray, labels: np.ndarray, part: np.ndarray, probs: n
     ok = np.ones(n + 1, bool)
     if probs is not None and cfg.band_marker_prob > 0:
         ok &= _mean_prob_of(cores, _majority_label(cores, labels), probs) >= cfg.band_marker_prob
-    ok &= np.bincount(cores.ravel(), weights=unmeasured.ravel(), minlength=n + 1) \
-        >= cfg.band_core_unmeasured * np.bincount(cores.ravel(), minlength=n + 1)
+    ok &= np.bincount(
+        cores.ravel(), weights=unmeasured.ravel(), minlength=n + 1
+    ) >= cfg.band_core_unmeasured * np.bincount(cores.ravel(), minlength=n + 1)
     ok[0] = False
     cores = np.where(ok[cores], cores, 0)
     return np.where(cores > 0, cores + int(inst.max()), inst).astype(np.int32)
@@ -295,8 +310,7 @@ def _flood(inst: np.ndarray, part: np.ndarray, ev: np.ndarray, levels: tuple[flo
     return out
 
 
-def label_instances(inst: np.ndarray, labels: np.ndarray, probs: np.ndarray | None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def label_instances(inst: np.ndarray, labels: np.ndarray, probs: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """(labels (N+1,) uint8, scores (N+1,) float32) of instances 1..N (index 0 = background: label 0, score 0).
 
     probs: (18, H, W) class probabilities or None (then majority label and its pixel share).
@@ -308,8 +322,9 @@ def label_instances(inst: np.ndarray, labels: np.ndarray, probs: np.ndarray | No
     area = np.bincount(idx, minlength=n + 1).astype(np.float64)
     if probs is not None:
         p = probs.reshape(probs.shape[0], -1)[:, sel].astype(np.float64)
-        mean = np.stack([np.bincount(idx, weights=p[c], minlength=n + 1) for c in range(NUM_CLASSES)]
-                        ).astype(np.float64)
+        mean = np.stack([np.bincount(idx, weights=p[c], minlength=n + 1) for c in range(NUM_CLASSES)]).astype(
+            np.float64
+        )
         mean /= np.maximum(area, 1)[None]
         mean[BACKGROUND] = 0.0
         mean /= np.maximum(mean.sum(axis=0, keepdims=True), 1e-12)
@@ -327,8 +342,14 @@ def label_instances(inst: np.ndarray, labels: np.ndarray, probs: np.ndarray | No
     return lab.astype(np.uint8), score.astype(np.float32)
 
 
-def _instances(labels: np.ndarray, part: np.ndarray, ev: np.ndarray, probs: np.ndarray | None, cfg: InstanceConfig,
-               unmeasured: np.ndarray | None = None) -> np.ndarray:
+def _instances(
+    labels: np.ndarray,
+    part: np.ndarray,
+    ev: np.ndarray,
+    probs: np.ndarray | None,
+    cfg: InstanceConfig,
+    unmeasured: np.ndarray | None = None,
+) -> np.ndarray:
     """Steps 1-4 of the module docstring: (H, W) int32 instance ids (not yet renumbered)."""
     core = part & (ev <= cfg.boundary_threshold)
     seeds = core & (ev < cfg.seed_threshold) if cfg.seed_threshold < cfg.boundary_threshold else core
@@ -350,10 +371,16 @@ def _instances(labels: np.ndarray, part: np.ndarray, ev: np.ndarray, probs: np.n
     return _merge_open(inst, core, labels, probs, cfg)
 
 
-def extract_instances(labels: np.ndarray, boundary: np.ndarray, region: np.ndarray | None = None,
-                      probs: np.ndarray | None = None, cfg: InstanceConfig = InstanceConfig(),
-                      method: str = "learned", evidence: np.ndarray | None = None,
-                      unmeasured: np.ndarray | None = None) -> Segmentation:
+def extract_instances(
+    labels: np.ndarray,
+    boundary: np.ndarray,
+    region: np.ndarray | None = None,
+    probs: np.ndarray | None = None,
+    cfg: InstanceConfig = InstanceConfig(),
+    method: str = "learned",
+    evidence: np.ndarray | None = None,
+    unmeasured: np.ndarray | None = None,
+) -> Segmentation:
     """Instances from a per-pixel label map and a face-boundary map.
 
     labels: (H, W) int 18-class labels (0 = background; 255 treated as background). boundary: (H, W) bool, or
@@ -374,8 +401,14 @@ def extract_instances(labels: np.ndarray, boundary: np.ndarray, region: np.ndarr
     rows, cols = np.nonzero(part.any(axis=1))[0], np.nonzero(part.any(axis=0))[0]
     if len(rows):  # work on the part's bounding box (same result, less image to flood)
         box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
-        inst[box] = _instances(labels[box], part[box], ev[box], None if probs is None else probs[(slice(None), *box)],
-                               cfg, None if unmeasured is None else np.asarray(unmeasured, bool)[box])
+        inst[box] = _instances(
+            labels[box],
+            part[box],
+            ev[box],
+            None if probs is None else probs[(slice(None), *box)],
+            cfg,
+            None if unmeasured is None else np.asarray(unmeasured, bool)[box],
+        )
     inst = _relabel_raster(inst)
     lab, score = label_instances(inst, labels, probs)
     return Segmentation(instances=inst, labels=lab, scores=score, method=method)

@@ -61,8 +61,9 @@ def predict(scan: Scan, cfg: LearnedConfig = LearnedConfig()) -> tuple[np.ndarra
 
 
 @torch.no_grad()
-def predict_with_features(scan: Scan, cfg: LearnedConfig = LearnedConfig()
-                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def predict_with_features(
+    scan: Scan, cfg: LearnedConfig = LearnedConfig()
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``predict`` plus the network's input features (9, H, W) float32 (``data.compute_features``)."""
     path = Path(cfg.weights or DEFAULT_WEIGHTS)
     if not path.is_file():
@@ -102,12 +103,22 @@ def _box(scan: Scan, context_px: int, shape: tuple[int, int]) -> tuple[int, int,
     ys, xs = np.nonzero(region)
     if len(ys) == 0:
         return 0, h, 0, w
-    return (max(int(ys.min()) - context_px, 0), min(int(ys.max()) + context_px + 1, h),
-            max(int(xs.min()) - context_px, 0), min(int(xs.max()) + context_px + 1, w))
+    return (
+        max(int(ys.min()) - context_px, 0),
+        min(int(ys.max()) + context_px + 1, h),
+        max(int(xs.min()) - context_px, 0),
+        min(int(xs.max()) + context_px + 1, w),
+    )
 
 
-def segment_learned(scan: Scan, weights: str | Path | None = None, config: LearnedConfig | None = None, *,
-                    refine: RefineConfig | None = None, ransac: RansacConfig | None = None) -> Segmentation:
+def segment_learned(
+    scan: Scan,
+    weights: str | Path | None = None,
+    config: LearnedConfig | None = None,
+    *,
+    refine: RefineConfig | None = None,
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
     """Segment a scan with the U-Net. Pixels outside mask.png / the ROI (when given) stay background.
 
     weights: a weights file (default the shipped one). Raises FileNotFoundError when it does not exist.
@@ -129,8 +140,14 @@ def segment_learned(scan: Scan, weights: str | Path | None = None, config: Learn
     return refine_instances(seg, scan.depth, scan.K, probs, cfg.refine, normals=feat[3:6], ransac=ransac)
 
 
-def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cfg: InstanceConfig,
-                              feat: np.ndarray | None = None, part: np.ndarray | None = None) -> Segmentation:
+def instances_from_prediction(
+    scan: Scan,
+    probs: np.ndarray,
+    bnd: np.ndarray,
+    cfg: InstanceConfig,
+    feat: np.ndarray | None = None,
+    part: np.ndarray | None = None,
+) -> Segmentation:
     """Instances of a scan from the network's class probabilities (18, H, W) and boundary probability (H, W).
 
     feat: the network input features (9, H, W), for the optional depth / normal boundary evidence of ``cfg``;
@@ -146,5 +163,13 @@ def instances_from_prediction(scan: Scan, probs: np.ndarray, bnd: np.ndarray, cf
             fg = probs[1:].argmax(axis=0).astype(np.uint8) + 1
             labels = np.where(region, fg, 0).astype(np.uint8)
     evidence = feature_evidence(feat, cfg) if feat is not None else None
-    return extract_instances(labels, bnd, region=region, probs=probs, cfg=cfg, method="learned", evidence=evidence,
-                             unmeasured=np.asarray(scan.depth) <= 0)
+    return extract_instances(
+        labels,
+        bnd,
+        region=region,
+        probs=probs,
+        cfg=cfg,
+        method="learned",
+        evidence=evidence,
+        unmeasured=np.asarray(scan.depth) <= 0,
+    )

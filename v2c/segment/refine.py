@@ -90,8 +90,9 @@ def _is_plane(labels: np.ndarray) -> np.ndarray:
     return TYPE_OF_LABEL[np.asarray(labels, np.int64)] == _PLANE
 
 
-def scan_geometry(depth: np.ndarray, K: np.ndarray, inst: np.ndarray, ransac: RansacConfig | None = None
-                  ) -> tuple[np.ndarray, float]:
+def scan_geometry(
+    depth: np.ndarray, K: np.ndarray, inst: np.ndarray, ransac: RansacConfig | None = None
+) -> tuple[np.ndarray, float]:
     """(H, W, 3) camera-frame points and the part size (metres; `estimate_part_size` with ``ransac.scale_trim``)
     from the valid pixels of the instances: what every step measures distances in. No step moves a pixel into or
     out of the part, so one computation serves them all."""
@@ -100,9 +101,15 @@ def scan_geometry(depth: np.ndarray, K: np.ndarray, inst: np.ndarray, ransac: Ra
     return pts, estimate_part_size(pts[(np.asarray(depth) > 0) & (np.asarray(inst) > 0)], ransac.scale_trim)
 
 
-def refine_instances(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
-                     cfg: RefineConfig = RefineConfig(), normals: np.ndarray | None = None,
-                     ransac: RansacConfig | None = None) -> Segmentation:
+def refine_instances(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    probs: np.ndarray,
+    cfg: RefineConfig = RefineConfig(),
+    normals: np.ndarray | None = None,
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
     """`split_plane_outliers`, `split_coaxial_steps`, then `merge_coplanar`, on one point map (normals: see
     `split_plane_outliers`; ransac: the instance points, RANSAC and type-selection settings of the cylinder and
     curvature tests, default `RansacConfig()`; a `v2c.fit.FitConfig` is one)."""
@@ -115,8 +122,7 @@ def refine_instances(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs:
     return merge_coplanar(seg, depth, K, cfg, geometry, ransac)
 
 
-def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.Generator
-                  ) -> tuple[np.ndarray, float]:
+def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.Generator) -> tuple[np.ndarray, float]:
     """(unit normal, offset) of the plane n.x = d that most points of x (n, 3) lie within tol of."""
     sub = x[rng.choice(len(x), min(len(x), cfg.sample_points), replace=False)]
     tri = sub[rng.integers(0, len(sub), (cfg.hypotheses, 3))]
@@ -134,8 +140,9 @@ def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.G
     return nn, float(nn @ c)
 
 
-def _same_label_neighbour(inst: np.ndarray, sel: np.ndarray, parent: int, label: int, labels: list,
-                          kernel: np.ndarray) -> int | None:
+def _same_label_neighbour(
+    inst: np.ndarray, sel: np.ndarray, parent: int, label: int, labels: list, kernel: np.ndarray
+) -> int | None:
     """The instance other than ``parent`` with label ``label`` that shares the longest contact with the pixel set
     ``sel`` (the rest of a face the network cut elsewhere), or None."""
     ring = cv2.dilate(sel.astype(np.uint8), kernel).astype(bool) & ~sel
@@ -147,10 +154,15 @@ def _same_label_neighbour(inst: np.ndarray, sel: np.ndarray, parent: int, label:
     return best
 
 
-def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, probs: np.ndarray,
-                         cfg: RefineConfig = RefineConfig(),
-                         geometry: tuple[np.ndarray, float] | None = None,
-                         normals: np.ndarray | None = None) -> Segmentation:
+def split_plane_outliers(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    probs: np.ndarray,
+    cfg: RefineConfig = RefineConfig(),
+    geometry: tuple[np.ndarray, float] | None = None,
+    normals: np.ndarray | None = None,
+) -> Segmentation:
     """``seg`` with the off-plane parts of its plane instances split off (module docstring). depth: (H, W) metres
     (0 = no reading); probs: the network's (18, H, W) class probabilities, which label the new instances;
     geometry: `scan_geometry` of the scan when already computed; normals: (3, H, W) unit surface normals in any
@@ -184,8 +196,9 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
             nm = normals[:, m].T
             ref = np.median(nm[inl], axis=0) if inl.any() else np.zeros(3)
             ref /= max(float(np.linalg.norm(ref)), 1e-12)
-            off_plane |= (np.abs(nm @ ref) < np.cos(np.deg2rad(cfg.normal_split_deg))) \
-                & (probs[:, m].argmax(axis=0) != labels[i])
+            off_plane |= (np.abs(nm @ ref) < np.cos(np.deg2rad(cfg.normal_split_deg))) & (
+                probs[:, m].argmax(axis=0) != labels[i]
+            )
         far = np.zeros(m.shape, np.uint8)
         far[m] = off_plane
         if cfg.open_px > 0:
@@ -211,8 +224,9 @@ def split_plane_outliers(seg: Segmentation, depth: np.ndarray, K: np.ndarray, pr
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
 
 
-def _coaxial_step(x: np.ndarray, side: np.ndarray, cyl: Cylinder, size: float, cfg: RefineConfig,
-                  rng: np.random.Generator) -> tuple[float, float]:
+def _coaxial_step(
+    x: np.ndarray, side: np.ndarray, cyl: Cylinder, size: float, cfg: RefineConfig, rng: np.random.Generator
+) -> tuple[float, float]:
     """(radius step r_side - r_other in part sizes, its size in standard errors) of one coaxial fit of points x
     (n, 3) with a radius per side (bool (n,)): shared axis line (two tilt and two shift parameters about
     ``cyl``'s), soft-l1 distances in part sizes."""
@@ -236,9 +250,14 @@ def _coaxial_step(x: np.ndarray, side: np.ndarray, cyl: Cylinder, size: float, c
     return step, abs(step) / max(sigma * np.sqrt(2.0 / max(n_small, 1)), 1e-12)
 
 
-def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
-                        geometry: tuple[np.ndarray, float] | None = None,
-                        ransac: RansacConfig | None = None) -> Segmentation:
+def split_coaxial_steps(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    cfg: RefineConfig = RefineConfig(),
+    geometry: tuple[np.ndarray, float] | None = None,
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
     """``seg`` with each cylinder instance split where its radius steps (module docstring); the new instance keeps
     the label and score. depth: (H, W) metres (0 = no reading); geometry: `scan_geometry` when already computed;
     ransac: the instance points and cylinder RANSAC settings (default `RansacConfig()`)."""
@@ -277,7 +296,7 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
             cusum = np.cumsum(e - e.mean())
         else:
             cusum = np.cumsum(e - np.median(e))
-        k = lo + int(np.argmax(np.abs(cusum[lo:n - lo])))  # the change point of the residuals along the axis
+        k = lo + int(np.argmax(np.abs(cusum[lo : n - lo])))  # the change point of the residuals along the axis
         side = np.zeros(n, bool)
         side[order[k:]] = True
         step, z = _coaxial_step(x, side, cyl, size, cfg, rng)
@@ -294,8 +313,18 @@ def split_coaxial_steps(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
 
 
-def _flat(i: int, x: np.ndarray, nrm: np.ndarray, off: float, labels: np.ndarray, size: float, cfg: RefineConfig,
-          rng: np.random.Generator, normals: np.ndarray, ransac: RansacConfig) -> bool:
+def _flat(
+    i: int,
+    x: np.ndarray,
+    nrm: np.ndarray,
+    off: float,
+    labels: np.ndarray,
+    size: float,
+    cfg: RefineConfig,
+    rng: np.random.Generator,
+    normals: np.ndarray,
+    ransac: RansacConfig,
+) -> bool:
     """True when instance ``i`` (points ``x``, metres; its plane n.x = off), whose label is not a plane, is flat:
     its plane explains it within flat_sigma sensor sigmas (robust residual sigma), and a fit of its label's type
     does not earn its curvature (`geometry.selection.supported` and GRIC against the plane, with the sensor's
@@ -315,9 +344,14 @@ def _flat(i: int, x: np.ndarray, nrm: np.ndarray, off: float, labels: np.ndarray
     return select_type({"plane": plane, ptype: got}, x, size, fit_cfg) == "plane"
 
 
-def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: RefineConfig = RefineConfig(),
-                   geometry: tuple[np.ndarray, float] | None = None,
-                   ransac: RansacConfig | None = None) -> Segmentation:
+def merge_coplanar(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    cfg: RefineConfig = RefineConfig(),
+    geometry: tuple[np.ndarray, float] | None = None,
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
     """``seg`` with adjacent plane instances merged where they lie on one plane (normals within merge_angle_deg,
     each one's points within merge_tol_part part sizes of the other's plane, median): the network cut a face where
     it saw a print edge, a shadow or noise, sometimes with two axis classes. With merge_flat, instances of other
@@ -335,8 +369,9 @@ def merge_coplanar(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: Ref
     tol = cfg.merge_tol_part * size
     labels = np.asarray(seg.labels)
     is_plane = _is_plane(labels)
-    pairs = np.concatenate([np.stack([inst[:, :-1].ravel(), inst[:, 1:].ravel()], 1),
-                            np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)])
+    pairs = np.concatenate(
+        [np.stack([inst[:, :-1].ravel(), inst[:, 1:].ravel()], 1), np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)]
+    )
     pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
     pairs = np.unique(np.sort(pairs, axis=1), axis=0)
     if not cfg.merge_flat:

@@ -53,14 +53,26 @@ FEATURES_RECIPE: tuple[tuple, ...] = (*STAGE5_RECIPE, (640, 480, "sensor", 1500,
 #: FEATURES_RECIPE plus 1500 scans with appearance and framing randomization (synth/appearance.py: random, dark
 #: and shiny materials, printed art inside faces, clutter, backgrounds, lights; part extent 30-70 % of the image):
 #: a row's optional 8th element is the appearance ("plain" | "random"; random also frames by extent).
-APPEARANCE_RECIPE: tuple[tuple, ...] = (*FEATURES_RECIPE,
-                                        (640, 480, "sensor", 1500, 131, 0.0, FAMILY_GROUPS["train"], "random"))
-RECIPES = {"base": TRAINING_RECIPE, "stage4": STAGE4_RECIPE, "stage5": STAGE5_RECIPE, "features": FEATURES_RECIPE,
-           "appearance": APPEARANCE_RECIPE}
+APPEARANCE_RECIPE: tuple[tuple, ...] = (
+    *FEATURES_RECIPE,
+    (640, 480, "sensor", 1500, 131, 0.0, FAMILY_GROUPS["train"], "random"),
+)
+RECIPES = {
+    "base": TRAINING_RECIPE,
+    "stage4": STAGE4_RECIPE,
+    "stage5": STAGE5_RECIPE,
+    "features": FEATURES_RECIPE,
+    "appearance": APPEARANCE_RECIPE,
+}
 
 
-def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 1,
-                           recipe: tuple = TRAINING_RECIPE, executor: str | ExecutorConfig = "local") -> list[Path]:
+def generate_training_data(
+    out_dir: str | Path,
+    scale: float = 1.0,
+    jobs: int = 1,
+    recipe: tuple = TRAINING_RECIPE,
+    executor: str | ExecutorConfig = "local",
+) -> list[Path]:
     """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
 
     Equivalent to one `v2c synth` run per recipe row; ``jobs`` local processes, or ``executor`` (e.g. a Ray
@@ -82,8 +94,10 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
         if families is not None:
             left_out = [f for f in families if f in LEAVE_OUT_FAMILIES]
             if left_out:
-                raise ValueError(f"recipe row {w}x{h} seed {seed}: {', '.join(left_out)} is a leave-out family "
-                                 "(families.LEAVE_OUT_FAMILIES), never used for training")
+                raise ValueError(
+                    f"recipe row {w}x{h} seed {seed}: {', '.join(left_out)} is a leave-out family "
+                    "(families.LEAVE_OUT_FAMILIES), never used for training"
+                )
             named = [k for k, v in FAMILY_GROUPS.items() if v == families]
             tag = "_" + (named[0] if named else "+".join(families))
         look_tag = "_look" if look != "plain" else ""
@@ -94,11 +108,15 @@ def generate_training_data(out_dir: str | Path, scale: float = 1.0, jobs: int = 
             have += 1
         done += [sub / scan_name(i) for i in range(have)]
         if have < n:
-            cfg = SynthConfig(width=w, height=h, noise=noise, scene=SceneConfig(print_share=share),
-                              **({"families": families} if families is not None else {}),
-                              **({"appearance": look, "framing": "extent"} if look != "plain" else {}))
-            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have,
-                                     executor=executor)
+            cfg = SynthConfig(
+                width=w,
+                height=h,
+                noise=noise,
+                scene=SceneConfig(print_share=share),
+                **({"families": families} if families is not None else {}),
+                **({"appearance": look, "framing": "extent"} if look != "plain" else {}),
+            )
+            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have, executor=executor)
     return done
 
 
@@ -123,8 +141,9 @@ def class_weights(data: CachedScans, ids: list[int], power: float) -> np.ndarray
     return w.astype(np.float32)
 
 
-def _batch(data: CachedScans, ids: list[int], cfg: TrainConfig, rng: np.random.Generator
-           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _batch(
+    data: CachedScans, ids: list[int], cfg: TrainConfig, rng: np.random.Generator
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     xs, ys, bs = [], [], []
     for _ in range(cfg.batch):
         i = ids[int(rng.integers(len(ids)))]
@@ -136,8 +155,9 @@ def _batch(data: CachedScans, ids: list[int], cfg: TrainConfig, rng: np.random.G
     return x, torch.from_numpy(np.stack(ys).astype(np.int64)), torch.from_numpy(np.stack(bs).astype(np.float32))
 
 
-def losses(model: UNet, x: torch.Tensor, y: torch.Tensor, b: torch.Tensor, cw: torch.Tensor, cfg: TrainConfig,
-           bf16: bool) -> tuple[torch.Tensor, torch.Tensor]:
+def losses(
+    model: UNet, x: torch.Tensor, y: torch.Tensor, b: torch.Tensor, cw: torch.Tensor, cfg: TrainConfig, bf16: bool
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(label CE, boundary BCE) of one batch."""
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
         lab, bnd = model(x)
@@ -160,8 +180,9 @@ def evaluate(model: UNet, data: CachedScans, ids: list[int], bf16: bool) -> dict
         pred = lab[0].float().argmax(0).numpy()
         y = np.asarray(y)
         ok = y != IGNORE
-        conf += np.bincount(y[ok].astype(np.int64) * NUM_CLASSES + pred[ok], minlength=NUM_CLASSES ** 2
-                            ).reshape(NUM_CLASSES, NUM_CLASSES)
+        conf += np.bincount(y[ok].astype(np.int64) * NUM_CLASSES + pred[ok], minlength=NUM_CLASSES**2).reshape(
+            NUM_CLASSES, NUM_CLASSES
+        )
         pb, gb = bnd[0, 0].float().numpy() > 0, np.asarray(b) > 0
         tp += int((pb & gb).sum())
         fp += int((pb & ~gb).sum())
@@ -171,14 +192,23 @@ def evaluate(model: UNet, data: CachedScans, ids: list[int], bf16: bool) -> dict
     union = conf.sum(0) + conf.sum(1) - inter
     present = conf.sum(1) > 0
     iou = np.where(union > 0, inter / np.maximum(union, 1), 0.0)
-    return {"miou": float(iou[present].mean()), "pixel_acc": float(inter.sum() / max(conf.sum(), 1)),
-            "boundary_f1": 2 * tp / max(2 * tp + fp + fn, 1),
-            "iou": {int(k): round(float(iou[k]), 4) for k in np.nonzero(present)[0]}}
+    return {
+        "miou": float(iou[present].mean()),
+        "pixel_acc": float(inter.sum() / max(conf.sum(), 1)),
+        "boundary_f1": 2 * tp / max(2 * tp + fp + fn, 1),
+        "iou": {int(k): round(float(iou[k]), 4) for k in np.nonzero(present)[0]},
+    }
 
 
-def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig | None = None, cache_dir: str | Path | None = None,
-          net_cfg: NetConfig | None = None, init: str | Path | None = None,
-          log: Callable[[str], object] = print) -> dict:
+def train(
+    data_dir: str | Path,
+    out: str | Path,
+    cfg: TrainConfig | None = None,
+    cache_dir: str | Path | None = None,
+    net_cfg: NetConfig | None = None,
+    init: str | Path | None = None,
+    log: Callable[[str], object] = print,
+) -> dict:
     """Train on the scans under ``data_dir``; write the best checkpoint (by validation mIoU) to ``out``.
 
     init: optional weights file to start from (a second stage: a fresh schedule over trained weights; its network
@@ -213,12 +243,25 @@ def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig | None = None,
     model.train()
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sizes = sorted({(e["w"], e["h"]) for e in data.entries})
-    record = {"config": asdict(cfg), "net": asdict(net_cfg), "train_scans": len(train_ids),
-              "val_scans": len(val_ids), "sizes": [list(s) for s in sizes], "bf16": bf16, "history": [],
-              "best": None, "data_dir": str(data_dir),
-              "init": None if init is None else {"path": str(init), "config": (init_meta or {}).get("config"),
-                                                 "steps_done": (init_meta or {}).get("step"),
-                                                 "best": (init_meta or {}).get("best")}}
+    record = {
+        "config": asdict(cfg),
+        "net": asdict(net_cfg),
+        "train_scans": len(train_ids),
+        "val_scans": len(val_ids),
+        "sizes": [list(s) for s in sizes],
+        "bf16": bf16,
+        "history": [],
+        "best": None,
+        "data_dir": str(data_dir),
+        "init": None
+        if init is None
+        else {
+            "path": str(init),
+            "config": (init_meta or {}).get("config"),
+            "steps_done": (init_meta or {}).get("step"),
+            "best": (init_meta or {}).get("best"),
+        },
+    }
     best = -1.0
     t_start = time.time()
     run_ce = run_bce = 0.0
@@ -237,13 +280,20 @@ def train(data_dir: str | Path, out: str | Path, cfg: TrainConfig | None = None,
         elapsed = (time.time() - t_start) / 60
         capped = (cfg.minutes is not None and elapsed >= cfg.minutes) or step + 1 == cfg.stop_step
         if (step + 1) % 50 == 0:
-            log(f"step {step + 1}/{cfg.steps} ce {run_ce / 50:.3f} bce {run_bce / 50:.3f} "
-                f"lr {_lr_at(step, cfg):.2e} {elapsed:.1f} min")
+            log(
+                f"step {step + 1}/{cfg.steps} ce {run_ce / 50:.3f} bce {run_bce / 50:.3f} "
+                f"lr {_lr_at(step, cfg):.2e} {elapsed:.1f} min"
+            )
             run_ce = run_bce = 0.0
         if (step + 1) % cfg.eval_every == 0 or step + 1 == cfg.steps or capped:
             ev = evaluate(model, data, val_ids, bf16)
-            entry = {"step": step + 1, "minutes": round(elapsed, 2), "miou": ev["miou"],
-                     "pixel_acc": ev["pixel_acc"], "boundary_f1": ev["boundary_f1"]}
+            entry = {
+                "step": step + 1,
+                "minutes": round(elapsed, 2),
+                "miou": ev["miou"],
+                "pixel_acc": ev["pixel_acc"],
+                "boundary_f1": ev["boundary_f1"],
+            }
             record["history"].append(entry)
             log(f"eval {entry}")
             save_weights(model, out.with_suffix(".last.pt"), {**record, "step": step + 1})

@@ -119,8 +119,9 @@ def project(K: np.ndarray, world_to_cam: np.ndarray, pts_world: np.ndarray) -> t
     return uv, z
 
 
-def frame_scene(scene: Scene, pts_rest_mm: np.ndarray, rng: np.random.Generator,
-                cfg: FramingConfig = FramingConfig()) -> tuple[Scene, dict]:
+def frame_scene(
+    scene: Scene, pts_rest_mm: np.ndarray, rng: np.random.Generator, cfg: FramingConfig = FramingConfig()
+) -> tuple[Scene, dict]:
     """Move the camera (its orientation kept) so the part's projected extent is a drawn fraction of the image's
     smaller side and its silhouette box sits at a random place inside the image.
 
@@ -195,15 +196,27 @@ def _photo_field(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
     return np.clip(img, 0.0, 1.0)
 
 
-def sample_appearance(rng: np.random.Generator, scene: Scene, bbox_lo_mm: np.ndarray, bbox_hi_mm: np.ndarray,
-                      cfg: AppearanceConfig = AppearanceConfig()) -> tuple[Scene, Appearance]:
+def sample_appearance(
+    rng: np.random.Generator,
+    scene: Scene,
+    bbox_lo_mm: np.ndarray,
+    bbox_hi_mm: np.ndarray,
+    cfg: AppearanceConfig = AppearanceConfig(),
+) -> tuple[Scene, Appearance]:
     """Draw a random look for `scene` (material, lights, ground, backdrop, clutter, art, exposure) from `rng`.
 
     `bbox_lo_mm`, `bbox_hi_mm`: the part's rest-pose bounding box (millimetres), so clutter stands clear of it.
     Returns the scene with its material, lights, ground, backdrop and print replaced, and the extras."""
     size = scene.part_size_m
-    corners = np.array([[x, y, z] for x in (bbox_lo_mm[0], bbox_hi_mm[0]) for y in (bbox_lo_mm[1], bbox_hi_mm[1])
-                        for z in (bbox_lo_mm[2], bbox_hi_mm[2])], float)
+    corners = np.array(
+        [
+            [x, y, z]
+            for x in (bbox_lo_mm[0], bbox_hi_mm[0])
+            for y in (bbox_lo_mm[1], bbox_hi_mm[1])
+            for z in (bbox_lo_mm[2], bbox_hi_mm[2])
+        ],
+        float,
+    )
     corners = corners @ scene.rest_to_world[:, :3].T + scene.rest_to_world[:, 3]
     material = _random_material(rng, cfg)
     art = bool(rng.random() < cfg.art_share)
@@ -221,40 +234,58 @@ def sample_appearance(rng: np.random.Generator, scene: Scene, bbox_lo_mm: np.nda
     lights = [Light(rot @ key_dir, tint() * rng.uniform(*cfg.key_intensity), True)]
     fill_dir = rng.normal(size=3)
     fill_dir[2] = abs(fill_dir[2]) + 0.2
-    lights.append(Light(rot @ (fill_dir / np.linalg.norm(fill_dir)), tint() * rng.uniform(*cfg.fill_intensity),
-                        False))
+    lights.append(Light(rot @ (fill_dir / np.linalg.norm(fill_dir)), tint() * rng.uniform(*cfg.fill_intensity), False))
     if rng.random() < cfg.rim_prob:  # from behind the part, seen from the camera
         back = -rot[2] + np.array([0.0, 0.0, rng.uniform(0.2, 1.0)])
         lights.append(Light(rot @ (back / np.linalg.norm(back)), tint() * rng.uniform(*cfg.rim_intensity), False))
     ambient = tint() * rng.uniform(*cfg.ambient)
 
-    kind = str(rng.choice(["concrete", "wood", "tiles", "plain", "printed"],
-                          p=[*([(1 - cfg.printed_ground_share) / 4] * 4), cfg.printed_ground_share]))
+    kind = str(
+        rng.choice(
+            ["concrete", "wood", "tiles", "plain", "printed"],
+            p=[*([(1 - cfg.printed_ground_share) / 4] * 4), cfg.printed_ground_share],
+        )
+    )
     base = rng.uniform(0.0, 1.0, 3) ** rng.uniform(0.6, 2.5)
     other = np.clip(base * rng.uniform(0.3, 1.7, 3) + rng.normal(0, 0.1, 3), 0.005, 0.95)
     gscale = float(size * rng.uniform(0.3, 2.5)) if kind != "tiles" else float(rng.uniform(0.02, 0.3))
     gprint = _sample_print(rng, float(size * rng.uniform(0.5, 2.0)), base) if kind == "printed" else None
-    ground = GroundLook(kind, base, other, gscale, float(rng.uniform(0, np.pi)), int(rng.integers(0, 2**31 - 1)),
-                        float(rng.uniform(0.0, 0.6)), gprint)
-    backdrop_image = _photo_field(rng, scene.height, scene.width) if rng.random() < cfg.photo_backdrop_share \
-        else None
+    ground = GroundLook(
+        kind,
+        base,
+        other,
+        gscale,
+        float(rng.uniform(0, np.pi)),
+        int(rng.integers(0, 2**31 - 1)),
+        float(rng.uniform(0.0, 0.6)),
+        gprint,
+    )
+    backdrop_image = _photo_field(rng, scene.height, scene.width) if rng.random() < cfg.photo_backdrop_share else None
     wall = rng.uniform(0.0, 1.0, 3) ** rng.uniform(0.6, 2.0)
     backdrop = np.stack([wall, np.clip(wall * rng.uniform(0.4, 1.3), 0, 1)])
     clutter = _place_clutter(rng, scene, corners, cfg)
-    app = Appearance(int(rng.integers(0, 2**31 - 1)), art, clutter, backdrop_image,
-                     float(rng.uniform(*cfg.exposure)), cfg=cfg)
-    app.info = {"material": material.name, "art": art, "world_print": look is not None, "ground": kind,
-                "backdrop": "photo" if backdrop_image is not None else "gradient", "lights": len(lights),
-                "clutter": [c.kind for c in clutter], "exposure": app.exposure}
+    app = Appearance(
+        int(rng.integers(0, 2**31 - 1)), art, clutter, backdrop_image, float(rng.uniform(*cfg.exposure)), cfg=cfg
+    )
+    app.info = {
+        "material": material.name,
+        "art": art,
+        "world_print": look is not None,
+        "ground": kind,
+        "backdrop": "photo" if backdrop_image is not None else "gradient",
+        "lights": len(lights),
+        "clutter": [c.kind for c in clutter],
+        "exposure": app.exposure,
+    }
     if look is not None:
         material = Material(material.albedo, material.specular, material.shininess, "printed")
-    scene = replace(scene, material=material, lights=lights, ambient=ambient, ground=ground, backdrop=backdrop,
-                    print_look=look)
+    scene = replace(
+        scene, material=material, lights=lights, ambient=ambient, ground=ground, backdrop=backdrop, print_look=look
+    )
     return scene, app
 
 
-def _place_clutter(rng: np.random.Generator, scene: Scene, corners: np.ndarray,
-                   cfg: AppearanceConfig) -> list[Clutter]:
+def _place_clutter(rng: np.random.Generator, scene: Scene, corners: np.ndarray, cfg: AppearanceConfig) -> list[Clutter]:
     """Objects on the ground beside the part (world bbox corners (8, 3), metres), clear of its footprint, none
     whose bounding sphere could hide a part pixel (its image disc overlaps the part's image box while it is
     nearer than the part's far side)."""
@@ -279,8 +310,13 @@ def _place_clutter(rng: np.random.Generator, scene: Scene, corners: np.ndarray,
                 foot = float(dims[0])
             r = part_radius_m + foot + size * rng.uniform(*cfg.clutter_gap_rel)
             a = rng.uniform(0, 2 * np.pi)
-            obj = Clutter(kind, np.array([r * np.cos(a), r * np.sin(a)]), dims, float(rng.uniform(0, np.pi)),
-                          _random_material(rng, cfg))
+            obj = Clutter(
+                kind,
+                np.array([r * np.cos(a), r * np.sin(a)]),
+                dims,
+                float(rng.uniform(0, np.pi)),
+                _random_material(rng, cfg),
+            )
             if any(np.hypot(*(obj.centre - o.centre)) < foot + o.bounding_sphere[1] for o in out):
                 continue
             c, rad = obj.bounding_sphere
@@ -303,8 +339,9 @@ def _place_clutter(rng: np.random.Generator, scene: Scene, corners: np.ndarray,
 # ----------------------------------------------------------------------------------------------- clutter hits
 
 
-def intersect_clutter(objs: list[Clutter], eye: np.ndarray, dirs_world: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def intersect_clutter(
+    objs: list[Clutter], eye: np.ndarray, dirs_world: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nearest hit of rays eye + t d (world, unit d (n, 3)) with the clutter: t (n,) metres (inf: none), world
     normals (n, 3) and the object index (n,) (-1: none)."""
     n = len(dirs_world)
@@ -360,8 +397,9 @@ def _hit_one(obj: Clutter, eye: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, 
         t = np.where(cap & (tc < t), tc, t)
         is_cap = cap & (t == tc)
         p = o + d * np.where(np.isfinite(t), t, 0)[:, None]
-        nrm = np.where(is_cap[:, None], np.array([0.0, 0.0, 1.0]), np.stack([p[:, 0] / r, p[:, 1] / r,
-                                                                             np.zeros(n)], axis=1))
+        nrm = np.where(
+            is_cap[:, None], np.array([0.0, 0.0, 1.0]), np.stack([p[:, 0] / r, p[:, 1] / r, np.zeros(n)], axis=1)
+        )
         return t, nrm
     # box turned by `angle` about Z, standing on z = 0: slabs in its own frame
     cs, sn = np.cos(obj.angle), np.sin(obj.angle)
@@ -395,13 +433,18 @@ def _ink(rng: np.random.Generator) -> tuple[float, float, float]:
     return tuple(float(v) for v in c)
 
 
-_FONTS = (cv2.FONT_HERSHEY_SIMPLEX, cv2.FONT_HERSHEY_DUPLEX, cv2.FONT_HERSHEY_COMPLEX, cv2.FONT_HERSHEY_TRIPLEX,
-          cv2.FONT_HERSHEY_PLAIN, cv2.FONT_HERSHEY_SCRIPT_SIMPLEX)
+_FONTS = (
+    cv2.FONT_HERSHEY_SIMPLEX,
+    cv2.FONT_HERSHEY_DUPLEX,
+    cv2.FONT_HERSHEY_COMPLEX,
+    cv2.FONT_HERSHEY_TRIPLEX,
+    cv2.FONT_HERSHEY_PLAIN,
+    cv2.FONT_HERSHEY_SCRIPT_SIMPLEX,
+)
 _CHARS = "ABCDEFGHJKLMNPRSTUVWXYZ0123456789-/."
 
 
-def _draw_item(rng: np.random.Generator, canvas: np.ndarray, cover: np.ndarray, box: tuple[int, int, int, int]
-               ) -> str:
+def _draw_item(rng: np.random.Generator, canvas: np.ndarray, cover: np.ndarray, box: tuple[int, int, int, int]) -> str:
     """Draw one art item (sRGB colours) into `canvas` (h, w, 3) and mark it in `cover` (h, w) uint8, inside the
     face's bounding box `box` = (x0, y0, x1, y1). Returns its kind."""
     x0, y0, x1, y1 = box
@@ -429,7 +472,7 @@ def _draw_item(rng: np.random.Generator, canvas: np.ndarray, cover: np.ndarray, 
         period = width * rng.uniform(1.5, 4.0)
         yy, xx = np.mgrid[y0:y1, x0:x1]
         along = (xx - cx) * np.cos(ang) + (yy - cy) * np.sin(ang)
-        band = (np.mod(along, period) < width)
+        band = np.mod(along, period) < width
         if rng.random() < 0.5:  # a band of stripes, not the whole face
             across = -(xx - cx) * np.sin(ang) + (yy - cy) * np.cos(ang)
             band &= np.abs(across) < s * rng.uniform(0.1, 0.4)
@@ -442,8 +485,16 @@ def _draw_item(rng: np.random.Generator, canvas: np.ndarray, cover: np.ndarray, 
             if shape == 0:
                 cv2.circle(layer, (px, py), r, 255, -1 if rng.random() < 0.6 else max(1, r // 4))
             elif shape == 1:
-                cv2.ellipse(layer, (px, py), (r, max(1, int(r * rng.uniform(0.3, 1.0)))),
-                            float(rng.uniform(0, 180)), 0, 360, 255, -1)
+                cv2.ellipse(
+                    layer,
+                    (px, py),
+                    (r, max(1, int(r * rng.uniform(0.3, 1.0)))),
+                    float(rng.uniform(0, 180)),
+                    0,
+                    360,
+                    255,
+                    -1,
+                )
             elif shape == 2:
                 k = int(rng.integers(3, 9))
                 ang = np.sort(rng.uniform(0, 2 * np.pi, k))
@@ -457,8 +508,9 @@ def _draw_item(rng: np.random.Generator, canvas: np.ndarray, cover: np.ndarray, 
         px0, py0 = int(np.clip(cx - pw // 2, 0, cover.shape[1] - 1)), int(np.clip(cy - ph // 2, 0, cover.shape[0] - 1))
         px1, py1 = min(px0 + pw, cover.shape[1]), min(py0 + ph, cover.shape[0])
         photo = _photo_field(rng, py1 - py0, px1 - px0)
-        canvas[py0:py1, px0:px1] = np.where(cover[py0:py1, px0:px1, None] > 0, canvas[py0:py1, px0:px1],
-                                            photo ** (1 / 2.2))
+        canvas[py0:py1, px0:px1] = np.where(
+            cover[py0:py1, px0:px1, None] > 0, canvas[py0:py1, px0:px1], photo ** (1 / 2.2)
+        )
         layer[py0:py1, px0:px1] = 255
         cover |= layer
         return kind

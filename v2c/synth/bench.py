@@ -25,8 +25,11 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=40, help="timed scans")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--noise", default="sensor")
-    ap.add_argument("--families", default=None,
-                    help="comma-separated families or groups as `v2c synth --families` (default: its default mix)")
+    ap.add_argument(
+        "--families",
+        default=None,
+        help="comma-separated families or groups as `v2c synth --families` (default: its default mix)",
+    )
     args = ap.parse_args()
     w, h = (int(x) for x in args.size.split("x"))
     extra = {}
@@ -46,9 +49,11 @@ def main() -> None:
             wall.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
     c, t = np.asarray(cpu), np.asarray(wall)
-    print(f"{args.size} noise={args.noise} n={len(t)}: {len(c) / c.sum():.2f} scans/s per core by CPU time "
-          f"(mean {1e3 * c.mean():.0f} ms, max {1e3 * c.max():.0f} ms); wall clock {len(t) / t.sum():.2f} scans/s "
-          f"(median {1e3 * np.median(t):.0f} ms)")
+    print(
+        f"{args.size} noise={args.noise} n={len(t)}: {len(c) / c.sum():.2f} scans/s per core by CPU time "
+        f"(mean {1e3 * c.mean():.0f} ms, max {1e3 * c.max():.0f} ms); wall clock {len(t) / t.sum():.2f} scans/s "
+        f"(median {1e3 * np.median(t):.0f} ms)"
+    )
 
 
 if __name__ == "__main__":

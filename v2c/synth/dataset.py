@@ -127,24 +127,28 @@ def _render_scan_into(folder: Path, seed: int, index: int, cfg: SynthConfig) -> 
     if cfg.framing not in appearance_mod.FRAMINGS:
         raise ValueError(f"unknown framing {cfg.framing!r} (choose from {', '.join(appearance_mod.FRAMINGS)})")
     if cfg.appearance not in appearance_mod.APPEARANCES:
-        raise ValueError(f"unknown appearance {cfg.appearance!r} (choose from "
-                         f"{', '.join(appearance_mod.APPEARANCES)})")
+        raise ValueError(f"unknown appearance {cfg.appearance!r} (choose from {', '.join(appearance_mod.APPEARANCES)})")
     if cfg.framing == "extent":  # own generators: the main stream (part, noise) stays that of the plain scan
         size_mm = float(np.max(np.asarray(hi) - np.asarray(lo)))
-        coarse = occ.tessellate(rest.shape, occ.faces_of(rest.shape), cfg.framing_cfg.mesh_deflection_rel * size_mm,
-                                cfg.angular_deflection_rad)
+        coarse = occ.tessellate(
+            rest.shape,
+            occ.faces_of(rest.shape),
+            cfg.framing_cfg.mesh_deflection_rel * size_mm,
+            cfg.angular_deflection_rad,
+        )
         scene, info = appearance_mod.frame_scene(
-            scene, coarse.vertices, np.random.default_rng([seed, index, appearance_mod.FRAMING_STREAM]),
-            cfg.framing_cfg)
+            scene, coarse.vertices, np.random.default_rng([seed, index, appearance_mod.FRAMING_STREAM]), cfg.framing_cfg
+        )
         extra_meta["framing"] = {"mode": "extent", **info}
     look = None
     if cfg.appearance == "random":
         scene, look = appearance_mod.sample_appearance(
-            np.random.default_rng([seed, index, appearance_mod.APPEARANCE_STREAM]), scene, lo, hi,
-            cfg.appearance_cfg)
+            np.random.default_rng([seed, index, appearance_mod.APPEARANCE_STREAM]), scene, lo, hi, cfg.appearance_cfg
+        )
     rot, trans = scene.world_to_cam[:, :3], scene.world_to_cam[:, 3]
-    rest_to_cam_mm = 1000.0 * np.hstack([rot @ scene.rest_to_world[:, :3],
-                                         (rot @ scene.rest_to_world[:, 3] + trans)[:, None]])
+    rest_to_cam_mm = 1000.0 * np.hstack(
+        [rot @ scene.rest_to_world[:, :3], (rot @ scene.rest_to_world[:, 3] + trans)[:, None]]
+    )
 
     gt = folder / "gt"
     gt.mkdir(parents=True, exist_ok=True)
@@ -156,8 +160,16 @@ def _render_scan_into(folder: Path, seed: int, index: int, cfg: SynthConfig) -> 
     face_labels(primitives, scene.axes_cam)
     deflection_mm = cfg.linear_deflection_rel * scene.part_size_m * 1000.0
     mesh = occ.tessellate(shape, faces, deflection_mm, cfg.angular_deflection_rad)
-    ren = render(scene, mesh.vertices * 1e-3, mesh.triangles, mesh.face_of_triangle, primitives,
-                 deflection_mm * 1e-3, cfg.render, look)
+    ren = render(
+        scene,
+        mesh.vertices * 1e-3,
+        mesh.triangles,
+        mesh.face_of_triangle,
+        primitives,
+        deflection_mm * 1e-3,
+        cfg.render,
+        look,
+    )
     if look is not None:
         extra_meta["appearance"] = {"mode": "random", **look.info}
 
@@ -171,8 +183,10 @@ def _render_scan_into(folder: Path, seed: int, index: int, cfg: SynthConfig) -> 
     _write_png(folder / "color.png", cv2.cvtColor(color, cv2.COLOR_RGB2BGR), level)
     _write_png(folder / "depth.png", _to_units(depth), level)
     _write_png(folder / "mask.png", np.where(ren.faces > 0, 255, 0).astype(np.uint8), level)
-    _write_json(folder / "camera.json", {"width": cfg.width, "height": cfg.height, "K": scene.K.tolist(),
-                                         "depth_scale": DEPTH_SCALE})
+    _write_json(
+        folder / "camera.json",
+        {"width": cfg.width, "height": cfg.height, "K": scene.K.tolist(), "depth_scale": DEPTH_SCALE},
+    )
     _write_png(gt / "faces.png", ren.faces, level)
     _write_png(gt / "labels.png", labels, level)
     _write_png(gt / "depth_clean.png", _to_units(ren.depth), level)
@@ -219,9 +233,16 @@ def _job(args: tuple[Path, int, int, SynthConfig]) -> Path:
     return generate_scan(*args)
 
 
-def generate_dataset(out_dir: Path, n: int, seed: int, cfg: SynthConfig = SynthConfig(), jobs: int = 1,
-                     progress: bool = True, start: int = 0,
-                     executor: str | ExecutorConfig = "local") -> list[Path]:
+def generate_dataset(
+    out_dir: Path,
+    n: int,
+    seed: int,
+    cfg: SynthConfig = SynthConfig(),
+    jobs: int = 1,
+    progress: bool = True,
+    start: int = 0,
+    executor: str | ExecutorConfig = "local",
+) -> list[Path]:
     """Generate scans start..start+n-1 of run `seed` into `out_dir` and return their folders in index order.
 
     executor: "local" (``jobs`` processes; 1 = this process) or an `v2c.executors.ExecutorConfig` (e.g. a Ray

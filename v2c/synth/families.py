@@ -9,13 +9,20 @@ family "cad", which is not a generator family).
 from __future__ import annotations
 
 PROCEDURAL_FAMILIES: tuple[str, ...] = ("block", "shaft", "flange", "knob", "turned", "bracket")
-FEATURE_FAMILIES: tuple[str, ...] = ("feat_prismatic", "feat_plate", "feat_turned", "feat_hex", "feat_knob",
-                                     "feat_block")
+FEATURE_FAMILIES: tuple[str, ...] = (
+    "feat_prismatic",
+    "feat_plate",
+    "feat_turned",
+    "feat_hex",
+    "feat_knob",
+    "feat_block",
+)
 #: Families no training run and no threshold choice may see (the unseen suite's generator families).
 LEAVE_OUT_FAMILIES: tuple[str, ...] = ("feat_hex", "feat_knob", "feat_block")
 #: Families training may draw from: every generator family that is not left out.
-TRAIN_FAMILIES: tuple[str, ...] = tuple(f for f in (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES)
-                                        if f not in LEAVE_OUT_FAMILIES)
+TRAIN_FAMILIES: tuple[str, ...] = tuple(
+    f for f in (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES) if f not in LEAVE_OUT_FAMILIES
+)
 #: Names `v2c synth --families` expands to a group of families.
 FAMILY_GROUPS: dict[str, tuple[str, ...]] = {
     "procedural": PROCEDURAL_FAMILIES,

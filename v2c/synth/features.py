@@ -100,14 +100,35 @@ from v2c.synth.families import FEATURE_FAMILIES
 from v2c.synth.parts import RestPart, rest_on_ground
 
 FEATURE_KINDS: tuple[str, ...] = (
-    "through_hole", "blind_hole", "counterbore", "countersink", "boss", "pocket", "slot", "rib", "step", "groove",
-    "fillet", "chamfer", "dome", "ball_end", "linear_pattern", "circular_pattern", "union", "cut",
+    "through_hole",
+    "blind_hole",
+    "counterbore",
+    "countersink",
+    "boss",
+    "pocket",
+    "slot",
+    "rib",
+    "step",
+    "groove",
+    "fillet",
+    "chamfer",
+    "dome",
+    "ball_end",
+    "linear_pattern",
+    "circular_pattern",
+    "union",
+    "cut",
 )
 #: Kinds whose operation is an edge blend (slower than a boolean; their count per part is capped).
 BLEND_KINDS = ("fillet", "chamfer")
 #: Surface types a generated part may hold (the pipeline's primitives).
-ANALYTIC_TYPES = {GeomAbs_Plane: "plane", GeomAbs_Cylinder: "cylinder", GeomAbs_Cone: "cone",
-                  GeomAbs_Sphere: "sphere", GeomAbs_Torus: "torus"}
+ANALYTIC_TYPES = {
+    GeomAbs_Plane: "plane",
+    GeomAbs_Cylinder: "cylinder",
+    GeomAbs_Cone: "cone",
+    GeomAbs_Sphere: "sphere",
+    GeomAbs_Torus: "torus",
+}
 
 _C, _MIN, _MAX = Align.CENTER, Align.MIN, Align.MAX
 _BASE = (_C, _C, _MIN)
@@ -290,8 +311,9 @@ def _planar_faces(shape: TopoDS_Shape, min_nz: float) -> list[tuple]:
     return out
 
 
-def find_site(w: Work, rng: np.random.Generator, radius: float, cfg: FeatureConfig, min_nz: float = -0.5,
-              up_only: bool = False) -> Site | None:
+def find_site(
+    w: Work, rng: np.random.Generator, radius: float, cfg: FeatureConfig, min_nz: float = -0.5, up_only: bool = False
+) -> Site | None:
     """A random point of a planar face of `w` whose disc of `radius` + wall (mm) lies inside the face.
 
     Faces are drawn by area; `min_nz` excludes faces looking down (the part rests on them), `up_only` keeps faces
@@ -365,8 +387,18 @@ def cylinder_sites(shape: TopoDS_Shape, outer_only: bool = True) -> list[CylSite
             continue
         umin, umax, vmin, vmax = BRepTools.UVBounds_s(face)
         ax = cyl.Position()
-        out.append(CylSite(_vec(ax.Location()), _vec(ax.Direction()), float(cyl.Radius()), (vmin, vmax),
-                           (umin, umax), _vec(ax.XDirection()), _vec(ax.YDirection()), outer))
+        out.append(
+            CylSite(
+                _vec(ax.Location()),
+                _vec(ax.Direction()),
+                float(cyl.Radius()),
+                (vmin, vmax),
+                (umin, umax),
+                _vec(ax.XDirection()),
+                _vec(ax.YDirection()),
+                outer,
+            )
+        )
     return out
 
 
@@ -432,8 +464,11 @@ def _hole_tool(w: Work, r: float, cfg: FeatureConfig) -> Solid:
 
 def _radial_site(w: Work, rng: np.random.Generator, r: float, cfg: FeatureConfig) -> tuple[Location, float] | None:
     """A local frame on an outer cylinder face (z = outward radial, for cross holes) and the material depth."""
-    cands = [c for c in cylinder_sites(w.shape) if c.radius > 2 * r + cfg.wall_mm
-             and c.v_range[1] - c.v_range[0] > 2 * (r + cfg.wall_mm)]
+    cands = [
+        c
+        for c in cylinder_sites(w.shape)
+        if c.radius > 2 * r + cfg.wall_mm and c.v_range[1] - c.v_range[0] > 2 * (r + cfg.wall_mm)
+    ]
     if not cands:
         return None
     c = cands[int(rng.integers(len(cands)))]
@@ -569,8 +604,7 @@ def f_slot(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResu
         return None
     angle = 0.5 * math.pi * int(rng.integers(4)) if rng.random() < 0.6 else _u(rng, 0, math.pi)
     tool = Pos(0, 0, -depth) * extrude(SlotOverall(length, width), depth + cfg.overshoot_mm)
-    return w.solid - site.location(angle) * tool, {"length": length, "width": width, "depth": depth,
-                                                   "through": through}
+    return w.solid - site.location(angle) * tool, {"length": length, "width": width, "depth": depth, "through": through}
 
 
 def f_rib(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
@@ -628,8 +662,9 @@ def f_groove(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureRe
         tool = Torus(c.radius, rt)
         params = {"shape": "round", "radius": c.radius, "tube_radius": rt}
     else:
-        ring = Cylinder(c.radius + o, width, align=(_C, _C, _C)) - Cylinder(c.radius - depth, width + 2 * o,
-                                                                             align=(_C, _C, _C))
+        ring = Cylinder(c.radius + o, width, align=(_C, _C, _C)) - Cylinder(
+            c.radius - depth, width + 2 * o, align=(_C, _C, _C)
+        )
         tool = ring
         params = {"shape": "square", "radius": c.radius, "width": width, "depth": depth}
     return w.solid - loc * tool, params
@@ -672,8 +707,10 @@ def blend_edges(shape: TopoDS_Shape) -> list[tuple]:
             if abs(n1 @ n2) > math.cos(math.radians(15)):
                 continue  # nearly tangent planes: a blend would be a sliver
             out.append((edge, faces[0], faces[1], "line", limit))
-        elif curve.GetType() == GeomAbs_Circle and {t1, t2} in ({GeomAbs_Plane, GeomAbs_Cylinder},
-                                                                 {GeomAbs_Plane, GeomAbs_Cone}):
+        elif curve.GetType() == GeomAbs_Circle and {t1, t2} in (
+            {GeomAbs_Plane, GeomAbs_Cylinder},
+            {GeomAbs_Plane, GeomAbs_Cone},
+        ):
             circ = curve.Circle()
             ax = _vec(circ.Axis().Direction())
             other = s2 if t1 == GeomAbs_Plane else s1
@@ -740,8 +777,9 @@ def f_ball_end(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> Feature
     return _cap(w, rng, cfg, ball=True)
 
 
-def _pattern_member(w: Work, rng: np.random.Generator, cfg: FeatureConfig
-                    ) -> tuple[str, float, float, Callable[[float], Solid]]:
+def _pattern_member(
+    w: Work, rng: np.random.Generator, cfg: FeatureConfig
+) -> tuple[str, float, float, Callable[[float], Solid]]:
     """One member feature of a pattern: (kind, clearance radius mm, radius of its cylinder faces mm,
     builder(material depth mm) -> the member's tool in the site's local frame)."""
     kind = str(rng.choice(["through_hole", "blind_hole", "boss", "slot"]))
@@ -756,8 +794,15 @@ def _pattern_member(w: Work, rng: np.random.Generator, cfg: FeatureConfig
         return kind, 1.5 * r, 1.5 * r, lambda depth: _cyl(1.5 * r, 0.0, h)
     length, width = 4 * r, 1.6 * r  # a short slot along the local X axis
     frac = _u(rng, 0.3, 0.7)
-    return kind, 2 * r, 0.5 * width, lambda depth: Pos(0, 0, -frac * (depth - cfg.wall_mm)) * extrude(
-        SlotOverall(length, width), frac * (depth - cfg.wall_mm) + cfg.overshoot_mm)
+    return (
+        kind,
+        2 * r,
+        0.5 * width,
+        lambda depth: (
+            Pos(0, 0, -frac * (depth - cfg.wall_mm))
+            * extrude(SlotOverall(length, width), frac * (depth - cfg.wall_mm) + cfg.overshoot_mm)
+        ),
+    )
 
 
 def f_linear_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResult:
@@ -785,8 +830,11 @@ def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) ->
     """Holes, bosses or slots on a bolt circle of one planar face (3-8 members), or flutes around a
     full outer cylinder when the part has one (6-18 concave cylinders; share ``w.data['flute_share']`` of draws,
     default 40 %)."""
-    cyls = [c for c in cylinder_sites(w.shape) if c.full and c.radius > 4 * cfg.wall_mm
-            and c.v_range[1] - c.v_range[0] > 2 * cfg.wall_mm]
+    cyls = [
+        c
+        for c in cylinder_sites(w.shape)
+        if c.full and c.radius > 4 * cfg.wall_mm and c.v_range[1] - c.v_range[0] > 2 * cfg.wall_mm
+    ]
     if cyls and rng.random() < w.data.get("flute_share", 0.4):  # flutes around a cylinder (knurl-like when many)
         c = cyls[int(rng.integers(len(cyls)))]
         n = int(rng.integers(6, 19))
@@ -797,8 +845,13 @@ def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) ->
         tools = []
         for i in range(n):
             a = 2 * math.pi * i / n
-            tools.append(loc * (Pos(c.radius * math.cos(a), c.radius * math.sin(a), v0 - o)
-                                * Cylinder(rf, v1 - v0 + 2 * o, align=_BASE)))
+            tools.append(
+                loc
+                * (
+                    Pos(c.radius * math.cos(a), c.radius * math.sin(a), v0 - o)
+                    * Cylinder(rf, v1 - v0 + 2 * o, align=_BASE)
+                )
+            )
         return w.solid - tools, {"of": "flute", "count": n, "member_radius": rf, "circle_radius": c.radius}
     kind, rc, radius, build = _pattern_member(w, rng, cfg)
     n = int(rng.integers(3, 9))
@@ -807,14 +860,23 @@ def f_circular_pattern(w: Work, rng: np.random.Generator, cfg: FeatureConfig) ->
     if site is None:
         return None
     phase = _u(rng, 0, 2 * math.pi)
-    pts = [site.point(rb * math.cos(phase + 2 * math.pi * i / n), rb * math.sin(phase + 2 * math.pi * i / n))
-           for i in range(n)]
+    pts = [
+        site.point(rb * math.cos(phase + 2 * math.pi * i / n), rb * math.sin(phase + 2 * math.pi * i / n))
+        for i in range(n)
+    ]
     depth = _depth_along(w.shape, pts, -site.normal)
     if depth <= 2 * cfg.wall_mm:
         return None
     frame = site.location()
-    tools = [frame * (Pos(rb * math.cos(phase + 2 * math.pi * i / n), rb * math.sin(phase + 2 * math.pi * i / n), 0)
-                      * Rot(0, 0, math.degrees(phase + 2 * math.pi * i / n)) * build(depth)) for i in range(n)]
+    tools = [
+        frame
+        * (
+            Pos(rb * math.cos(phase + 2 * math.pi * i / n), rb * math.sin(phase + 2 * math.pi * i / n), 0)
+            * Rot(0, 0, math.degrees(phase + 2 * math.pi * i / n))
+            * build(depth)
+        )
+        for i in range(n)
+    ]
     new = w.solid + tools if kind == "boss" else w.solid - tools
     return new, {"of": kind, "count": n, "circle_radius": rb, "member_radius": radius}
 
@@ -866,18 +928,35 @@ def f_cut(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -> FeatureResul
 
 
 FEATURES: dict[str, Callable[[Work, np.random.Generator, FeatureConfig], FeatureResult]] = {
-    "through_hole": f_through_hole, "blind_hole": f_blind_hole, "counterbore": f_counterbore,
-    "countersink": f_countersink, "boss": f_boss, "pocket": f_pocket, "slot": f_slot, "rib": f_rib,
-    "step": f_step, "groove": f_groove, "fillet": f_fillet, "chamfer": f_chamfer, "dome": f_dome,
-    "ball_end": f_ball_end, "linear_pattern": f_linear_pattern, "circular_pattern": f_circular_pattern,
-    "union": f_union, "cut": f_cut,
+    "through_hole": f_through_hole,
+    "blind_hole": f_blind_hole,
+    "counterbore": f_counterbore,
+    "countersink": f_countersink,
+    "boss": f_boss,
+    "pocket": f_pocket,
+    "slot": f_slot,
+    "rib": f_rib,
+    "step": f_step,
+    "groove": f_groove,
+    "fillet": f_fillet,
+    "chamfer": f_chamfer,
+    "dome": f_dome,
+    "ball_end": f_ball_end,
+    "linear_pattern": f_linear_pattern,
+    "circular_pattern": f_circular_pattern,
+    "union": f_union,
+    "cut": f_cut,
 }
 assert tuple(FEATURES) == FEATURE_KINDS
 
 
-def apply_feature(w: Work, kind: str, rng: np.random.Generator, cfg: FeatureConfig = FeatureConfig(),
-                  op: Callable[[Work, np.random.Generator, FeatureConfig], FeatureResult] | None = None
-                  ) -> dict | None:
+def apply_feature(
+    w: Work,
+    kind: str,
+    rng: np.random.Generator,
+    cfg: FeatureConfig = FeatureConfig(),
+    op: Callable[[Work, np.random.Generator, FeatureConfig], FeatureResult] | None = None,
+) -> dict | None:
     """Try feature `kind` on `w`; on success replace `w.solid`, record it and return its parameters.
 
     `op` replaces the kind's own operation (a family's fixed feature recorded under a standard kind). A feature
@@ -918,8 +997,14 @@ def apply_feature(w: Work, kind: str, rng: np.random.Generator, cfg: FeatureConf
 # ---- stocks ------------------------------------------------------------------------------------------------------
 
 
-def _round_corners(pts: list[np.ndarray], rng: np.random.Generator, p_round: float, p_chamfer: float,
-                   size_frac: tuple[float, float] = (0.1, 0.35), sharp: tuple[int, ...] = ()) -> list[tuple]:
+def _round_corners(
+    pts: list[np.ndarray],
+    rng: np.random.Generator,
+    p_round: float,
+    p_chamfer: float,
+    size_frac: tuple[float, float] = (0.1, 0.35),
+    sharp: tuple[int, ...] = (),
+) -> list[tuple]:
     """Closed 2-D outline -> segments: ("line", a, b) or ("arc", a, mid, b); some corners rounded by a tangent arc
     or cut by a chamfer of a drawn size (fraction of the shorter adjacent side). Corners in `sharp` stay sharp."""
     n = len(pts)
@@ -1025,23 +1110,33 @@ def stock_extrude(rng: np.random.Generator, L: float, W: float, H: float) -> tup
     face = Face(Wire(_edges_2d(segs)))
     solid = extrude(face, H)
     arcs = sum(s[0] == "arc" for s in segs)
-    return _as_solid(solid), {"stock": "extrude", "outline": kind, "L": L, "W": W, "H": H, "segments": len(segs),
-                              "arcs": arcs}
+    return _as_solid(solid), {
+        "stock": "extrude",
+        "outline": kind,
+        "L": L,
+        "W": W,
+        "H": H,
+        "segments": len(segs),
+        "arcs": arcs,
+    }
 
 
 def stock_polygon(rng: np.random.Generator, n: int, across_flats: float, length: float) -> tuple[Solid, dict]:
     """Regular n-gon bar of `across_flats` (mm) standing along +Z from 0 to `length`, one side normal to -Y."""
     R = 0.5 * across_flats / math.cos(math.pi / n)
     theta0 = -0.5 * math.pi + math.pi / n  # vertices at +-180/n about -Y: a flat faces -Y
-    pts = [np.array([R * math.cos(theta0 + 2 * math.pi * k / n), R * math.sin(theta0 + 2 * math.pi * k / n)])
-           for k in range(n)]
+    pts = [
+        np.array([R * math.cos(theta0 + 2 * math.pi * k / n), R * math.sin(theta0 + 2 * math.pi * k / n)])
+        for k in range(n)
+    ]
     segs = [("line", pts[k], pts[(k + 1) % n]) for k in range(n)]
     solid = extrude(Face(Wire(_edges_2d(segs))), length)
     return _as_solid(solid), {"stock": "polygon", "sides": n, "across_flats": across_flats, "length": length}
 
 
-def _revolve_profile(pts: list[np.ndarray], rng: np.random.Generator, p_round: float, p_chamfer: float
-                     ) -> tuple[Solid, int]:
+def _revolve_profile(
+    pts: list[np.ndarray], rng: np.random.Generator, p_round: float, p_chamfer: float
+) -> tuple[Solid, int]:
     """Revolve a closed (r, z) outline whose first and last points lie on the axis (r = 0) about Z."""
     # Corners on the axis are kept sharp (a blend there would leave the axis); the rest may be rounded.
     segs = _round_corners(pts, rng, p_round, p_chamfer, size_frac=(0.1, 0.4), sharp=(0, len(pts) - 1))
@@ -1052,8 +1147,13 @@ def _revolve_profile(pts: list[np.ndarray], rng: np.random.Generator, p_round: f
     return _as_solid(solid), sum(s[0] == "arc" for s in fixed)
 
 
-def stock_turned(rng: np.random.Generator, n_steps: int, r_range: tuple[float, float], h_range: tuple[float, float],
-                 taper: float = 0.3) -> tuple[Solid, dict]:
+def stock_turned(
+    rng: np.random.Generator,
+    n_steps: int,
+    r_range: tuple[float, float],
+    h_range: tuple[float, float],
+    taper: float = 0.3,
+) -> tuple[Solid, dict]:
     """A turned profile: `n_steps` sections of random radius and height (mm), joined by shoulders or tapers
     (cones), corners rounded (tori) or chamfered (cones); revolved about Z, base at z = 0."""
     radii = rng.uniform(*r_range, n_steps)
@@ -1099,21 +1199,74 @@ def stock_pillow_block(rng: np.random.Generator) -> tuple[Solid, dict, dict]:
     housing = Pos(0, 0, Hc) * Rot(90, 0, 0) * Cylinder(Rh, Wh, align=(_C, _C, _C))
     body = base + pedestal + housing
     body = body - Pos(0, 0, Hc) * Rot(90, 0, 0) * Cylinder(Rb, Wb + 10, align=(_C, _C, _C))
-    return _as_solid(body), {"stock": "pillow_block", "L": L, "W": Wb, "base_height": Hb, "housing_radius": Rh,
-                             "axis_height": Hc, "bore_radius": Rb}, {"L": L, "ped": ped, "Hb": Hb, "Wb": Wb}
+    return (
+        _as_solid(body),
+        {
+            "stock": "pillow_block",
+            "L": L,
+            "W": Wb,
+            "base_height": Hb,
+            "housing_radius": Rh,
+            "axis_height": Hc,
+            "bore_radius": Rb,
+        },
+        {"L": L, "ped": ped, "Hb": Hb, "Wb": Wb},
+    )
 
 
 # ---- families ----------------------------------------------------------------------------------------------------
 
 # Relative weights of the random features per family (kinds that cannot apply just get skipped).
-_W_PRISMATIC = {"through_hole": 3, "blind_hole": 2, "counterbore": 2, "countersink": 1, "boss": 2, "pocket": 2,
-                "slot": 2, "rib": 1, "step": 1.5, "groove": 0.5, "fillet": 2, "chamfer": 2, "dome": 0.5,
-                "ball_end": 0.3, "linear_pattern": 1.5, "circular_pattern": 1, "union": 1, "cut": 1.5}
-_W_PLATE = {**_W_PRISMATIC, "step": 0.5, "rib": 1.5, "union": 0.5, "linear_pattern": 2.5, "circular_pattern": 2,
-            "boss": 1, "groove": 0.2}
-_W_TURNED = {"through_hole": 2, "blind_hole": 2, "counterbore": 1, "countersink": 1, "boss": 0.5, "pocket": 0.5,
-             "slot": 1, "rib": 0.3, "step": 1, "groove": 3, "fillet": 1.5, "chamfer": 2, "dome": 1.5,
-             "ball_end": 1, "linear_pattern": 0.5, "circular_pattern": 2.5, "union": 0.5, "cut": 1}
+_W_PRISMATIC = {
+    "through_hole": 3,
+    "blind_hole": 2,
+    "counterbore": 2,
+    "countersink": 1,
+    "boss": 2,
+    "pocket": 2,
+    "slot": 2,
+    "rib": 1,
+    "step": 1.5,
+    "groove": 0.5,
+    "fillet": 2,
+    "chamfer": 2,
+    "dome": 0.5,
+    "ball_end": 0.3,
+    "linear_pattern": 1.5,
+    "circular_pattern": 1,
+    "union": 1,
+    "cut": 1.5,
+}
+_W_PLATE = {
+    **_W_PRISMATIC,
+    "step": 0.5,
+    "rib": 1.5,
+    "union": 0.5,
+    "linear_pattern": 2.5,
+    "circular_pattern": 2,
+    "boss": 1,
+    "groove": 0.2,
+}
+_W_TURNED = {
+    "through_hole": 2,
+    "blind_hole": 2,
+    "counterbore": 1,
+    "countersink": 1,
+    "boss": 0.5,
+    "pocket": 0.5,
+    "slot": 1,
+    "rib": 0.3,
+    "step": 1,
+    "groove": 3,
+    "fillet": 1.5,
+    "chamfer": 2,
+    "dome": 1.5,
+    "ball_end": 1,
+    "linear_pattern": 0.5,
+    "circular_pattern": 2.5,
+    "union": 0.5,
+    "cut": 1,
+}
 
 
 def _draw_kinds(rng: np.random.Generator, weights: dict[str, float], cfg: FeatureConfig) -> list[str]:
@@ -1165,8 +1318,14 @@ def _fam_knob(rng: np.random.Generator, cfg: FeatureConfig) -> tuple[Work, list[
     rt = rb * _u(rng, 0.5, 0.9)
     ht = _u(rng, 6, 25)
     top = float(hb + 0.3 * ht + ht)
-    pts = [np.array([0.0, 0.0]), np.array([rb, 0.0]), np.array([rb, hb]), np.array([rt, hb + 0.3 * ht]),
-           np.array([rt, top]), np.array([0.0, top])]
+    pts = [
+        np.array([0.0, 0.0]),
+        np.array([rb, 0.0]),
+        np.array([rb, hb]),
+        np.array([rt, hb + 0.3 * ht]),
+        np.array([rt, top]),
+        np.array([0.0, top]),
+    ]
     solid, arcs = _revolve_profile(pts, rng, 0.4, 0.2)
     info = {"stock": "knob", "base_radius": rb, "top_radius": rt, "height": top, "arcs": arcs}
     # The top first (it needs the full top disc), then a groove (it needs a full cylinder), then the flutes.
@@ -1174,16 +1333,25 @@ def _fam_knob(rng: np.random.Generator, cfg: FeatureConfig) -> tuple[Work, list[
     if rng.random() < 0.5:
         kinds.append("groove")
     kinds.append("circular_pattern")
-    kinds += _draw_kinds(rng, {"through_hole": 1, "blind_hole": 1.5, "chamfer": 1, "fillet": 1, "groove": 1,
-                               "circular_pattern": 0.5}, replace(cfg, n_features=(1, 3)))
+    kinds += _draw_kinds(
+        rng,
+        {"through_hole": 1, "blind_hole": 1.5, "chamfer": 1, "fillet": 1, "groove": 1, "circular_pattern": 0.5},
+        replace(cfg, n_features=(1, 3)),
+    )
     return Work(solid, "feat_knob", 2 * rb, info, data={"flute_share": 0.8}), kinds
 
 
 def _fam_block(rng: np.random.Generator, cfg: FeatureConfig) -> tuple[Work, list[str]]:
     solid, info, holes = stock_pillow_block(rng)
     w = Work(solid, "feat_block", holes["Wb"], info, data=holes)
-    kinds = ["block_counterbores", *_draw_kinds(rng, {"fillet": 2, "chamfer": 2, "blind_hole": 1, "slot": 0.5,
-                                                      "through_hole": 1, "cut": 0.5}, replace(cfg, n_features=(1, 4)))]
+    kinds = [
+        "block_counterbores",
+        *_draw_kinds(
+            rng,
+            {"fillet": 2, "chamfer": 2, "blind_hole": 1, "slot": 0.5, "through_hole": 1, "cut": 0.5},
+            replace(cfg, n_features=(1, 4)),
+        ),
+    ]
     return w, kinds
 
 
@@ -1203,13 +1371,16 @@ def _block_counterbores(w: Work, rng: np.random.Generator, cfg: FeatureConfig) -
     for sx in (-1, 1):
         for y in ys:
             tools.append(Pos(sx * x, y, h["Hb"]) * (_cyl(r, -h["Hb"] - o, o) + _cyl(rc, -depth, o)))
-    return w.solid - tools, {"radius": r, "counterbore_radius": rc, "counterbore_depth": depth,
-                             "count": len(tools)}
+    return w.solid - tools, {"radius": r, "counterbore_radius": rc, "counterbore_depth": depth, "count": len(tools)}
 
 
 _FAMILY_BUILDERS: dict[str, Callable[[np.random.Generator, FeatureConfig], tuple[Work, list[str]]]] = {
-    "feat_prismatic": _fam_prismatic, "feat_plate": _fam_plate, "feat_turned": _fam_turned,
-    "feat_hex": _fam_hex, "feat_knob": _fam_knob, "feat_block": _fam_block,
+    "feat_prismatic": _fam_prismatic,
+    "feat_plate": _fam_plate,
+    "feat_turned": _fam_turned,
+    "feat_hex": _fam_hex,
+    "feat_knob": _fam_knob,
+    "feat_block": _fam_block,
 }
 assert tuple(_FAMILY_BUILDERS) == FEATURE_FAMILIES
 
@@ -1248,16 +1419,22 @@ def make_feature_part(family: str, rng: np.random.Generator, cfg: FeatureConfig 
     problem = shape_problem(shape, cfg)
     if problem is not None:  # every step was checked; this guards the final turn and move
         raise RuntimeError(f"{family} part invalid after its rest pose: {problem}")
-    info = {**w.info, "features": list(w.features), "feature_params": w.params, "skipped": list(w.skipped),
-            "lying": w.lying}
+    info = {
+        **w.info,
+        "features": list(w.features),
+        "feature_params": w.params,
+        "skipped": list(w.skipped),
+        "lying": w.lying,
+    }
     return RestPart(shape, family, box, info)
 
 
 # ---- validity and speed ------------------------------------------------------------------------------------------
 
 
-def measure(n: int, seed: int, families: tuple[str, ...] = FEATURE_FAMILIES,
-            cfg: FeatureConfig = FeatureConfig()) -> dict:
+def measure(
+    n: int, seed: int, families: tuple[str, ...] = FEATURE_FAMILIES, cfg: FeatureConfig = FeatureConfig()
+) -> dict:
     """Build `n` parts in this process (family i % len(families), generator [seed, i]) and report the valid share
     (built, one BRepCheck-valid solid of analytic faces in its rest pose), parts per CPU second and per wall
     second, the feature kinds applied and why the skipped features were skipped."""
@@ -1280,10 +1457,18 @@ def measure(n: int, seed: int, families: tuple[str, ...] = FEATURE_FAMILIES,
         # Why features were skipped, by cause ("no room", "OCCT failed", "BRepCheck: invalid", "non-analytic", ...).
         skipped.update(reason.split(": ", 1)[1].split(" (")[0] for reason in part.info["skipped"])
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
-    return {"parts": n, "valid": valid, "valid_share": valid / n, "parts_per_cpu_s": n / cpu,
-            "parts_per_wall_s": n / wall, "mean_features": float(np.mean(n_features)) if n_features else 0.0,
-            "kinds": dict(sorted(kinds.items())), "valid_per_family": dict(per_family),
-            "features_applied": int(sum(kinds.values())), "features_skipped": dict(skipped.most_common())}
+    return {
+        "parts": n,
+        "valid": valid,
+        "valid_share": valid / n,
+        "parts_per_cpu_s": n / cpu,
+        "parts_per_wall_s": n / wall,
+        "mean_features": float(np.mean(n_features)) if n_features else 0.0,
+        "kinds": dict(sorted(kinds.items())),
+        "valid_per_family": dict(per_family),
+        "features_applied": int(sum(kinds.values())),
+        "features_skipped": dict(skipped.most_common()),
+    }
 
 
 if __name__ == "__main__":

@@ -40,8 +40,9 @@ def _axis(params: dict, key: str = "axis") -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def intersect_primitive(kind: str, params: dict, dirs: np.ndarray, t0: np.ndarray,
-                        max_shift: float) -> tuple[np.ndarray, np.ndarray]:
+def intersect_primitive(
+    kind: str, params: dict, dirs: np.ndarray, t0: np.ndarray, max_shift: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Analytic hit distances (n,) and unit normals (n, 3) facing the camera for rays `dirs` (n, 3) from the
     origin against one primitive; NaN distance where there is no hit within `max_shift` metres of t0."""
     o = np.asarray(params["origin"], float)
@@ -54,16 +55,18 @@ def intersect_primitive(kind: str, params: dict, dirs: np.ndarray, t0: np.ndarra
     elif kind == "sphere":
         r = float(params["radius"])
         q0 = -o
-        t = _nearest_quadratic_root(np.ones(len(dirs)), 2.0 * rows_dot(dirs, q0), np.full(len(dirs), q0 @ q0 - r * r),
-                                    t0)
+        t = _nearest_quadratic_root(
+            np.ones(len(dirs)), 2.0 * rows_dot(dirs, q0), np.full(len(dirs), q0 @ q0 - r * r), t0
+        )
         normals = dirs * t[:, None] - o
     elif kind == "cylinder":
         a, r = _axis(params), float(params["radius"])
         q0 = -o
         qp = q0 - (q0 @ a) * a
         dp = dirs - rows_dot(dirs, a)[:, None] * a
-        t = _nearest_quadratic_root(np.einsum("ij,ij->i", dp, dp), 2.0 * rows_dot(dp, qp),
-                                    np.full(len(dirs), qp @ qp - r * r), t0)
+        t = _nearest_quadratic_root(
+            np.einsum("ij,ij->i", dp, dp), 2.0 * rows_dot(dp, qp), np.full(len(dirs), qp @ qp - r * r), t0
+        )
         p = dirs * t[:, None] - o
         normals = p - rows_dot(p, a)[:, None] * a
     elif kind == "cone":
@@ -71,14 +74,17 @@ def intersect_primitive(kind: str, params: dict, dirs: np.ndarray, t0: np.ndarra
         q0 = -o  # ray origin relative to the apex
         da = rows_dot(dirs, a)
         qa = q0 @ a
-        t = _nearest_quadratic_root(da * da - cos2, 2.0 * (qa * da - cos2 * rows_dot(dirs, q0)),
-                                    np.full(len(dirs), qa * qa - cos2 * (q0 @ q0)), t0)
+        t = _nearest_quadratic_root(
+            da * da - cos2,
+            2.0 * (qa * da - cos2 * rows_dot(dirs, q0)),
+            np.full(len(dirs), qa * qa - cos2 * (q0 @ q0)),
+            t0,
+        )
         p = dirs * t[:, None] - o
         t = np.where(rows_dot(p, a) > 0.0, t, np.nan)  # the material nappe only
         normals = rows_dot(p, a)[:, None] * a - cos2 * p
     elif kind == "torus":
-        t, normals = _torus_newton(o, _axis(params), float(params["radius"]), float(params["minor_radius"]),
-                                   dirs, t0)
+        t, normals = _torus_newton(o, _axis(params), float(params["radius"]), float(params["minor_radius"]), dirs, t0)
     else:
         raise ValueError(f"no analytic intersection for {kind}")
     t = np.where(np.abs(t - t0) <= max_shift, t, np.nan)
@@ -89,8 +95,9 @@ def intersect_primitive(kind: str, params: dict, dirs: np.ndarray, t0: np.ndarra
     return t, normals
 
 
-def _torus_newton(c: np.ndarray, a: np.ndarray, big_r: float, small_r: float, dirs: np.ndarray,
-                  t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _torus_newton(
+    c: np.ndarray, a: np.ndarray, big_r: float, small_r: float, dirs: np.ndarray, t0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Newton on the torus signed distance along each ray, started at the mesh hit t0 (the quartic's root nearest
     t0). Returns NaN where it does not converge to the surface."""
     t = t0.astype(float).copy()

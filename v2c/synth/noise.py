@@ -102,13 +102,18 @@ def apply_paper(depth: np.ndarray, rng: np.random.Generator, cfg: PaperNoise = P
     """The paper's fBm + bilateral blur (see the module docstring)."""
     valid = depth > 0
     noisy = depth + cfg.amplitude_m * fbm_map(rng, depth.shape[1], depth.shape[0], cfg.fbm)
-    noisy = cv2.bilateralFilter(np.where(valid, noisy, 0.0).astype(np.float32), cfg.bilateral_diameter_px,
-                                cfg.bilateral_sigma_depth_m, cfg.bilateral_sigma_space_px)
+    noisy = cv2.bilateralFilter(
+        np.where(valid, noisy, 0.0).astype(np.float32),
+        cfg.bilateral_diameter_px,
+        cfg.bilateral_sigma_depth_m,
+        cfg.bilateral_sigma_space_px,
+    )
     return np.where(valid, noisy, 0.0)
 
 
-def apply_sensor(depth: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator,
-                 cfg: SensorNoise = SensorNoise()) -> np.ndarray:
+def apply_sensor(
+    depth: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator, cfg: SensorNoise = SensorNoise()
+) -> np.ndarray:
     """RealSense-like noise on a clean depth map; `cos_incidence` (H, W) is |cos| of the angle between each
     pixel's ray and the surface normal."""
     h, w = depth.shape
@@ -151,8 +156,9 @@ def apply_sensor(depth: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Ge
     return np.where(missing | (noisy <= 0), 0.0, noisy)
 
 
-def apply_depth_noise(profile: str, depth: np.ndarray, cos_incidence: np.ndarray,
-                      rng: np.random.Generator) -> np.ndarray:
+def apply_depth_noise(
+    profile: str, depth: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
     """Noisy depth (metres) for one of PROFILES."""
     if profile == "none":
         return depth.copy()
@@ -174,8 +180,9 @@ def noise_params(profile: str) -> dict:
     return {}
 
 
-def finish_color(linear: np.ndarray, rng: np.random.Generator, profile: str,
-                 cfg: ColorNoise = ColorNoise()) -> np.ndarray:
+def finish_color(
+    linear: np.ndarray, rng: np.random.Generator, profile: str, cfg: ColorNoise = ColorNoise()
+) -> np.ndarray:
     """Linear RGB float (H, W, 3) -> sRGB uint8 with blur and (unless profile is none) read noise."""
     lin = np.clip(linear, 0.0, 1.0).astype(np.float32)
     srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.power(np.maximum(lin, 0.0031308), 1 / 2.4) - 0.055)

@@ -202,30 +202,44 @@ def face_primitive(face: TopoDS_Face, to_m: float) -> dict:
         return {"type": "plane", "params": {"origin": _scaled(pln.Location(), to_m), "normal": normal.tolist()}}
     if kind == GeomAbs_Cylinder:
         cyl = surf.Cylinder()
-        return {"type": "cylinder", "params": {"origin": _scaled(cyl.Location(), to_m),
-                                               "axis": _xyz(cyl.Axis().Direction()),
-                                               "radius": cyl.Radius() * to_m}}
+        return {
+            "type": "cylinder",
+            "params": {
+                "origin": _scaled(cyl.Location(), to_m),
+                "axis": _xyz(cyl.Axis().Direction()),
+                "radius": cyl.Radius() * to_m,
+            },
+        }
     if kind == GeomAbs_Cone:
         cone = surf.Cone()
         apex = np.array(_xyz(cone.Apex()))
         axis = np.array(_xyz(cone.Axis().Direction()))
         # The face may lie on either nappe (OCCT allows v beyond the apex): orient the axis from the apex
         # towards the face's own points, i.e. towards growing radius on the material side.
-        mid = surf.Value(0.5 * (surf.FirstUParameter() + surf.LastUParameter()),
-                         0.5 * (surf.FirstVParameter() + surf.LastVParameter()))
+        mid = surf.Value(
+            0.5 * (surf.FirstUParameter() + surf.LastUParameter()),
+            0.5 * (surf.FirstVParameter() + surf.LastVParameter()),
+        )
         if (np.array(_xyz(mid)) - apex) @ axis < 0:
             axis = -axis
-        return {"type": "cone", "params": {"origin": (apex * to_m).tolist(), "axis": axis.tolist(),
-                                           "half_angle": abs(cone.SemiAngle())}}
+        return {
+            "type": "cone",
+            "params": {"origin": (apex * to_m).tolist(), "axis": axis.tolist(), "half_angle": abs(cone.SemiAngle())},
+        }
     if kind == GeomAbs_Sphere:
         sph = surf.Sphere()
         return {"type": "sphere", "params": {"origin": _scaled(sph.Location(), to_m), "radius": sph.Radius() * to_m}}
     if kind == GeomAbs_Torus:
         tor = surf.Torus()
-        return {"type": "torus", "params": {"origin": _scaled(tor.Location(), to_m),
-                                            "axis": _xyz(tor.Axis().Direction()),
-                                            "radius": tor.MajorRadius() * to_m,
-                                            "minor_radius": tor.MinorRadius() * to_m}}
+        return {
+            "type": "torus",
+            "params": {
+                "origin": _scaled(tor.Location(), to_m),
+                "axis": _xyz(tor.Axis().Direction()),
+                "radius": tor.MajorRadius() * to_m,
+                "minor_radius": tor.MinorRadius() * to_m,
+            },
+        }
     return {"type": _NON_ANALYTIC_NAMES.get(kind, "other"), "params": {}}
 
 

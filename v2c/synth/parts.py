@@ -157,8 +157,9 @@ def build_shaft(rng: np.random.Generator) -> tuple[Part, dict]:
         z0 = float(np.sum(lengths[:k]))
         r = float(radii[k])
         kl, kw = 0.6 * float(lengths[k]), 0.4 * r
-        part -= Pos(0, r - 0.25 * r, z0 + 0.2 * float(lengths[k])) * Box(kw, r, kl, align=(Align.CENTER, Align.MIN,
-                                                                                          Align.MIN))
+        part -= Pos(0, r - 0.25 * r, z0 + 0.2 * float(lengths[k])) * Box(
+            kw, r, kl, align=(Align.CENTER, Align.MIN, Align.MIN)
+        )
     if rng.random() < 0.5:
         k = int(rng.integers(0, n))
         zc = float(np.sum(lengths[:k]) + 0.5 * lengths[k])
@@ -215,10 +216,19 @@ def build_knob(rng: np.random.Generator) -> tuple[Part, dict]:
     turn = _turn_angle_deg(rng)
     for k in range(n_holes):
         a = turn + 360.0 * k / max(n_holes, 1)
-        part -= Pos(0, 0, 0.5 * h1) * Rot(0, 0, a) * Rot(0, 90, 0) * Cylinder(_u(rng, 0.08, 0.15) * h1, 3 * R1,
-                                                                                 align=_MIN)
-    return part, {"R1": R1, "h1": h1, "R2": R2, "R3": R3, "h2": h2, "cap_radius": float(rs), "holes": n_holes,
-                  "hole_turn_deg": turn}
+        part -= (
+            Pos(0, 0, 0.5 * h1) * Rot(0, 0, a) * Rot(0, 90, 0) * Cylinder(_u(rng, 0.08, 0.15) * h1, 3 * R1, align=_MIN)
+        )
+    return part, {
+        "R1": R1,
+        "h1": h1,
+        "R2": R2,
+        "R3": R3,
+        "h2": h2,
+        "cap_radius": float(rs),
+        "holes": n_holes,
+        "hole_turn_deg": turn,
+    }
 
 
 def build_turned(rng: np.random.Generator) -> tuple[Part, dict]:
@@ -243,8 +253,7 @@ def build_turned(rng: np.random.Generator) -> tuple[Part, dict]:
     hole_r = _u(rng, 0.03, 0.06) * W
     for sx in (-1, 1):
         for sy in (-1, 1):
-            part -= Pos(sx * (L / 2 - 3 * hole_r), sy * (W / 2 - 3 * hole_r), -1) * Cylinder(hole_r, H + 2,
-                                                                                               align=_MIN)
+            part -= Pos(sx * (L / 2 - 3 * hole_r), sy * (W / 2 - 3 * hole_r), -1) * Cylinder(hole_r, H + 2, align=_MIN)
     return part, {"L": L, "W": W, "H": H, "turn_deg": turn, "block": [bl, bw, bh]}
 
 
@@ -255,8 +264,11 @@ def build_bracket(rng: np.random.Generator) -> tuple[Part, dict]:
     T = _u(rng, 5, 12)
     Hv = _u(rng, 35, 90)
     part = Box(L, W, T, align=_MIN) + Pos(-L / 2 + T / 2, 0, 0) * Box(T, W, Hv, align=_MIN)
-    inner = [e for e in part.edges().filter_by(Axis.Y)
-             if abs(e.center().X - (-L / 2 + T)) < 1e-6 and abs(e.center().Z - T) < 1e-6]
+    inner = [
+        e
+        for e in part.edges().filter_by(Axis.Y)
+        if abs(e.center().X - (-L / 2 + T)) < 1e-6 and abs(e.center().Z - T) < 1e-6
+    ]
     bend = _u(rng, 0.5, 2.0) * T
     part = fillet(inner, bend)
     hole_r = _u(rng, 0.06, 0.12) * W
@@ -264,8 +276,11 @@ def build_bracket(rng: np.random.Generator) -> tuple[Part, dict]:
     for k in range(nh):
         y = (k - (nh - 1) / 2) * W / nh
         part -= Pos(_u(rng, 0.15, 0.3) * L + T / 2 + bend / 2, y, -1) * Cylinder(hole_r, T + 2, align=_MIN)
-        part -= Pos(-L / 2 - 1, y, T + bend + _u(rng, 0.3, 0.6) * (Hv - T - bend)) * Rot(0, 90, 0) * Cylinder(
-            hole_r, T + 2, align=_MIN)
+        part -= (
+            Pos(-L / 2 - 1, y, T + bend + _u(rng, 0.3, 0.6) * (Hv - T - bend))
+            * Rot(0, 90, 0)
+            * Cylinder(hole_r, T + 2, align=_MIN)
+        )
     if rng.random() < 0.6:
         part = fillet(part.edges().filter_by(Axis.X).group_by(Axis.Z)[-1], _u(rng, 0.1, 0.4) * T)
     return part, {"L": L, "W": W, "T": T, "Hv": Hv, "bend": bend}

@@ -51,8 +51,9 @@ class Render:
     dropped: int  # part pixels whose ray missed the exact surface (grazing silhouettes): set to no reading
 
 
-def pixel_rays(K: np.ndarray, width: int, height: int, index: np.ndarray | None = None,
-               dtype: DTypeLike = np.float64) -> np.ndarray:
+def pixel_rays(
+    K: np.ndarray, width: int, height: int, index: np.ndarray | None = None, dtype: DTypeLike = np.float64
+) -> np.ndarray:
     """Unit ray directions (n, 3) through pixel centres (camera frame), for all pixels in row-major order or for
     the flat pixel indices `index`."""
     if index is None:
@@ -74,9 +75,16 @@ def _embree_scene(vertices: np.ndarray, triangles: np.ndarray) -> rtcore_scene.E
     return scene
 
 
-def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_triangle: np.ndarray,
-           primitives: list[dict], deflection_m: float, cfg: RenderConfig = RenderConfig(),
-           appearance: Appearance | None = None) -> Render:
+def render(
+    scene: Scene,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    face_of_triangle: np.ndarray,
+    primitives: list[dict],
+    deflection_m: float,
+    cfg: RenderConfig = RenderConfig(),
+    appearance: Appearance | None = None,
+) -> Render:
     """Render the part mesh (camera frame, metres) with exact depth on its primitives.
 
     `primitives[i]` is face i's primitives.json entry ("type", "params"); `deflection_m` is the mesh's linear
@@ -110,8 +118,9 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
     for fid, sel in zip(fids, np.split(order, starts[1:]), strict=True):
         entry = primitives[fid]
         if entry["type"] in ANALYTIC:
-            t[sel], nrm[sel] = intersect_primitive(entry["type"], entry["params"], d[sel], t_mesh[sel],
-                                                   cfg.max_shift_factor * deflection_m)
+            t[sel], nrm[sel] = intersect_primitive(
+                entry["type"], entry["params"], d[sel], t_mesh[sel], cfg.max_shift_factor * deflection_m
+            )
     # A ray that hits the mesh but misses the exact surface (grazing silhouettes) gets no reading and no face,
     # but is still coloured like the part from the mesh hit.
     missed = ~np.isfinite(t)
@@ -162,8 +171,19 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
     color = np.zeros((n, 3), np.float32)
     ground_n = -up if (trans @ up) > 0 else up  # facing the camera
     albedo_g = ground_albedo(scene, cfg).reshape(-1, 3)[ground]
-    color[ground] = _shade(scene, ebr, dirs32[ground], t_ground[ground], ground_n, albedo_g, scene.ground.specular,
-                           GROUND_SHININESS, sphere, deflection_m, cfg)
+    color[ground] = _shade(
+        scene,
+        ebr,
+        dirs32[ground],
+        t_ground[ground],
+        ground_n,
+        albedo_g,
+        scene.ground.specular,
+        GROUND_SHININESS,
+        sphere,
+        deflection_m,
+        cfg,
+    )
     albedo_p = scene.material.albedo
     if scene.print_look is not None:  # printed part: albedo from the world position of each hit
         world_p = (d * t[:, None] - trans) @ rot
@@ -185,10 +205,32 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
         alb = obj.material.albedo
         if obj.print_look is not None:
             alb = print_texture(obj.print_look, eye + (dirs32[px].astype(np.float64) @ rot) * t_c[sel, None])
-        color[px] = _shade(scene, ebr, dirs32[px], t_c[sel], n_cam[sel].astype(np.float32), alb,
-                           obj.material.specular, obj.material.shininess, sphere, deflection_m, cfg)
-    color[hit] = _shade(scene, ebr, d.astype(np.float32), t, nrm, albedo_p, scene.material.specular,
-                        scene.material.shininess, sphere, deflection_m, cfg)
+        color[px] = _shade(
+            scene,
+            ebr,
+            dirs32[px],
+            t_c[sel],
+            n_cam[sel].astype(np.float32),
+            alb,
+            obj.material.specular,
+            obj.material.shininess,
+            sphere,
+            deflection_m,
+            cfg,
+        )
+    color[hit] = _shade(
+        scene,
+        ebr,
+        d.astype(np.float32),
+        t,
+        nrm,
+        albedo_p,
+        scene.material.specular,
+        scene.material.shininess,
+        sphere,
+        deflection_m,
+        cfg,
+    )
     # Backdrop: a vertical gradient where rays miss everything; far ground fades into it.
     far_mask = prim < 0
     far_mask[in_range] = False
@@ -203,12 +245,14 @@ def render(scene: Scene, vertices: np.ndarray, triangles: np.ndarray, face_of_tr
         color[far] = np.where(fade, np.float32(0.5) * (color[far] + back), back)
     if appearance is not None:
         color *= np.float32(appearance.exposure)
-    return Render(faces.reshape(h, w), depth.reshape(h, w), cos_inc.reshape(h, w), color.reshape(h, w, 3),
-                  int(missed.sum()))
+    return Render(
+        faces.reshape(h, w), depth.reshape(h, w), cos_inc.reshape(h, w), color.reshape(h, w, 3), int(missed.sum())
+    )
 
 
-def _shadow_candidates(dirs: np.ndarray, t: np.ndarray, light: np.ndarray, sphere: tuple[np.ndarray, float]
-                       ) -> np.ndarray:
+def _shadow_candidates(
+    dirs: np.ndarray, t: np.ndarray, light: np.ndarray, sphere: tuple[np.ndarray, float]
+) -> np.ndarray:
     """Bool (n,): the shadow ray from t * dirs (float32) towards `light` crosses the part's bounding sphere."""
     c, r = sphere[0].astype(np.float32), np.float32(sphere[1])
     # m = c - p with p = t d: m.l = c.l - t (d.l); |m|^2 = |c|^2 - 2 t (d.c) + t^2 (|d| = 1).
@@ -217,9 +261,19 @@ def _shadow_candidates(dirs: np.ndarray, t: np.ndarray, light: np.ndarray, spher
     return (m2 < r * r) | ((b > 0) & (b * b - (m2 - r * r) > 0))
 
 
-def _shade(scene: Scene, ebr: rtcore_scene.EmbreeScene, dirs: np.ndarray, t: np.ndarray, normals: np.ndarray,
-           albedo: np.ndarray, specular: float, shininess: float, sphere: tuple[np.ndarray, float], deflection_m: float,
-           cfg: RenderConfig) -> np.ndarray:
+def _shade(
+    scene: Scene,
+    ebr: rtcore_scene.EmbreeScene,
+    dirs: np.ndarray,
+    t: np.ndarray,
+    normals: np.ndarray,
+    albedo: np.ndarray,
+    specular: float,
+    shininess: float,
+    sphere: tuple[np.ndarray, float],
+    deflection_m: float,
+    cfg: RenderConfig,
+) -> np.ndarray:
     """Linear RGB (n, 3) float32 of surface points t * dirs (dirs (n, 3) float32, t metres): Lambert +
     Blinn-Phong; the key light's shadows are cast by the part.
 
@@ -291,7 +345,7 @@ def ground_texture(look: GroundLook, x: np.ndarray, y: np.ndarray) -> np.ndarray
     if look.kind == "wood":
         warp = _fbm(noise, u * 0.3, v * 2.0)
         rings = 0.5 + 0.5 * np.sin(2 * np.pi * (v * 1.5 + 1.5 * warp))
-        mix = rings ** 3
+        mix = rings**3
     elif look.kind == "tiles":
         grout = np.minimum(np.abs(u - np.round(u)), np.abs(v - np.round(v))) < 0.03
         checker = (np.floor(u) + np.floor(v)) % 2
@@ -321,8 +375,9 @@ def print_texture(look: PrintLook, p: np.ndarray) -> np.ndarray:
         noise.noise_type = NoiseType.NoiseType_OpenSimplex2
         noise.fractal_type = FractalType.FractalType_FBm
         noise.fractal_octaves = 3
-        v = 0.5 + 0.5 * np.asarray(noise.gen_from_coords((q * (0.05 if look.kind == "text" else 1.0)
-                                                          ).T.astype(np.float32)), float)
+        v = 0.5 + 0.5 * np.asarray(
+            noise.gen_from_coords((q * (0.05 if look.kind == "text" else 1.0)).T.astype(np.float32)), float
+        )
         v = np.clip((v - 0.5) * 2.5 + 0.5, 0.0, 0.999)
     idx = np.clip((v * k).astype(int), 0, k - 1)
     if look.kind == "text":  # lines of fine marks on the regions of ink 1 and up

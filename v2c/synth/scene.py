@@ -123,8 +123,15 @@ def _sample_ground(rng: np.random.Generator, part_size: float) -> GroundLook:
     base = rng.uniform(0.05, 0.7, 3) * rng.uniform(0.4, 1.0)
     other = np.clip(base * rng.uniform(0.5, 1.5, 3) + rng.normal(0, 0.05, 3), 0.01, 0.95)
     scale = float(part_size * rng.uniform(0.4, 2.0)) if kind != "tiles" else float(rng.uniform(0.05, 0.3))
-    return GroundLook(kind, base, other, scale, float(rng.uniform(0, np.pi)), int(rng.integers(0, 2**31 - 1)),
-                      float(rng.uniform(0.0, 0.3)))
+    return GroundLook(
+        kind,
+        base,
+        other,
+        scale,
+        float(rng.uniform(0, np.pi)),
+        int(rng.integers(0, 2**31 - 1)),
+        float(rng.uniform(0.0, 0.3)),
+    )
 
 
 def _sample_print(rng: np.random.Generator, part_size: float, base: np.ndarray) -> PrintLook:
@@ -132,11 +139,11 @@ def _sample_print(rng: np.random.Generator, part_size: float, base: np.ndarray) 
     k = int(rng.integers(2, 5))
     palette = rng.uniform(0.0, 1.0, (k, 3)) ** rng.uniform(0.7, 2.2, (k, 1))
     palette[0] = base  # the material colour stays one of the inks
-    scale = float(part_size * rng.uniform(0.08, 0.5)) if kind != "text" else float(part_size * rng.uniform(0.01,
-                                                                                                           0.03))
+    scale = float(part_size * rng.uniform(0.08, 0.5)) if kind != "text" else float(part_size * rng.uniform(0.01, 0.03))
     direction = rng.normal(size=3)
-    return PrintLook(kind, palette.astype(float), scale, direction / np.linalg.norm(direction),
-                     int(rng.integers(0, 2**31 - 1)))
+    return PrintLook(
+        kind, palette.astype(float), scale, direction / np.linalg.norm(direction), int(rng.integers(0, 2**31 - 1))
+    )
 
 
 def _look_at(eye: np.ndarray, target: np.ndarray, roll: float) -> np.ndarray:
@@ -164,8 +171,14 @@ def view_corrected_axes(rot_world_to_cam: np.ndarray, model_axes_world: np.ndarr
     return np.stack([x, y, z]) @ rot_world_to_cam.T
 
 
-def sample_scene(rng: np.random.Generator, bbox_lo_mm: np.ndarray, bbox_hi_mm: np.ndarray, width: int,
-                 height: int, cfg: SceneConfig = SceneConfig()) -> Scene:
+def sample_scene(
+    rng: np.random.Generator,
+    bbox_lo_mm: np.ndarray,
+    bbox_hi_mm: np.ndarray,
+    width: int,
+    height: int,
+    cfg: SceneConfig = SceneConfig(),
+) -> Scene:
     """Draw a scene for a rest-pose part with bounding box (lo, hi) in millimetres.
 
     The camera distance d and fill fraction f are drawn first and the part is scaled so its bounding sphere
@@ -226,9 +239,14 @@ def sample_scene(rng: np.random.Generator, bbox_lo_mm: np.ndarray, bbox_hi_mm: n
     wall = rng.uniform(0.1, 0.8, 3) * rng.uniform(0.3, 1.0)
     backdrop = np.stack([wall, np.clip(wall * rng.uniform(0.6, 1.2), 0, 1)])
 
-    info = {"elevation_deg": float(np.rad2deg(elev)), "azimuth_deg": float(np.rad2deg(azim)),
-            "distance_m": float(dist), "fill": float(fill), "turn_deg": float(np.rad2deg(turn)),
-            "hfov_deg": float(np.rad2deg(hfov))}
+    info = {
+        "elevation_deg": float(np.rad2deg(elev)),
+        "azimuth_deg": float(np.rad2deg(azim)),
+        "distance_m": float(dist),
+        "fill": float(fill),
+        "turn_deg": float(np.rad2deg(turn)),
+        "hfov_deg": float(np.rad2deg(hfov)),
+    }
     material, ground = _sample_material(rng), _sample_ground(rng, float(size))
     look = None
     if cfg.print_share > 0:  # its own generator (seeded by the ground's draw): the main stream is untouched
@@ -236,5 +254,20 @@ def sample_scene(rng: np.random.Generator, bbox_lo_mm: np.ndarray, bbox_hi_mm: n
         if prng.random() < cfg.print_share:
             look = _sample_print(prng, float(size), material.albedo)
             material = Material(material.albedo, float(prng.uniform(0.0, 0.15)), material.shininess, "printed")
-    return Scene(width, height, K, world_to_cam, float(scale), rest_to_world, float(size), axes_cam, ambient,
-                 lights, material, ground, backdrop, info, look)
+    return Scene(
+        width,
+        height,
+        K,
+        world_to_cam,
+        float(scale),
+        rest_to_world,
+        float(size),
+        axes_cam,
+        ambient,
+        lights,
+        material,
+        ground,
+        backdrop,
+        info,
+        look,
+    )

@@ -31,8 +31,15 @@ class SheetChoice:
         return self.sheet % 2 == 1
 
 
-def choose_sheet(prim: Primitive, pixels: np.ndarray, depth: np.ndarray, K: np.ndarray,
-                 window: tuple[float, float], rng: np.random.Generator, max_pixels: int) -> SheetChoice:
+def choose_sheet(
+    prim: Primitive,
+    pixels: np.ndarray,
+    depth: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    rng: np.random.Generator,
+    max_pixels: int,
+) -> SheetChoice:
     """Pick the sheet of ``prim`` that agrees best with observed depths.
 
     pixels: (N, 2) (u, v) of the face; depth: (N,) observed depth (metres, 0 = none); at most ``max_pixels`` of

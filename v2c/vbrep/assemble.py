@@ -38,8 +38,11 @@ if TYPE_CHECKING:
 
 def uncertainty_config(cfg: VBRepConfig) -> UncertaintyConfig:
     """The positional-uncertainty model from the sigma_* fields of the config."""
-    return UncertaintyConfig(depth_sigma_coeff_per_m=cfg.sigma_depth_coeff_per_m,
-                             depth_correlated=cfg.sigma_depth_correlated, min_angle_deg=cfg.sigma_min_angle_deg)
+    return UncertaintyConfig(
+        depth_sigma_coeff_per_m=cfg.sigma_depth_coeff_per_m,
+        depth_correlated=cfg.sigma_depth_correlated,
+        min_angle_deg=cfg.sigma_min_angle_deg,
+    )
 
 
 def _calibration(cfg: VBRepConfig) -> CalibrationMap | None:
@@ -49,8 +52,9 @@ def _calibration(cfg: VBRepConfig) -> CalibrationMap | None:
     return load_map(None if cfg.conf_calibration == "shipped" else cfg.conf_calibration)
 
 
-def _edge_sigma_m(p: ProtoEdge, covs: dict[int, FaceCovariance | None], focal: float,
-                  ucfg: UncertaintyConfig) -> float | None:
+def _edge_sigma_m(
+    p: ProtoEdge, covs: dict[int, FaceCovariance | None], focal: float, ucfg: UncertaintyConfig
+) -> float | None:
     """An edge's 1-sigma position error (metres) from its faces' covariances; None without them."""
     fc = [covs.get(f) for f in p.faces]
     if any(c is None for c in fc):
@@ -60,8 +64,13 @@ def _edge_sigma_m(p: ProtoEdge, covs: dict[int, FaceCovariance | None], focal: f
     return outline_sigma_m(fc[0], p.pts, focal, ucfg)
 
 
-def _vedges(ctx: ExtractContext, protos: list[ProtoEdge], fid: dict[int, int],
-            covs: dict[int, FaceCovariance | None], ucfg: UncertaintyConfig) -> list[VEdge]:
+def _vedges(
+    ctx: ExtractContext,
+    protos: list[ProtoEdge],
+    fid: dict[int, int],
+    covs: dict[int, FaceCovariance | None],
+    ucfg: UncertaintyConfig,
+) -> list[VEdge]:
     """The VB-Rep edges with their confidences (raw and calibrated), analytic curves and sigmas (mm)."""
     cfg = ctx.cfg
     cmap = _calibration(cfg)
@@ -70,18 +79,41 @@ def _vedges(ctx: ExtractContext, protos: list[ProtoEdge], fid: dict[int, int],
     for k, p in enumerate(protos):
         s = p.stats
         length_px = float(np.sum(np.linalg.norm(np.diff(project(p.pts, ctx.K), axis=0), axis=1)))
-        raw = edge_confidence(p.type, residual=s.get("residual", 0.0), depth_err=s.get("depth_err", np.nan),
-                              length_px=length_px, angle=s.get("angle", np.nan), gap=s.get("gap", np.nan),
-                              jump=s.get("jump", np.inf), vis_share=s.get("vis_share", 0.0),
-                              agreement=s.get("agreement", 1.0), gap_thr=ctx.gap_thr, scale=ctx.scale, cfg=cfg)
+        raw = edge_confidence(
+            p.type,
+            residual=s.get("residual", 0.0),
+            depth_err=s.get("depth_err", np.nan),
+            length_px=length_px,
+            angle=s.get("angle", np.nan),
+            gap=s.get("gap", np.nan),
+            jump=s.get("jump", np.inf),
+            vis_share=s.get("vis_share", 0.0),
+            agreement=s.get("agreement", 1.0),
+            gap_thr=ctx.gap_thr,
+            scale=ctx.scale,
+            cfg=cfg,
+        )
         raw = round(raw * s.get("factor", 1.0), 4)
         conf = raw if cmap is None else round(float(cmap.apply(p.type, raw)), 4)
         curve = dict(p.curve) if p.type is EdgeType.INTERSECTION and p.curve is not None else None
         tangent = bool(curve.pop("tangent", False)) if curve is not None else False
         sig = _edge_sigma_m(p, covs, focal, ucfg)
         sig_mm = round(1000.0 * sig, 5) if sig is not None and np.isfinite(sig) else None
-        edges.append(VEdge(k, p.type, conf, tuple(fid[f] for f in p.faces), p.pts, p.v0, p.v1,
-                           curve, tangent=tangent, confidence_raw=raw, sigma_mm=sig_mm))
+        edges.append(
+            VEdge(
+                k,
+                p.type,
+                conf,
+                tuple(fid[f] for f in p.faces),
+                p.pts,
+                p.v0,
+                p.v1,
+                curve,
+                tangent=tangent,
+                confidence_raw=raw,
+                sigma_mm=sig_mm,
+            )
+        )
     return edges
 
 
@@ -94,12 +126,15 @@ def _part_box(ctx: ExtractContext) -> tuple[np.ndarray, np.ndarray] | None:
     q = measured_points(ctx.instances > 0, ctx.depth, ctx.K)
     if not len(q):
         return None
-    return (np.percentile(q, cfg.mesh_bound_percentile, axis=0),
-            np.percentile(q, 100.0 - cfg.mesh_bound_percentile, axis=0))
+    return (
+        np.percentile(q, cfg.mesh_bound_percentile, axis=0),
+        np.percentile(q, 100.0 - cfg.mesh_bound_percentile, axis=0),
+    )
 
 
-def _face_box(ctx: ExtractContext, fg: FaceGeom, region: np.ndarray, conf: float,
-              bounds: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _face_box(
+    ctx: ExtractContext, fg: FaceGeom, region: np.ndarray, conf: float, bounds: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """The box a face's mesh must lie in: the part's box, padded (more for a sure face with few depth readings of
     its own, which its edges place) and, for a curved face, deep enough for a hole's wall."""
     cfg, scale = ctx.cfg, ctx.scale
@@ -111,8 +146,14 @@ def _face_box(ctx: ExtractContext, fg: FaceGeom, region: np.ndarray, conf: float
     return lo, hi
 
 
-def _vfaces(ctx: ExtractContext, inst_ids: list[int], fid: dict[int, int], loops: dict, covs: dict,
-            face_pts: dict[int, np.ndarray]) -> list[VFace]:
+def _vfaces(
+    ctx: ExtractContext,
+    inst_ids: list[int],
+    fid: dict[int, int],
+    loops: dict,
+    covs: dict,
+    face_pts: dict[int, np.ndarray],
+) -> list[VFace]:
     """The VB-Rep faces with their meshes, loops, confidences and sigmas (mm)."""
     cfg, scale = ctx.cfg, ctx.scale
     bounds = _part_box(ctx)
@@ -123,17 +164,39 @@ def _vfaces(ctx: ExtractContext, inst_ids: list[int], fid: dict[int, int], loops
         ch = ctx.sheets[inst]
         conf = face_confidence(fg.residual, ch.errors, ch.sheet, scale, cfg)
         box = None if bounds is None else _face_box(ctx, fg, region, conf, bounds)
-        mv, mt = face_mesh(fg.prim, fg.sheet, region, ctx.depth, ctx.K, ctx.window, cfg.mesh_stride_px,
-                           cfg.mesh_max_edge * scale, cfg.mesh_surface_tol * scale, box,
-                           cfg.mesh_plane_long and isinstance(fg.prim, Plane) and conf >= cfg.mesh_loose_min_conf)
+        mv, mt = face_mesh(
+            fg.prim,
+            fg.sheet,
+            region,
+            ctx.depth,
+            ctx.K,
+            ctx.window,
+            cfg.mesh_stride_px,
+            cfg.mesh_max_edge * scale,
+            cfg.mesh_surface_tol * scale,
+            box,
+            cfg.mesh_plane_long and isinstance(fg.prim, Plane) and conf >= cfg.mesh_loose_min_conf,
+        )
         fsig = face_sigma_m(covs[inst], face_pts[inst]) if covs[inst] is not None else float("nan")
-        vfaces.append(VFace(fid[inst], inst, fg.prim.to_dict(), fg.axis_label, loops.get(fid[inst], []), mv, mt,
-                            round(conf, 4), sigma_mm=round(1000.0 * fsig, 5) if np.isfinite(fsig) else None))
+        vfaces.append(
+            VFace(
+                fid[inst],
+                inst,
+                fg.prim.to_dict(),
+                fg.axis_label,
+                loops.get(fid[inst], []),
+                mv,
+                mt,
+                round(conf, 4),
+                sigma_mm=round(1000.0 * fsig, 5) if np.isfinite(fsig) else None,
+            )
+        )
     return vfaces
 
 
-def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoVertex], fit: FitResult,
-             seg: Segmentation) -> VBRep:
+def assemble(
+    ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoVertex], fit: FitResult, seg: Segmentation
+) -> VBRep:
     """Build the VBRep dataclasses: faces with meshes and loops, edges with confidences, vertices; meta with the
     per-face sheet and fallback notes and the extraction's counts."""
     # a face none of whose edges survived post-processing (a sliver of a few pixels) has no boundary to be
@@ -152,12 +215,26 @@ def assemble(ctx: ExtractContext, protos: list[ProtoEdge], vertices: list[ProtoV
     vfaces = _vfaces(ctx, inst_ids, fid, loops, covs, face_pts)
     meta = {
         "segmentation": seg.method,
-        "faces": {str(fid[i]): {"sheet": ctx.sheets[i].sheet, "concave": ctx.sheets[i].concave,
-                                "residual_m": ctx.faces[i].residual,
-                                "fallback_plane": bool(ctx.faces[i].extra.get("fallback")),
-                                "refit": ctx.faces[i].extra.get("refit")} for i in inst_ids},
+        "faces": {
+            str(fid[i]): {
+                "sheet": ctx.sheets[i].sheet,
+                "concave": ctx.sheets[i].concave,
+                "residual_m": ctx.faces[i].residual,
+                "fallback_plane": bool(ctx.faces[i].extra.get("fallback")),
+                "refit": ctx.faces[i].extra.get("refit"),
+            }
+            for i in inst_ids
+        },
         "extract": dict(ctx.stats, gap_threshold_m=ctx.gap_thr),
     }
     h, w = ctx.instances.shape
-    return VBRep(vfaces, edges, vverts, frame=np.asarray(fit.frame, float), K=ctx.K.copy(),
-                 image_size=(int(w), int(h)), scale=ctx.scale, meta=meta)
+    return VBRep(
+        vfaces,
+        edges,
+        vverts,
+        frame=np.asarray(fit.frame, float),
+        K=ctx.K.copy(),
+        image_size=(int(w), int(h)),
+        scale=ctx.scale,
+        meta=meta,
+    )

@@ -33,8 +33,9 @@ DEFAULT_MAP = Path(__file__).with_name("confidence_calibration.json")
 FORMAT = "v2c.confidence_calibration"
 
 
-def isotonic_fit(x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None, min_block: float = 1.0
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def isotonic_fit(
+    x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None, min_block: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weighted isotonic (non-decreasing) least-squares regression of ``y`` on ``x`` by pool-adjacent-violators.
 
     Returns knots (xk, yk, wk): each pooled block's weighted mean x, its value and its weight; xk strictly
@@ -99,9 +100,15 @@ class CalibrationMap:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form of ``confidence_calibration.json`` (knots rounded to 6 decimals)."""
-        return {"format": FORMAT, "format_version": 1, "meta": self.meta,
-                "types": {t: {"x": [round(float(v), 6) for v in xk], "y": [round(float(v), 6) for v in yk]}
-                          for t, (xk, yk) in sorted(self.knots.items())}}
+        return {
+            "format": FORMAT,
+            "format_version": 1,
+            "meta": self.meta,
+            "types": {
+                t: {"x": [round(float(v), 6) for v in xk], "y": [round(float(v), 6) for v in yk]}
+                for t, (xk, yk) in sorted(self.knots.items())
+            },
+        }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "calibration") -> CalibrationMap:
@@ -136,8 +143,14 @@ def load_map(path: str | None = None) -> CalibrationMap | None:
     return CalibrationMap.from_dict(json.loads(p.read_text()), str(p))
 
 
-def fit_map(types: np.ndarray, raw: np.ndarray, ok: np.ndarray, min_edges: int = 20, min_block: int = 20,
-            meta: dict[str, Any] | None = None) -> CalibrationMap:
+def fit_map(
+    types: np.ndarray,
+    raw: np.ndarray,
+    ok: np.ndarray,
+    min_edges: int = 20,
+    min_block: int = 20,
+    meta: dict[str, Any] | None = None,
+) -> CalibrationMap:
     """Isotonic map per edge type from labelled edges (types: EdgeType values, raw: raw confidences, ok: 0/1);
     a type with fewer than ``min_edges`` edges gets no knots (keeps its raw value). Each knot rests on at least
     ``min_block`` edges, and its value is the block's share right with one right and one wrong pseudo-edge added
@@ -176,8 +189,13 @@ def expected_calibration_error(conf: np.ndarray, ok: np.ndarray, n_bins: int = 1
     return float(np.sum(r["count"][s] * np.abs(r["accuracy"][s] - r["confidence"][s])) / r["count"].sum())
 
 
-def reliability_diagram(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str = "",
-                        n_bins: int = 10, size: int = 420) -> Path:
+def reliability_diagram(
+    curves: dict[str, tuple[np.ndarray, np.ndarray]],
+    path: str | Path,
+    title: str = "",
+    n_bins: int = 10,
+    size: int = 420,
+) -> Path:
     """PNG reliability diagram (OpenCV): per curve (label -> (confidence, right)) the share right against the mean
     confidence of each non-empty bin, dot area by count, the diagonal for reference; ECE in the legend."""
     import cv2
@@ -192,13 +210,23 @@ def reliability_diagram(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: 
     cv2.rectangle(img, px(0, 0), px(1, 1), (0, 0, 0), 1)
     for t in np.linspace(0, 1, 6):
         cv2.line(img, px(t, 0), (px(t, 0)[0], px(t, 0)[1] + 4), (0, 0, 0), 1)
-        cv2.putText(img, f"{t:.1f}", (px(t, 0)[0] - 10, px(t, 0)[1] + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
-                    (0, 0, 0), 1, cv2.LINE_AA)
-        cv2.putText(img, f"{t:.1f}", (m - 30, px(0, t)[1] + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 0), 1,
-                    cv2.LINE_AA)
+        cv2.putText(
+            img,
+            f"{t:.1f}",
+            (px(t, 0)[0] - 10, px(t, 0)[1] + 16),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.35,
+            (0, 0, 0),
+            1,
+            cv2.LINE_AA,
+        )
+        cv2.putText(
+            img, f"{t:.1f}", (m - 30, px(0, t)[1] + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 0), 1, cv2.LINE_AA
+        )
     cv2.line(img, px(0, 0), px(1, 1), (150, 150, 150), 1, cv2.LINE_AA)
-    cv2.putText(img, "confidence", (m + size // 2 - 35, m + size + 32), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0),
-                1, cv2.LINE_AA)
+    cv2.putText(
+        img, "confidence", (m + size // 2 - 35, m + size + 32), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA
+    )
     cv2.putText(img, "share right", (4, m - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
     if title:
         cv2.putText(img, title, (m, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
@@ -215,8 +243,16 @@ def reliability_diagram(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: 
         ece = expected_calibration_error(conf, ok, n_bins)
         y = m + size + 50 + 22 * i
         cv2.line(img, (m, y - 4), (m + 20, y - 4), col, 3)
-        cv2.putText(img, f"{label}: ECE {ece:.3f} ({len(conf)} edges)", (m + 28, y), cv2.FONT_HERSHEY_SIMPLEX,
-                    0.42, (0, 0, 0), 1, cv2.LINE_AA)
+        cv2.putText(
+            img,
+            f"{label}: ECE {ece:.3f} ({len(conf)} edges)",
+            (m + 28, y),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.42,
+            (0, 0, 0),
+            1,
+            cv2.LINE_AA,
+        )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(path), img, [cv2.IMWRITE_PNG_COMPRESSION, 9])

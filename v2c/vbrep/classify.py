@@ -109,8 +109,9 @@ def _near_region(instances: np.ndarray, inst: int, uv: np.ndarray, r: int) -> np
     return out
 
 
-def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, view: SurfaceView,
-                     rule: TypingRule) -> SampleTypes:
+def classify_samples(
+    uv: np.ndarray, normal: np.ndarray, a: int, b: int, view: SurfaceView, rule: TypingRule
+) -> SampleTypes:
     """Type the samples ``uv`` (N, 2, pixels) of the boundary between instances ``a`` and ``b`` (0 or an instance
     missing from ``view.faces`` = background); ``normal`` (N, 2) unit image vectors from a's side into b's side."""
     faces, K, window = view.faces, view.K, view.window
@@ -139,8 +140,9 @@ def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, view: S
         kind[is_int] = KIND_INT
         if is_int.any():
             x0 = 0.5 * (p_a[is_int] + p_b[is_int])
-            p_int[is_int] = project_to_intersection(fa.prim, fb.prim, x0, rule.curve_iters, K,
-                                                    band_px + rule.curve_slack_px)
+            p_int[is_int] = project_to_intersection(
+                fa.prim, fb.prim, x0, rule.curve_iters, K, band_px + rule.curve_slack_px
+            )
             x = p_int[is_int]
             cosang = np.abs(np.einsum("ij,ij->i", fa.prim.normal(x), fb.prim.normal(x)))
             angle[is_int] = np.arccos(np.clip(cosang, 0.0, 1.0))
@@ -150,8 +152,17 @@ def classify_samples(uv: np.ndarray, normal: np.ndarray, a: int, b: int, view: S
         sel = np.nonzero(kind == near)[0]
         if face is None or not face.curved or len(sel) == 0:
             continue
-        res = find_contour(face.prim, face.sheet, uv[sel], sign * normal[sel], K, window, rule.vis_px,
-                           rule.vis_step_px, rule.vis_bisect)
+        res = find_contour(
+            face.prim,
+            face.sheet,
+            uv[sel],
+            sign * normal[sel],
+            K,
+            window,
+            rule.vis_px,
+            rule.vis_step_px,
+            rule.vis_bisect,
+        )
         vis[sel] = res.found
         hit = sel[res.found]
         if len(hit):

@@ -26,9 +26,21 @@ from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.model import EdgeType
 
 
-def edge_confidence(etype: EdgeType, *, residual: float, depth_err: float, length_px: float,
-                    angle: float, gap: float, jump: float, vis_share: float, agreement: float,
-                    gap_thr: float, scale: float, cfg: VBRepConfig) -> float:
+def edge_confidence(
+    etype: EdgeType,
+    *,
+    residual: float,
+    depth_err: float,
+    length_px: float,
+    angle: float,
+    gap: float,
+    jump: float,
+    vis_share: float,
+    agreement: float,
+    gap_thr: float,
+    scale: float,
+    cfg: VBRepConfig,
+) -> float:
     """Confidence in [0, 1] of one edge; see the module docstring. Lengths in metres, angle in radians."""
     f_fit = np.exp(-residual / (cfg.conf_residual * scale))
     f_depth = np.exp(-depth_err / (cfg.conf_depth * scale)) if np.isfinite(depth_err) else 0.5
@@ -45,8 +57,7 @@ def edge_confidence(etype: EdgeType, *, residual: float, depth_err: float, lengt
     return float(np.clip(c, 0.0, 1.0))
 
 
-def face_confidence(residual: float, sheet_errors: np.ndarray, sheet: int, scale: float,
-                    cfg: VBRepConfig) -> float:
+def face_confidence(residual: float, sheet_errors: np.ndarray, sheet: int, scale: float, cfg: VBRepConfig) -> float:
     """Face confidence in [0, 1]: the fit factor times how clearly the chosen sheet beats the next best
     (1 when only one sheet exists)."""
     f_fit = np.exp(-residual / (cfg.conf_residual * scale))

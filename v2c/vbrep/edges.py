@@ -50,10 +50,18 @@ _N_CODES = 5
 
 def typing_rule(cfg: VBRepConfig, gap_thr: float) -> TypingRule:
     """The extraction's tolerances of the edge-type rule; ``gap_thr``: the depth-gap threshold (metres)."""
-    return TypingRule(band_px=cfg.int_band_px, band_step_px=cfg.int_band_step_px, gap_m=gap_thr,
-                      vis_px=cfg.vis_px, vis_step_px=cfg.vis_step_px, vis_bisect=cfg.vis_bisect,
-                      vis_angle_deg=cfg.vis_angle_deg, vis_face_px=cfg.vis_face_px, curve_iters=cfg.curve_iters,
-                      curve_slack_px=cfg.curve_slack_px)
+    return TypingRule(
+        band_px=cfg.int_band_px,
+        band_step_px=cfg.int_band_step_px,
+        gap_m=gap_thr,
+        vis_px=cfg.vis_px,
+        vis_step_px=cfg.vis_step_px,
+        vis_bisect=cfg.vis_bisect,
+        vis_angle_deg=cfg.vis_angle_deg,
+        vis_face_px=cfg.vis_face_px,
+        curve_iters=cfg.curve_iters,
+        curve_slack_px=cfg.curve_slack_px,
+    )
 
 
 @dataclass
@@ -114,9 +122,11 @@ def type_edge(ctx: ExtractContext, gi: int, gedge: GraphEdge, a: int, b: int) ->
     if vote < 0:
         m = -m
     st = classify_samples(uv, m, a, b, ctx.view, typing_rule(cfg, ctx.gap_thr))
-    raw = np.where(st.kind == KIND_INT, _C_INT,
-                   np.where(st.kind == 1, np.where(st.vis, _C_A_VIS, _C_A_SIL),
-                            np.where(st.vis, _C_B_VIS, _C_B_SIL)))
+    raw = np.where(
+        st.kind == KIND_INT,
+        _C_INT,
+        np.where(st.kind == 1, np.where(st.vis, _C_A_VIS, _C_A_SIL), np.where(st.vis, _C_B_VIS, _C_B_SIL)),
+    )
     min_run = max(1, round(cfg.min_run_px / cfg.sample_step_px))
     codes = smooth_codes(raw, cfg.smooth_samples, min_run, _N_CODES)
     # observed depth just inside each side (for the depth-agreement confidence)
@@ -138,7 +148,7 @@ def split_runs(te: TypedEdge, cfg: VBRepConfig) -> tuple[list[tuple[int, int]], 
     for k0, k1 in zip(starts, ends):
         # outline corners: only where a face ends against something farther (contours of smooth surfaces and
         # intersection curves of smooth surfaces have no corners of their own)
-        cuts = corner_samples(te.uv_raw[k0:min(k1 + 1, n)], cfg) if codes[k0] in (_C_A_SIL, _C_B_SIL) else []
+        cuts = corner_samples(te.uv_raw[k0 : min(k1 + 1, n)], cfg) if codes[k0] in (_C_A_SIL, _C_B_SIL) else []
         corner_cuts |= {int(k0 + c) for c in cuts}
         bounds = [k0] + [k0 + c for c in cuts] + [k1]
         pieces += list(itertools.pairwise(bounds))
@@ -155,8 +165,9 @@ def _tangent_lift(ctx: ExtractContext, fa: FaceGeom, fb: FaceGeom, x0: np.ndarra
     return pts, curve
 
 
-def _intersection_lift(ctx: ExtractContext, te: TypedEdge, sl: slice, fa: FaceGeom, fb: FaceGeom,
-                       x0: np.ndarray) -> tuple[np.ndarray, dict] | None:
+def _intersection_lift(
+    ctx: ExtractContext, te: TypedEdge, sl: slice, fa: FaceGeom, fb: FaceGeom, x0: np.ndarray
+) -> tuple[np.ndarray, dict] | None:
     """An intersection run's samples on the curve where its surfaces meet, and that curve; None when the fitted
     surfaces do not meet along the run (``meet_share``, ``retype_gap``)."""
     cfg, st = ctx.cfg, te.st
@@ -174,8 +185,9 @@ def _intersection_lift(ctx: ExtractContext, te: TypedEdge, sl: slice, fa: FaceGe
     return pts, intersection_curve(fa.prim, fb.prim, pts, cfg.perpendicular_deg, cfg.parallel_deg)
 
 
-def _intersection_edge(ctx: ExtractContext, te: TypedEdge, sl: slice, agree: float,
-                       common: dict[str, Any]) -> ProtoEdge | None:
+def _intersection_edge(
+    ctx: ExtractContext, te: TypedEdge, sl: slice, agree: float, common: dict[str, Any]
+) -> ProtoEdge | None:
     """The intersection edge of run ``sl`` (tangent junction or crossing); None when its surfaces do not meet."""
     st = te.st
     fa, fb = ctx.faces[te.a], ctx.faces[te.b]
@@ -191,9 +203,20 @@ def _intersection_edge(ctx: ExtractContext, te: TypedEdge, sl: slice, agree: flo
     errs = [e for e in (te.side_a.error(sl), te.side_b.error(sl)) if np.isfinite(e)]
     derr = float(np.mean(errs)) if errs else np.nan
     angle = float(np.nanmedian(st.angle[sl])) if np.isfinite(st.angle[sl]).any() else np.nan
-    return ProtoEdge(EdgeType.INTERSECTION, (te.a, te.b), pts, curve=curve, stats={
-        "agreement": agree, "angle": angle, "gap": float(np.median(st.gap[sl])), "depth_err": derr,
-        "residual": max(fa.residual, fb.residual)}, **common)
+    return ProtoEdge(
+        EdgeType.INTERSECTION,
+        (te.a, te.b),
+        pts,
+        curve=curve,
+        stats={
+            "agreement": agree,
+            "angle": angle,
+            "gap": float(np.median(st.gap[sl])),
+            "depth_err": derr,
+            "residual": max(fa.residual, fb.residual),
+        },
+        **common,
+    )
 
 
 def _retyped_code(ctx: ExtractContext, te: TypedEdge, sl: slice) -> int:
@@ -219,8 +242,9 @@ def _contour_points(p_vis: np.ndarray, p_near: np.ndarray) -> tuple[np.ndarray, 
     return pts, vis_share
 
 
-def _outline_edges(ctx: ExtractContext, te: TypedEdge, sl: slice, code: int, agree: float, retyped: bool,
-                   common: dict[str, Any]) -> list[ProtoEdge]:
+def _outline_edges(
+    ctx: ExtractContext, te: TypedEdge, sl: slice, code: int, agree: float, retyped: bool, common: dict[str, Any]
+) -> list[ProtoEdge]:
     """The silhouette or visibility edge of the near face of run ``sl`` and, with a face behind, its occluded
     edge; a retyped intersection's confidence is scaled by ``retype_conf``."""
     a, b, st = te.a, te.b, te.st
@@ -234,18 +258,42 @@ def _outline_edges(ctx: ExtractContext, te: TypedEdge, sl: slice, code: int, agr
     pts, vis_share = _contour_points(st.p_vis[sl], p_near) if vis else (p_near, 0.0)
     etype = EdgeType.VISIBILITY if vis else EdgeType.SILHOUETTE
     factor = ctx.cfg.retype_conf if retyped else 1.0
-    protos = [ProtoEdge(etype, (near,), pts, stats={
-        "agreement": agree, "jump": jump, "vis_share": vis_share, "depth_err": err_near,
-        "residual": ctx.faces[near].residual, "factor": factor}, **common)]
+    protos = [
+        ProtoEdge(
+            etype,
+            (near,),
+            pts,
+            stats={
+                "agreement": agree,
+                "jump": jump,
+                "vis_share": vis_share,
+                "depth_err": err_near,
+                "residual": ctx.faces[near].residual,
+                "factor": factor,
+            },
+            **common,
+        )
+    ]
     if far:
-        protos.append(ProtoEdge(EdgeType.OCCLUDED, (far,), p_far, stats={
-            "agreement": agree, "jump": jump, "depth_err": err_far,
-            "residual": ctx.faces[far].residual, "factor": factor}, **common))
+        protos.append(
+            ProtoEdge(
+                EdgeType.OCCLUDED,
+                (far,),
+                p_far,
+                stats={
+                    "agreement": agree,
+                    "jump": jump,
+                    "depth_err": err_far,
+                    "residual": ctx.faces[far].residual,
+                    "factor": factor,
+                },
+                **common,
+            )
+        )
     return protos
 
 
-def _run_protos(ctx: ExtractContext, te: TypedEdge, sl: slice, code: int,
-                common: dict[str, Any]) -> list[ProtoEdge]:
+def _run_protos(ctx: ExtractContext, te: TypedEdge, sl: slice, code: int, common: dict[str, Any]) -> list[ProtoEdge]:
     """The proto edges of one run of samples ``sl`` whose smoothed type code is ``code``."""
     agree = float(np.mean(te.raw[sl] == code))
     if code != _C_INT:

@@ -40,8 +40,9 @@ if TYPE_CHECKING:
 _FRAME_ROW = {"X": 0, "Y": 1, "Z": 2}
 
 
-def labelled_fallback(inst: int, seg: Segmentation, fit: FitResult, X: np.ndarray, scale: float,
-                      cfg: VBRepConfig) -> tuple[Cylinder | Plane, float, str | None] | None:
+def labelled_fallback(
+    inst: int, seg: Segmentation, fit: FitResult, X: np.ndarray, scale: float, cfg: VBRepConfig
+) -> tuple[Cylinder | Plane, float, str | None] | None:
     """An unfitted instance labelled cylinder or plane with an aligned axis class (X / Y / Z): the cylinder on
     that axis of the shared frame (radius at most the part size: a tiny wall patch keeps its type instead of
     becoming a plane), or the plane normal to it, that fits its evidence X (N, 3) within fallback_rms; else None.
@@ -77,8 +78,14 @@ def labelled_fallback(inst: int, seg: Segmentation, fit: FitResult, X: np.ndarra
     return got[0], got[1], ax.value
 
 
-def fallback_plane_points(inst: int, inst_map: np.ndarray, depth: np.ndarray, K: np.ndarray,
-                          faces: dict[int, FaceGeom], window: tuple[float, float]) -> list[np.ndarray]:
+def fallback_plane_points(
+    inst: int,
+    inst_map: np.ndarray,
+    depth: np.ndarray,
+    K: np.ndarray,
+    faces: dict[int, FaceGeom],
+    window: tuple[float, float],
+) -> list[np.ndarray]:
     """3D evidence (camera frame, metres) for an instance the geometry stage could not fit (e.g. a face seen at a
     grazing angle, where the sensor returns no depth): its own depth points, plus its boundary pixels next to each
     fitted neighbour lifted onto that neighbour's surface (where two faces meet, the edge lies on both). Returns
@@ -92,16 +99,19 @@ def fallback_plane_points(inst: int, inst_map: np.ndarray, depth: np.ndarray, K:
         nb = cv2.dilate((inst_map == j).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & m
         bv, bu = np.nonzero(nb)
         uv = np.stack([bu, bv], 1).astype(float)
-        pts.append(pixel_rays(uv, K) * sheet_depth(intersect(faces[int(j)].prim, pixel_rays(uv, K), window),
-                                                   faces[int(j)].sheet)[:, None])
+        pts.append(
+            pixel_rays(uv, K)
+            * sheet_depth(intersect(faces[int(j)].prim, pixel_rays(uv, K), window), faces[int(j)].sheet)[:, None]
+        )
     return [p for p in pts if len(p) >= 3]
 
 
 class _FaceSet:
     """Faces and sheets being collected; the sheet choice's sampling draws from one seeded generator, in order."""
 
-    def __init__(self, inst_map: np.ndarray, depth: np.ndarray, K: np.ndarray, window: tuple[float, float],
-                 cfg: VBRepConfig) -> None:
+    def __init__(
+        self, inst_map: np.ndarray, depth: np.ndarray, K: np.ndarray, window: tuple[float, float], cfg: VBRepConfig
+    ) -> None:
         self.inst_map, self.depth, self.K, self.window, self.cfg = inst_map, depth, K, window, cfg
         self.rng = np.random.default_rng(cfg.seed)
         self.faces: dict[int, FaceGeom] = {}
@@ -112,18 +122,27 @@ class _FaceSet:
         vs, us = np.nonzero(self.inst_map == inst)
         if len(us) == 0:
             return
-        ch = choose_sheet(prim, np.stack([us, vs], 1).astype(float), self.depth[vs, us], self.K, self.window,
-                          self.rng, self.cfg.sheet_max_pixels)
+        ch = choose_sheet(
+            prim,
+            np.stack([us, vs], 1).astype(float),
+            self.depth[vs, us],
+            self.K,
+            self.window,
+            self.rng,
+            self.cfg.sheet_max_pixels,
+        )
         self.faces[inst] = FaceGeom(inst, prim, ch.sheet, res, axl, extra)
         self.sheets[inst] = ch
 
     def coincides(self, plane: Plane, scale: float) -> bool:
         """Whether ``plane`` is a fitted plane again (within fallback_min_angle_deg and fallback_rms)."""
         cfg = self.cfg
-        return any(f.prim.type == "plane" and abs(float(f.prim.axis_vector @ plane.axis_vector))
-                   > np.cos(np.deg2rad(cfg.fallback_min_angle_deg))
-                   and abs(float(f.prim.axis_vector @ (plane.origin - f.prim.origin))) < cfg.fallback_rms * scale
-                   for f in self.faces.values())
+        return any(
+            f.prim.type == "plane"
+            and abs(float(f.prim.axis_vector @ plane.axis_vector)) > np.cos(np.deg2rad(cfg.fallback_min_angle_deg))
+            and abs(float(f.prim.axis_vector @ (plane.origin - f.prim.origin))) < cfg.fallback_rms * scale
+            for f in self.faces.values()
+        )
 
 
 def _add_fitted(fs: _FaceSet, fit: FitResult, scale: float) -> list[int]:
@@ -139,8 +158,13 @@ def _add_fitted(fs: _FaceSet, fit: FitResult, scale: float) -> list[int]:
             if got is not None and got[1] <= fs.cfg.fallback_rms * scale:
                 fs.add(int(inst), got[0], got[1], None, {"refit": "sphere"})
             continue
-        fs.add(int(inst), as_primitive(fit.primitives[inst]), float(fit.residuals.get(inst, 0.0) or 0.0),
-               fit.axis_labels.get(inst), {})
+        fs.add(
+            int(inst),
+            as_primitive(fit.primitives[inst]),
+            float(fit.residuals.get(inst, 0.0) or 0.0),
+            fit.axis_labels.get(inst),
+            {},
+        )
     return rejected
 
 
@@ -171,9 +195,16 @@ def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float
             fs.add(int(inst), plane, rms, None, {"fallback": True})
 
 
-def face_geoms(fit: FitResult, seg: Segmentation, depth: np.ndarray, K: np.ndarray, window: tuple[float, float],
-               scale: float, cfg: VBRepConfig, stats: dict[str, Any],
-               ) -> tuple[dict[int, FaceGeom], dict[int, SheetChoice]]:
+def face_geoms(
+    fit: FitResult,
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    scale: float,
+    cfg: VBRepConfig,
+    stats: dict[str, Any],
+) -> tuple[dict[int, FaceGeom], dict[int, SheetChoice]]:
     """Each face's geometry and sheet (instance id -> `FaceGeom`, `SheetChoice`); depth: (H, W) metres, 0 = none;
     window: depth range of the ray casts (metres); scale: part size (metres). Fitted primitives with invalid
     parameters are rejected (``stats["rejected_primitives"]``, instance ids) and treated like instances without a

@@ -60,10 +60,18 @@ class GTTypeConfig:
 
     def rule(self) -> TypingRule:
         """These tolerances as the edge-type rule's (`v2c.vbrep.classify`); ``gap_m`` is the depth-gap threshold."""
-        return TypingRule(band_px=self.band_px, band_step_px=self.band_step_px, gap_m=self.gap_m,
-                          vis_px=self.vis_px, vis_step_px=self.vis_step_px, vis_bisect=self.vis_bisect,
-                          vis_angle_deg=self.vis_angle_deg, vis_face_px=self.vis_face_px,
-                          curve_iters=self.curve_iters, curve_slack_px=self.curve_slack_px)
+        return TypingRule(
+            band_px=self.band_px,
+            band_step_px=self.band_step_px,
+            gap_m=self.gap_m,
+            vis_px=self.vis_px,
+            vis_step_px=self.vis_step_px,
+            vis_bisect=self.vis_bisect,
+            vis_angle_deg=self.vis_angle_deg,
+            vis_face_px=self.vis_face_px,
+            curve_iters=self.curve_iters,
+            curve_slack_px=self.curve_slack_px,
+        )
 
 
 @dataclass
@@ -121,8 +129,9 @@ def gt_face_geoms(scan: Scan, cfg: GTTypeConfig | None = None) -> dict[int, Face
             continue
         prim = as_primitive({"type": p["type"], "params": p["params"]})
         vs, us = np.nonzero(sel)
-        ch = choose_sheet(prim, np.stack([us, vs], 1).astype(float), depth[vs, us], scan.K, window, rng,
-                          cfg.sheet_max_pixels)
+        ch = choose_sheet(
+            prim, np.stack([us, vs], 1).astype(float), depth[vs, us], scan.K, window, rng, cfg.sheet_max_pixels
+        )
         out[int(val)] = FaceGeom(int(val), prim, ch.sheet, 0.0, p.get("axis_label"))
     return out
 
@@ -168,5 +177,6 @@ def gt_edge_samples(scan: Scan, cfg: GTTypeConfig | None = None) -> GTEdgeSample
             out_type.append(t)
     if not out_uv:
         return GTEdgeSamples(np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, int), np.zeros(0, str))
-    return GTEdgeSamples(np.concatenate(out_uv), np.concatenate(out_face), np.concatenate(out_other),
-                         np.concatenate(out_type))
+    return GTEdgeSamples(
+        np.concatenate(out_uv), np.concatenate(out_face), np.concatenate(out_other), np.concatenate(out_type)
+    )

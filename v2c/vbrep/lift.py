@@ -21,8 +21,15 @@ from v2c.vbrep.raycast import intersect, sheet_depth
 #: metres: the central-difference step of numeric Jacobians (far below any tolerance, far above rounding at 1 m)
 FD_STEP_M = 1e-6
 
-def lift_pixels(prim: Primitive, sheet: int, uv: np.ndarray, K: np.ndarray, window: tuple[float, float],
-                prior: np.ndarray | None = None) -> np.ndarray:
+
+def lift_pixels(
+    prim: Primitive,
+    sheet: int,
+    uv: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    prior: np.ndarray | None = None,
+) -> np.ndarray:
     """(N, 2) pixels -> (N, 3) camera-frame points on sheet ``sheet`` of ``prim`` (closest approach where the
     ray misses the surface)."""
     rays = pixel_rays(uv, K)
@@ -32,8 +39,9 @@ def lift_pixels(prim: Primitive, sheet: int, uv: np.ndarray, K: np.ndarray, wind
     return rays * z[:, None]
 
 
-def project_to_intersection(pa: Primitive, pb: Primitive, x0: np.ndarray, iters: int,
-                            K: np.ndarray | None = None, max_px: float | None = None) -> np.ndarray:
+def project_to_intersection(
+    pa: Primitive, pb: Primitive, x0: np.ndarray, iters: int, K: np.ndarray | None = None, max_px: float | None = None
+) -> np.ndarray:
     """(N, 3) start points -> (N, 3) points on both surfaces (camera frame, metres), by minimal-norm Gauss-Newton
     steps on (sd_a, sd_b). Where the surfaces are tangent the step is damped and the point stays near both.
     With K and max_px: a point whose projection moved more than max_px pixels (an ill-conditioned, nearly
@@ -55,8 +63,9 @@ def project_to_intersection(pa: Primitive, pb: Primitive, x0: np.ndarray, iters:
     return x
 
 
-def surfaces_meet(pa: Primitive, pb: Primitive, x0: np.ndarray, tol: float, iters: int,
-                  eps: float) -> tuple[np.ndarray, np.ndarray]:
+def surfaces_meet(
+    pa: Primitive, pb: Primitive, x0: np.ndarray, tol: float, iters: int, eps: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Whether the two surfaces meet near each start point (N, 3) (camera frame, metres): the Gauss-Newton
     projection onto both (`project_to_intersection`, unrestricted, ``iters`` steps) ends within ``eps`` metres of
     both surfaces and within ``tol`` metres of its start. Returns (N,) bool and the projected points (N, 3)."""
@@ -77,8 +86,9 @@ def visibility_residual(prim: Primitive) -> Callable[[np.ndarray], np.ndarray]:
     return g
 
 
-def solve_vertex(funcs: list[Callable[[np.ndarray], np.ndarray]], x0: np.ndarray, iters: int
-                 ) -> tuple[np.ndarray, float]:
+def solve_vertex(
+    funcs: list[Callable[[np.ndarray], np.ndarray]], x0: np.ndarray, iters: int
+) -> tuple[np.ndarray, float]:
     """Solve f_k(x) = 0 (k = 1..3) for one point x (3,) from x0 by damped Gauss-Newton with a central-difference
     Jacobian (step `FD_STEP_M`), at most ``iters`` steps. Returns the point and the final max |f_k| (units of the
     f_k)."""
@@ -109,8 +119,9 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def intersection_curve(pa: Primitive, pb: Primitive, polyline: np.ndarray, perpendicular_deg: float,
-                       parallel_deg: float) -> dict:
+def intersection_curve(
+    pa: Primitive, pb: Primitive, polyline: np.ndarray, perpendicular_deg: float, parallel_deg: float
+) -> dict:
     """Analytic curve of the intersection edge of two surfaces, oriented along ``polyline`` (K, 3) (camera frame,
     metres): plane-plane -> line; plane with a cylinder/cone/torus whose axis is perpendicular to the plane, or a
     plane and a sphere -> circle; anything else -> {"kind": "intersection"} (the polyline samples it). Axes within

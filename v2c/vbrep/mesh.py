@@ -34,10 +34,19 @@ from v2c.vbrep.raycast import as_primitive, intersect, sheet_depth
 _CLOSEST_STEPS = 3
 
 
-def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray, K: np.ndarray,
-              window: tuple[float, float], stride: int, max_edge: float, surface_tol: float,
-              bounds: tuple[np.ndarray, np.ndarray] | None = None,
-              long_in_bounds: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def face_mesh(
+    prim: Primitive,
+    sheet: int,
+    region: np.ndarray,
+    depth: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    stride: int,
+    max_edge: float,
+    surface_tol: float,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    long_in_bounds: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
     """Mesh of one face. region: (H, W) bool pixels of the face; depth: (H, W) observed depth (metres, 0 = none)
     used to pick the crossing where the sheet is absent; window: (near, far) depths (metres) a vertex may have;
     stride: grid spacing (pixels); max_edge: metres (inf: no limit);
@@ -74,7 +83,7 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
     out = ~inside[keep]
     if out.any():
         y0, x0 = max(0, gv[0]), max(0, gu[0])
-        sub = ~region[y0:gv[-1] + 1, x0:gu[-1] + 1]
+        sub = ~region[y0 : gv[-1] + 1, x0 : gu[-1] + 1]
         _, (iy, ix) = distance_transform_edt(sub, return_indices=True)
         q = uv[out]
         qi = np.clip(np.rint(q[:, 1]).astype(int) - y0, 0, sub.shape[0] - 1)
@@ -97,8 +106,11 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
         if len(snap):
             for _ in range(_CLOSEST_STEPS):
                 verts[snap] = p.closest_point(verts[snap])
-            good[snap] &= (np.abs(p.signed_distance(verts[snap])) <= 1e-7) & (verts[snap, 2] >= window[0]) \
+            good[snap] &= (
+                (np.abs(p.signed_distance(verts[snap])) <= 1e-7)
+                & (verts[snap, 2] >= window[0])
                 & (verts[snap, 2] <= window[1])
+            )
     if not good.all():
         idx[keep] = np.where(good, idx[keep], -1)
     a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
@@ -118,8 +130,9 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
     if len(tri) == 0:
         return np.zeros((0, 3)), tri
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
-    longest = np.max(np.stack([np.linalg.norm(p1 - p0, axis=1), np.linalg.norm(p2 - p1, axis=1),
-                               np.linalg.norm(p0 - p2, axis=1)]), 0)
+    longest = np.max(
+        np.stack([np.linalg.norm(p1 - p0, axis=1), np.linalg.norm(p2 - p1, axis=1), np.linalg.norm(p0 - p2, axis=1)]), 0
+    )
     keep = np.isfinite(longest) & (longest <= max_edge)
     if bounds is not None:
         inside = np.all((verts >= bounds[0]) & (verts <= bounds[1]), axis=1)[tri].all(axis=1)
@@ -134,8 +147,7 @@ def face_mesh(prim: Primitive, sheet: int, region: np.ndarray, depth: np.ndarray
     return verts[used], remap[tri]
 
 
-def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int,
-                   rng: np.random.Generator) -> np.ndarray:
+def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """Draw n points area-uniformly on a triangle mesh (metres, same frame as the vertices)."""
     if len(triangles) == 0 or n <= 0:
         return np.zeros((0, 3))

@@ -235,9 +235,7 @@ class VEdge:
         """Inverse of `to_dict` (curve vectors back to arrays)."""
         curve = d.get("curve")
         if curve is not None:
-            curve = {
-                k: (np.asarray(v, np.float64) if k in _CURVE_VECTOR_KEYS else v) for k, v in curve.items()
-            }
+            curve = {k: (np.asarray(v, np.float64) if k in _CURVE_VECTOR_KEYS else v) for k, v in curve.items()}
         return cls(
             id=int(d["id"]),
             type=EdgeType(d["type"]),

@@ -53,8 +53,12 @@ class ProtoVertex:
     outline_corner: bool = False  # a corner of an image outline (never merged away)
 
 
-_KIND_PRIORITY = {VertexKind.CORNER: 0, VertexKind.INTERSECTION_VISIBILITY: 1, VertexKind.OCCLUSION: 2,
-                  VertexKind.OTHER: 3}
+_KIND_PRIORITY = {
+    VertexKind.CORNER: 0,
+    VertexKind.INTERSECTION_VISIBILITY: 1,
+    VertexKind.OCCLUSION: 2,
+    VertexKind.OTHER: 3,
+}
 
 
 def image_length(pts: np.ndarray, K: np.ndarray) -> float:
@@ -78,13 +82,14 @@ def _labelling(protos: list[ProtoEdge]) -> list[ProtoEdge]:
     return out
 
 
-def _contract_short(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray,
-                    min_px: float, loop_min_px: float, same_m: float) -> list[ProtoEdge]:
+def _contract_short(
+    protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, min_px: float, loop_min_px: float, same_m: float
+) -> list[ProtoEdge]:
     parent = list(range(len(verts)))
     # vertices optimised onto the same 3D point (junction clutter of the 2D graph) are one vertex
     pos = np.array([v.position for v in verts]) if verts else np.zeros((0, 3))
     for i in range(len(verts)):
-        d = np.linalg.norm(pos[i + 1:] - pos[i], axis=1)
+        d = np.linalg.norm(pos[i + 1 :] - pos[i], axis=1)
         for j in np.flatnonzero(d < same_m) + i + 1:
             if verts[j].kind is verts[i].kind and parent[j] == j:
                 parent[j] = i
@@ -149,20 +154,34 @@ def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplif
             v_start = p.v1 if si else p.v0
             v_end = q.v1 if sj else q.v0
             n_a, n_b = len(a), len(b)
-            stats = {k: (p.stats[k] * n_a + q.stats[k] * n_b) / (n_a + n_b)
-                     if k in q.stats and np.isfinite(p.stats[k]) and np.isfinite(q.stats[k]) else p.stats[k]
-                     for k in p.stats}
-            merged = ProtoEdge(p.type, p.faces, np.concatenate([a, b[1:]]),
-                               np.concatenate([ua, ub[1:]]) if len(ua) and len(ub) else ua, p.key0, q.key1,
-                               p.graph_edge, p.curve, stats, v_start, v_end)
+            stats = {
+                k: (p.stats[k] * n_a + q.stats[k] * n_b) / (n_a + n_b)
+                if k in q.stats and np.isfinite(p.stats[k]) and np.isfinite(q.stats[k])
+                else p.stats[k]
+                for k in p.stats
+            }
+            merged = ProtoEdge(
+                p.type,
+                p.faces,
+                np.concatenate([a, b[1:]]),
+                np.concatenate([ua, ub[1:]]) if len(ua) and len(ub) else ua,
+                p.key0,
+                q.key1,
+                p.graph_edge,
+                p.curve,
+                stats,
+                v_start,
+                v_end,
+            )
             protos = [x for k, x in enumerate(protos) if k not in (i, j)] + [merged]
             changed = True
             break
     return protos
 
 
-def postprocess(protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, cfg: VBRepConfig,
-                same_m: float) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
+def postprocess(
+    protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, cfg: VBRepConfig, same_m: float
+) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
     """Apply the rules of the module docstring; returns edges and vertices with compact vertex ids.
     same_m: vertices of one kind closer than this (metres) are merged first."""
     protos = _labelling(protos)
@@ -197,8 +216,9 @@ def build_loops(protos: list[ProtoEdge], fid: dict[int, int], K: np.ndarray) -> 
             loop = [(e0, False)]
             start, cur = protos[e0].v0, protos[e0].v1
             while cur != start:
-                nxt = next(((e, False) for e in unused if protos[e].v0 == cur), None) or \
-                    next(((e, True) for e in unused if protos[e].v1 == cur), None)
+                nxt = next(((e, False) for e in unused if protos[e].v0 == cur), None) or next(
+                    ((e, True) for e in unused if protos[e].v1 == cur), None
+                )
                 if nxt is None:
                     break
                 unused.remove(nxt[0])

@@ -62,8 +62,9 @@ def _quadratic(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> tuple[np.ndarray,
     return r, -B / (2 * A)
 
 
-def intersect(prim: Primitive | dict, rays: np.ndarray, window: tuple[float, float] = (0.05, 5.0),
-              samples: int = 160) -> RayHits:
+def intersect(
+    prim: Primitive | dict, rays: np.ndarray, window: tuple[float, float] = (0.05, 5.0), samples: int = 160
+) -> RayHits:
     """Intersect rays (N, 3, z component 1) with a primitive. window: depth range (metres) searched for the
     torus, which is sampled (``samples`` steps, then refined by regula falsi); the quadrics are solved exactly."""
     p = as_primitive(prim)

@@ -76,7 +76,7 @@ def smooth_codes(codes: np.ndarray, window: int, min_run: int, n_codes: int) -> 
         left = lens[r - 1] if r > 0 else -1
         right = lens[r + 1] if r + 1 < len(starts) else -1
         src = r - 1 if left >= right else r + 1
-        codes[starts[r]:ends[r]] = codes[starts[src]]
+        codes[starts[r] : ends[r]] = codes[starts[src]]
 
 
 def turn_deg(uv: np.ndarray, L: int) -> np.ndarray:
@@ -88,7 +88,8 @@ def turn_deg(uv: np.ndarray, L: int) -> np.ndarray:
     k = np.arange(L, n - L)
     t_in, t_out = uv[k] - uv[k - L], uv[k + L] - uv[k]
     c = np.einsum("ij,ij->i", t_in, t_out) / np.maximum(
-        np.linalg.norm(t_in, axis=1) * np.linalg.norm(t_out, axis=1), 1e-12)
+        np.linalg.norm(t_in, axis=1) * np.linalg.norm(t_out, axis=1), 1e-12
+    )
     out[k] = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
     return out
 

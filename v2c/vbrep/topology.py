@@ -80,8 +80,14 @@ def _on_surface(prim: Primitive, pts: np.ndarray) -> np.ndarray:
     return x
 
 
-def snap_to_surfaces(protos: list[ProtoEdge], verts: list[ProtoVertex], prims: dict[int, Primitive],
-                     max_move: float, K: np.ndarray, cfg: VBRepConfig) -> dict[str, Any]:
+def snap_to_surfaces(
+    protos: list[ProtoEdge],
+    verts: list[ProtoVertex],
+    prims: dict[int, Primitive],
+    max_move: float,
+    K: np.ndarray,
+    cfg: VBRepConfig,
+) -> dict[str, Any]:
     """Make the edges lie on their surfaces and end at their vertices (in place). Solves take ``cfg.snap_iters``
     steps; ``eps`` below is ``cfg.snap_tol``, ``end_px`` ``cfg.snap_end_px``.
 
@@ -178,8 +184,9 @@ def open_loops(vbrep: VBRep) -> list[tuple[int, int]]:
     out = []
     for f in vbrep.faces:
         for k, lp in enumerate(f.loops):
-            ends = [(vbrep.edges[e].v1, vbrep.edges[e].v0) if r else (vbrep.edges[e].v0, vbrep.edges[e].v1)
-                    for e, r in lp]
+            ends = [
+                (vbrep.edges[e].v1, vbrep.edges[e].v0) if r else (vbrep.edges[e].v0, vbrep.edges[e].v1) for e, r in lp
+            ]
             if not all(ends[i][1] == ends[(i + 1) % len(ends)][0] for i in range(len(ends))):
                 out.append((f.id, k))
     return out
@@ -193,11 +200,17 @@ def check_topology(vbrep: VBRep) -> dict[str, Any]:
     gap = off = 0.0
     for e in vbrep.edges:
         p = np.asarray(e.polyline, float)
-        gap = max(gap, float(np.linalg.norm(p[0] - vbrep.vertices[e.v0].position)),
-                  float(np.linalg.norm(p[-1] - vbrep.vertices[e.v1].position)))
+        gap = max(
+            gap,
+            float(np.linalg.norm(p[0] - vbrep.vertices[e.v0].position)),
+            float(np.linalg.norm(p[-1] - vbrep.vertices[e.v1].position)),
+        )
         for f in e.faces:
             off = max(off, float(np.abs(prims[f].signed_distance(p)).max()))
-    return {"open_loops": len(open_loops(vbrep)),
-            "faces_without_loops": sum(1 for f in vbrep.faces if not f.loops),
-            "end_gap_m": gap, "off_surface_m": off,
-            "invalid_primitives": [k for k, pr in prims.items() if not valid_primitive(pr)]}
+    return {
+        "open_loops": len(open_loops(vbrep)),
+        "faces_without_loops": sum(1 for f in vbrep.faces if not f.loops),
+        "end_gap_m": gap,
+        "off_surface_m": off,
+        "invalid_primitives": [k for k, pr in prims.items() if not valid_primitive(pr)],
+    }

@@ -84,8 +84,7 @@ class FaceCovariance:
         return np.sqrt(self.fit_sigma_at(x) ** 2 + self.floor_m**2)
 
 
-def face_covariance(prim: Primitive, X: np.ndarray, residual_m: float,
-                    cfg: UncertaintyConfig) -> FaceCovariance | None:
+def face_covariance(prim: Primitive, X: np.ndarray, residual_m: float, cfg: UncertaintyConfig) -> FaceCovariance | None:
     """Covariance of ``prim`` fitted to points X (N, 3, camera frame, metres) with RMS residual ``residual_m``;
     None for fewer points than parameters."""
     X = np.asarray(X, float).reshape(-1, 3)
@@ -112,8 +111,7 @@ def face_sigma_m(fc: FaceCovariance, X: np.ndarray) -> float:
     return float(fc.sigma_at(c[None])[0])
 
 
-def intersection_sigma_m(fa: FaceCovariance, fb: FaceCovariance, x: np.ndarray,
-                         cfg: UncertaintyConfig) -> float:
+def intersection_sigma_m(fa: FaceCovariance, fb: FaceCovariance, x: np.ndarray, cfg: UncertaintyConfig) -> float:
     """RMS over the samples x (K, 3) of an intersection edge's 1-sigma position error (metres)."""
     x = np.asarray(x, float).reshape(-1, 3)
     if len(x) == 0:
@@ -125,8 +123,7 @@ def intersection_sigma_m(fa: FaceCovariance, fb: FaceCovariance, x: np.ndarray,
     return float(np.sqrt(np.mean(var)))
 
 
-def outline_sigma_m(f: FaceCovariance, x: np.ndarray, focal_px: float,
-                    cfg: UncertaintyConfig) -> float:
+def outline_sigma_m(f: FaceCovariance, x: np.ndarray, focal_px: float, cfg: UncertaintyConfig) -> float:
     """RMS over the samples x (K, 3) of a one-face edge's 1-sigma position error (metres)."""
     x = np.asarray(x, float).reshape(-1, 3)
     if len(x) == 0:

@@ -47,8 +47,9 @@ def face_groups(faces: list[tuple[int, ...]]) -> list[np.ndarray]:
     return groups_sharing_keys(faces)
 
 
-def _vertex_kind(ctx: ExtractContext, types_faces: list[tuple[EdgeType, tuple[int, ...]]], n_groups: int
-                 ) -> tuple[VertexKind, list[Residual] | None, list[int]]:
+def _vertex_kind(
+    ctx: ExtractContext, types_faces: list[tuple[EdgeType, tuple[int, ...]]], n_groups: int
+) -> tuple[VertexKind, list[Residual] | None, list[int]]:
     """A vertex's kind from the (type, faces) of its edges, with the residuals it is solved on (None: not
     solved) and the faces of its intersection edges, in order."""
     int_faces: list[int] = []
@@ -67,16 +68,21 @@ def _vertex_kind(ctx: ExtractContext, types_faces: list[tuple[EdgeType, tuple[in
     return VertexKind.OTHER, None, int_faces
 
 
-def _solved_position(ctx: ExtractContext, funcs: list[Residual], int_faces: list[int], x0: np.ndarray,
-                     pixel: np.ndarray) -> np.ndarray | None:
+def _solved_position(
+    ctx: ExtractContext, funcs: list[Residual], int_faces: list[int], x0: np.ndarray, pixel: np.ndarray
+) -> np.ndarray | None:
     """The solved position of a vertex, or None where the solution leaves its surfaces, its initial lift (by
     more than d_int) or its image point (by more than vertex_px)."""
     cfg = ctx.cfg
     xs, _ = solve_vertex(funcs, x0, cfg.vertex_iters)
     surf = max(abs(float(sd_func(ctx.faces[f].prim)(xs[None])[0])) for f in int_faces[:3])
     px = float(np.linalg.norm(project(xs[None], ctx.K)[0] - pixel))
-    if (np.all(np.isfinite(xs)) and surf <= cfg.d_int * ctx.scale and px <= cfg.vertex_px
-            and np.linalg.norm(xs - x0) <= cfg.d_int * ctx.scale):
+    if (
+        np.all(np.isfinite(xs))
+        and surf <= cfg.d_int * ctx.scale
+        and px <= cfg.vertex_px
+        and np.linalg.norm(xs - x0) <= cfg.d_int * ctx.scale
+    ):
         return xs
     return None
 
@@ -98,8 +104,9 @@ def make_vertices(ctx: ExtractContext, protos: list[ProtoEdge], graph: EdgeGraph
             cl_ends = [ends[i] for i in cl]
             best = min(_END_PRIORITY[protos[pi].type] for pi, _ in cl_ends)
             x0 = pos[[i for i in cl if _END_PRIORITY[protos[ends[i][0]].type] == best]].mean(0)
-            kind, funcs, int_faces = _vertex_kind(ctx, [(protos[pi].type, protos[pi].faces) for pi, _ in cl_ends],
-                                                  len(clusters))
+            kind, funcs, int_faces = _vertex_kind(
+                ctx, [(protos[pi].type, protos[pi].faces) for pi, _ in cl_ends], len(clusters)
+            )
             x = x0
             if funcs is not None:
                 n_opt += 1

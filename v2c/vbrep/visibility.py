@@ -28,16 +28,26 @@ class ContourSearch:
     points: np.ndarray
 
 
-def _exists(prim: Primitive, sheet: int, uv: np.ndarray, K: np.ndarray,
-            window: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+def _exists(
+    prim: Primitive, sheet: int, uv: np.ndarray, K: np.ndarray, window: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray]:
     rays = pixel_rays(uv, K)
     hits = intersect(prim, rays, window)
     z = hits.depths[:, sheet]
     return np.isfinite(z), rays * np.where(np.isfinite(z), z, hits.closest)[:, None]
 
 
-def find_contour(prim: Primitive, sheet: int, uv: np.ndarray, direction: np.ndarray, K: np.ndarray,
-                 window: tuple[float, float], vis_px: float, step_px: float, bisect: int) -> ContourSearch:
+def find_contour(
+    prim: Primitive,
+    sheet: int,
+    uv: np.ndarray,
+    direction: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    vis_px: float,
+    step_px: float,
+    bisect: int,
+) -> ContourSearch:
     """Search for the contour generator of ``prim`` (sheet ``sheet``) along ``uv + o * direction``,
     o in [-vis_px, vis_px] pixels, every ``step_px`` pixels, then ``bisect`` bisection steps. uv, direction: (N, 2)
     pixels / unit image vectors."""
