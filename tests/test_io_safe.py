@@ -199,7 +199,7 @@ def test_failing_figure_after_the_step_keeps_the_old_set(
 ) -> None:
     """Ctrl-C (KeyboardInterrupt) while the figure is drawn, after the new STEP and JSON were written: the
     command says "interrupted", exits 130, and the folder holds the complete old set."""
-    import exporters.figure
+    import exporters
 
     out = tmp_path / "out"
     before = _old_set(out)
@@ -207,7 +207,7 @@ def test_failing_figure_after_the_step_keeps_the_old_set(
     def interrupted(*a: object, **k: object) -> None:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(exporters.figure, "result_figure", interrupted)
+    monkeypatch.setattr(exporters, "result_figure", interrupted)  # the public name v2c.api draws with
     res = _to_step([str(tiny_gt_scan), "-o", str(out / f"{STEM}.step"), "--force"])  # --force: a stand-in old set
     assert res.exit_code == 130 and res.output.strip() == "interrupted", res.output
     assert _files(out) == before
