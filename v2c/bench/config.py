@@ -10,12 +10,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from v2c.choices import ABLATIONS as CHOICE_ABLATIONS
+from v2c.choices import SEGMENTATION_METHODS
 from v2c.executors import ExecutorConfig
 from v2c.labels import AXIS_ALIGN_TOL_DEG
 
-ABLATIONS = ("full", "no-axis", "no-int", "fit-only")
+ABLATIONS = CHOICE_ABLATIONS
 GT = "gt"  # pseudo-ablation: the ideal VB-Rep built from the ground truth
-SEGMENTATIONS = ("learned", "geometric", "oracle")
+SEGMENTATIONS = SEGMENTATION_METHODS
 NOISES = ("sensor", "paper")
 
 

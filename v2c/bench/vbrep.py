@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 from v2c.bench.config import MetricConfig
 from v2c.bench.surfaces import chamfer_distance, gt_points, part_size, reconstruction_points
 from v2c.camera import project
+from v2c.choices import DEFAULT_ABLATION, DEFAULT_SEGMENTATION, SEGMENTATION_METHODS
 from v2c.vbrep.gt_types import GTEdgeSamples, GTTypeConfig, gt_edge_samples
 from v2c.vbrep.model import EdgeType, VBRep
 
@@ -175,7 +176,9 @@ def edge_correctness(
     return ok
 
 
-def evaluate(scan_dirs: list[str], segmentation: str = "oracle", ablation: str = "full") -> list[dict[str, Any]]:
+def evaluate(
+    scan_dirs: list[str], segmentation: str = DEFAULT_SEGMENTATION, ablation: str = DEFAULT_ABLATION
+) -> list[dict[str, Any]]:
     """Reconstruct each scan and measure it: one row per scan (chamfer, chamfer_all, the edge-type accuracy
     fields, seconds per stage)."""
     from v2c.pipeline import reconstruct
@@ -218,7 +221,7 @@ if __name__ == "__main__":  # python -m v2c.bench.vbrep DIR [--n 30] [--json out
     ap = argparse.ArgumentParser(description="VB-Rep chamfer and edge-type accuracy over a folder of scans")
     ap.add_argument("folder", type=Path)
     ap.add_argument("--n", type=int, default=None, help="first n scans (sorted by name)")
-    ap.add_argument("--segmentation", default="oracle")
+    ap.add_argument("--segmentation", default=DEFAULT_SEGMENTATION, choices=SEGMENTATION_METHODS)
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
     dirs = sorted(p for p in a.folder.iterdir() if (p / "camera.json").exists())[: a.n]

@@ -7,11 +7,12 @@ from typing import Any
 
 import numpy as np
 
+from v2c.choices import ABLATIONS as CHOICE_ABLATIONS
 from v2c.primitives import Primitive
 from v2c.segment.graph import EdgeGraph
 
-#: The ablations of BENCHMARK.md / the paper's Table 1.
-ABLATIONS = ("full", "no-axis", "no-int", "fit-only")
+#: The ablations of BENCHMARK.md / the paper's Table 1 (named once, in `v2c.choices`).
+ABLATIONS = CHOICE_ABLATIONS
 
 
 @dataclass

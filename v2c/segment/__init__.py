@@ -7,6 +7,7 @@ import importlib
 import warnings
 from typing import TYPE_CHECKING, Any
 
+from v2c.choices import DEFAULT_SEGMENTATION
 from v2c.segment.types import Segmentation
 
 if TYPE_CHECKING:
@@ -23,8 +24,8 @@ SEGMENTERS: dict[str, tuple[str, str]] = {
 #: The segmenters that check their instances geometrically (`v2c.segment.refine`) and so take ``refine`` and
 #: ``ransac``.
 REFINING = ("learned",)
-#: The segmentation every entry point uses unless told otherwise.
-DEFAULT_METHOD = "learned"
+#: The segmentation every entry point uses unless told otherwise (`v2c.choices`).
+DEFAULT_METHOD = DEFAULT_SEGMENTATION
 
 
 def segment(
