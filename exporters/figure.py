@@ -9,12 +9,15 @@ intersection-visibility vertices as magenta balls.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from v2c.vbrep.model import EdgeType, VBRep, VertexKind
+
+if TYPE_CHECKING:
+    from v2c.scan import Scan
 
 #: sRGB edge colours by type (SCAN_FORMAT.md).
 EDGE_COLORS: dict[EdgeType, tuple[int, int, int]] = {
@@ -220,7 +223,7 @@ def _legend(width: int) -> np.ndarray:
 
 
 def result_figure(
-    scan: Any,
+    scan: Scan,
     instances: np.ndarray,
     vbrep: VBRep,
     path: str | Path | None = None,
@@ -228,7 +231,7 @@ def result_figure(
     source: str = "VB-Rep",
 ) -> np.ndarray:
     """The 2 x 2 result figure (RGB uint8): input image, segmentation, VB-Rep from the camera and from a turned
-    view, with a legend. scan: anything with ``color`` (H, W, 3) RGB; instances: (H, W) int instance map.
+    view, with a legend. scan: the scan (its ``color``, (H, W, 3) RGB, is drawn); instances: (H, W) int instance map.
     source: what the lower panels show, in their titles ("VB-Rep", or "STEP" when ``vbrep`` is the written file
     read back, `exporters.readback`).
     Written as PNG to ``path`` when given."""

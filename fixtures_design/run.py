@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from fixtures_design.design import Params, design_fixture
 from fixtures_design.frames import Frame
 from fixtures_design.model import Fixture, FixtureKind
 from v2c.vbrep.model import VBRep
+
+if TYPE_CHECKING:
+    from v2c.scan import Scan
 
 PartChoice = Literal["reconstructed", "true", "none"]
 
@@ -36,7 +39,7 @@ class FixtureRun:
     files: FixtureFiles
 
 
-def ground_height(scan: object, vbrep: VBRep, ring_px: int = 25) -> float | None:
+def ground_height(scan: Scan, vbrep: VBRep, ring_px: int = 25) -> float | None:
     """Height (metres, along the VB-Rep frame's Z, camera origin) of the ground around the part, or None.
 
     The median height of the valid depth pixels in a ``ring_px`` wide ring around the scan's part mask.
