@@ -1,18 +1,21 @@
-"""Keep exactly one distribution that owns the `OCP/` package (the OpenCASCADE bindings).
+"""Check that exactly one distribution owns the `OCP/` package (the OpenCASCADE bindings), and restore it through
+pip when another one crept in.
 
 Why: cadquery 2.8.0 requires `cadquery-ocp` (bindings built with VTK) and build123d 0.12.0 requires
-`cadquery-ocp-novtk` (the same OCCT 7.9.3 bindings without VTK). pip installs both, and both write the same files
-into `site-packages/OCP/`; whichever is unpacked last wins the shared `OCP/OCP.cpython-*.so`. If it is the no-VTK
-one, `import cadquery` fails (cadquery.occ_impl.shapes imports OCP.IVtkOCC), and uninstalling either distribution
-later deletes files the other one needs. No version pin can avoid this: the two requirements are hard
-dependencies of the pinned packages.
+`cadquery-ocp-novtk` (the same OCCT 7.9.3 bindings without VTK). Both write the same files into
+`site-packages/OCP/`; whichever is unpacked last wins the shared `OCP/OCP.cpython-*.so`. If it is the no-VTK one,
+`import cadquery` fails (cadquery.occ_impl.shapes imports OCP.IVtkOCC), and uninstalling either distribution later
+deletes files the other one needs. No version pin avoids it: both are hard requirements of the pinned packages.
 
-The fix keeps `cadquery-ocp`: it is a strict superset of the no-VTK build (same OCCT version, the same 642 OCP
-modules plus the 4 IVtk ones), so build123d runs on it unchanged. For every other distribution that owns OCP
-files we delete the files it alone owns (its dist-info and its private `.libs` folder), never a file of `OCP/`
-that `cadquery-ocp` also lists; then we check every `OCP/` file against `cadquery-ocp`'s RECORD hashes and, if any
-differs or is missing, reinstall `cadquery-ocp` (same version, --no-deps). Side effect: `pip check` reports
-"build123d 0.12.0 requires cadquery-ocp-novtk, which is not installed"; that is expected.
+scripts/setup.sh settles it before pip resolves anything: it installs a files-less stand-in named
+`cadquery-ocp-novtk` (scripts/shims/cadquery-ocp-novtk), so build123d's requirement is met and the no-VTK wheel is
+never installed; `cadquery-ocp` (a strict superset: the same 642 OCP modules plus the 4 IVtk ones) owns OCP/ alone,
+build123d runs on it unchanged, and `pip check` is clean. Nothing is deleted from site-packages by hand.
+
+This script checks that state. With --fix, a second owner that got in anyway (e.g. `pip install
+cadquery-ocp-novtk` by hand, or a venv of an older recipe) is removed with `pip uninstall`, and `cadquery-ocp` is
+then reinstalled (same version, --no-deps) when any of its OCP/ files is missing or differs from its RECORD;
+--hashes checks those hashes even when no second owner was found.
 
 Usage: python scripts/ocp_single.py [--fix] [--hashes]. Exit 0 when exactly one OCP distribution remains.
 Runs with the venv's interpreter (it inspects the environment it runs in).
@@ -65,26 +68,6 @@ def mismatched_files(dist: md.Distribution) -> list[str]:
     return bad
 
 
-def remove_exclusive_files(drop: md.Distribution, keep: md.Distribution) -> int:
-    """Delete the files `drop` owns that `keep` does not (never shared OCP/ files). Returns the count."""
-    shared = {str(f) for f in keep.files or []}
-    removed, dirs = 0, set()
-    for f in drop.files or []:
-        if str(f) in shared:
-            continue
-        p = Path(f.locate())
-        dirs.add(p.parent)
-        if p.is_file() or p.is_symlink():
-            p.unlink()
-            removed += 1
-    # empty folders left behind (dist-info, .libs, sboms), deepest first
-    for d in sorted(dirs, key=lambda x: len(x.parts), reverse=True):
-        while d.is_dir() and not any(d.iterdir()) and d.name not in ("site-packages", "OCP"):
-            d.rmdir()
-            d = d.parent
-    return removed
-
-
 def main(argv: list[str]) -> int:
     fix, hashes = "--fix" in argv, "--hashes" in argv
     dists = ocp_distributions()
@@ -103,9 +86,8 @@ def main(argv: list[str]) -> int:
         )
         return 1
     for name, d in others.items():
-        version = d.version  # read before its metadata goes
-        n = remove_exclusive_files(d, keep)
-        print(f"[ocp] removed {name} {version} ({n} files it alone owned; shared OCP/ files kept)")
+        print(f"[ocp] uninstalling {name} {d.version} (pip); {KEEP} is checked and reinstalled below if it lost files")
+        subprocess.run([sys.executable, "-m", "pip", "uninstall", "-q", "-y", name], check=True)
     if others or hashes:
         bad = mismatched_files(keep)
         if bad:
