@@ -31,7 +31,6 @@ from v2c.geometry.config import RansacConfig
 from v2c.geometry.points import estimate_part_size, instance_points
 from v2c.geometry.ransac import RansacFit, ransac_fit
 from v2c.geometry.selection import select_type, supported
-from v2c.groups import groups_sharing_keys
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
 from v2c.primitives import Cylinder, Plane
 from v2c.primitives.directions import tangent_basis
@@ -74,6 +73,13 @@ class RefineConfig:
     flat_sigma: float = 1.5  # ... robust residual sigma (1.4826 MAD) of their plane within this many sensor sigmas
     # (ratio) ...
     flat_min_px: int = 30  # ... and at least this many valid pixels (pixels)
+    merge_joint: bool = False  # also merge touching flat pieces that one plane fitted to both explains, although
+    # their own planes disagree by more than merge_angle_deg (a small piece's own plane is poorly determined on real
+    # depth): each piece's points within merge_tol_part of the joint plane (median), joined greedily, best first,
+    # the joint plane refitted to each grown group so a chain of pieces cannot bend round a curved surface
+    merge_joint_angle_deg: float = 12.0  # ... and each piece's own plane within this angle of the joint plane
+    # (degrees)
+    merge_joint_points: int = 4000  # points of a group its joint plane is fitted to (count; a seeded subsample)
     noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
     # synthetic `sensor` profile's D4xx model
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
@@ -344,6 +350,80 @@ def _flat(
     return select_type({"plane": plane, ptype: got}, x, size, fit_cfg) == "plane"
 
 
+def _coplanar_pairs(
+    pairs: np.ndarray, planes: dict[int, tuple[np.ndarray, float, np.ndarray]], tol: float, cfg: RefineConfig
+) -> tuple[list[tuple[int, int]], list[tuple[float, int, int]]]:
+    """The touching pairs whose own planes agree (normals within merge_angle_deg, each one's points within ``tol``
+    metres of the other's plane, median), and, with merge_joint, the other flat pairs as joint-plane candidates:
+    (score, a, b), score = the pair's larger median distance to the other's plane (metres), best first."""
+    cos_min = np.cos(np.deg2rad(cfg.merge_angle_deg))
+    agree: list[tuple[int, int]] = []
+    joint: list[tuple[float, int, int]] = []
+    for a, b in pairs.tolist():  # loop over touching pairs
+        if a not in planes or b not in planes:
+            continue
+        (na, da, xa), (nb, db, xb) = planes[a], planes[b]
+        dab, dba = float(np.median(np.abs(xb @ na - da))), float(np.median(np.abs(xa @ nb - db)))
+        if abs(float(na @ nb)) >= cos_min and dab < tol and dba < tol:
+            agree.append((a, b))
+        elif cfg.merge_joint:
+            joint.append((min(dab, dba), a, b))
+    return agree, sorted(joint)
+
+
+def _explained_by_one_plane(
+    xs: list[np.ndarray],
+    own: list[np.ndarray],
+    tol: float,
+    cfg: RefineConfig,
+    rng: np.random.Generator,
+) -> bool:
+    """True when one plane fitted to the point sets ``xs`` (metres) lies within ``tol`` of each (median distance)
+    and within merge_joint_angle_deg of each set's own plane normal (``own``, unit normals)."""
+    x = np.concatenate(xs)
+    if len(x) > cfg.merge_joint_points:
+        x = x[rng.choice(len(x), cfg.merge_joint_points, replace=False)]
+    n, d = _plane_ransac(x, 0.5 * tol, cfg, rng)
+    cos_min = np.cos(np.deg2rad(cfg.merge_joint_angle_deg))
+    return all(float(np.median(np.abs(xi @ n - d))) < tol for xi in xs) and all(
+        abs(float(n @ ni)) >= cos_min for ni in own
+    )
+
+
+def _merge_groups(
+    pairs: np.ndarray,
+    planes: dict[int, tuple[np.ndarray, float, np.ndarray]],
+    tol: float,
+    cfg: RefineConfig,
+    rng: np.random.Generator,
+) -> list[list[int]]:
+    """Groups (instance ids, two or more) to merge: the pairs whose own planes agree, joined transitively (as
+    always), then with merge_joint the remaining flat pairs best first, each joining two groups only when one
+    plane explains every piece of both (`_explained_by_one_plane`)."""
+    agree, joint = _coplanar_pairs(pairs, planes, tol, cfg)
+    parent = {i: i for i in planes}
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b in agree:
+        parent[find(a)] = find(b)
+    for _, a, b in joint:  # loop over candidate pairs, best first
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            continue
+        members = [i for i in planes if find(i) in (ra, rb)]
+        if _explained_by_one_plane([planes[i][2] for i in members], [planes[i][0] for i in members], tol, cfg, rng):
+            parent[ra] = rb
+    out: dict[int, list[int]] = {}
+    for i in sorted(planes):
+        out.setdefault(find(i), []).append(i)
+    return [ids for ids in out.values() if len(ids) > 1]
+
+
 def merge_coplanar(
     seg: Segmentation,
     depth: np.ndarray,
@@ -389,25 +469,13 @@ def merge_coplanar(
                 if not _flat(i, ip.points, nrm, off, labels, size, cfg, rng, ip.normals, ransac):
                     continue
             planes[int(i)] = (nrm, off, x)
-    cos_min = np.cos(np.deg2rad(cfg.merge_angle_deg))
-    keys: dict[int, list[int]] = {}
-    for k, (a, b) in enumerate(pairs.tolist()):  # loop over touching pairs
-        if a not in planes or b not in planes:
-            continue
-        (na, da, xa), (nb, db, xb) = planes[a], planes[b]
-        if abs(float(na @ nb)) < cos_min:
-            continue
-        if np.median(np.abs(xb @ na - da)) < tol and np.median(np.abs(xa @ nb - db)) < tol:
-            keys.setdefault(a, []).append(k)
-            keys.setdefault(b, []).append(k)
-    if not keys:
+    groups = _merge_groups(pairs, planes, tol, cfg, rng)
+    if not groups:
         return seg
-    items = sorted(keys)
     lut = np.arange(len(labels), dtype=np.int32)
     area = np.bincount(inst.ravel(), minlength=len(labels))
     out_labels, out_scores = np.array(labels), np.array(seg.scores)
-    for group in groups_sharing_keys([keys[i] for i in items]):
-        ids = [items[g] for g in group]
+    for ids in groups:
         # the largest plane-labelled piece's label and score stand (the largest piece's where none is a plane:
         # then a merged group of flat pieces is a plane of no axis class, at that piece's score)
         flat_ids = [j for j in ids if is_plane[j]] or ids
