@@ -19,7 +19,7 @@ from scipy.interpolate import splprep
 
 from exporters.frames import FrameMap
 from exporters.occ_surfaces import AnalyticSurface, gp_direction, gp_point, perpendicular, unit
-from exporters.polygons import densify, dist_to_polyline_2d, rdp_indices
+from exporters.polygons import densify, dist_to_polyline_2d, simplify_polyline
 
 
 def intersection_curves(s1: AnalyticSurface, s2: AnalyticSurface, tol: float) -> list[Geom_Curve]:
@@ -191,7 +191,7 @@ def fit_pcurve(uv: np.ndarray, tol: float, circles: bool = False) -> Geom2d_Curv
         arc = _circle_arc(uv, tol)
         if arc is not None:
             return arc
-    uv = uv[rdp_indices(uv, 0.5 * tol)]  # long pixel-step polylines: keep only what shapes them
+    uv = simplify_polyline(uv, 0.5 * tol)  # long pixel-step polylines: keep only what shapes them
     c = _smoothing_bspline(uv, tol)
     if c is not None:
         ts = np.linspace(c.FirstParameter(), c.LastParameter(), 200)

@@ -33,6 +33,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from v2c.bench.config import MetricConfig
 from v2c.bench.segmentation import match_faces
@@ -319,6 +320,5 @@ def vbrep_from_gt(scan: Scan, tilt: dict[int, tuple[np.ndarray, float]] | None =
 
 
 def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues rotation of ``v`` about unit ``axis`` by ``angle`` radians."""
-    k = axis / np.linalg.norm(axis)
-    return v * np.cos(angle) + np.cross(k, v) * np.sin(angle) + k * (k @ v) * (1 - np.cos(angle))
+    """``v`` rotated about ``axis`` (any length) by ``angle`` radians."""
+    return Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)).apply(v)

@@ -58,6 +58,8 @@ def perturb_direction(d0: np.ndarray, ab: np.ndarray, basis: tuple[np.ndarray, n
 
 def rotation_exp(w: np.ndarray) -> np.ndarray:
     """Rotation matrix of the axis-angle vector ``w`` (3,) (radians), Rodrigues' formula."""
+    # kept, not Rotation.from_rotvec: the LM's analytic Jacobian (geometry.residuals.left_jacobian) is this
+    # formula's derivative, and fits stay bit for bit; scipy's quaternion round trip is slower per call
     w = np.asarray(w, float)
     th = float(np.linalg.norm(w))
     k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
@@ -68,6 +70,8 @@ def rotation_exp(w: np.ndarray) -> np.ndarray:
 
 def nearest_rotation(m: np.ndarray) -> np.ndarray:
     """The proper rotation closest to the 3x3 matrix ``m`` in the Frobenius norm (polar decomposition)."""
+    # kept: the SVD polar factor is the standard numpy form; Rotation.from_matrix refuses det <= 0 (two axis
+    # classes give a singular m) and Rotation.align_vectors does this same SVD through a quaternion round trip
     u, _, vt = np.linalg.svd(np.asarray(m, float))
     d = np.sign(np.linalg.det(u @ vt)) or 1.0
     return u @ np.diag([1.0, 1.0, d]) @ vt

@@ -38,6 +38,7 @@ from build123d import (
     fillet,
 )
 from OCP.TopoDS import TopoDS_Shape
+from scipy.spatial.transform import Rotation
 
 from v2c.synth import occ
 
@@ -366,7 +367,8 @@ def _hull_rest_rotation(shape: TopoDS_Shape) -> np.ndarray:
         x[(k + 1) % 3] = 1.0
         y = np.cross(z, x)
         return np.stack([x, y, z])
-    rot = _rotation_between(n, np.array([0.0, 0.0, -1.0]))
+    # the smallest rotation taking n to -Z (n is no model axis here, so never antiparallel to it)
+    rot = Rotation.align_vectors([[0.0, 0.0, -1.0]], [n])[0].as_matrix()
     best_dir, best_area = None, 0.0
     for face in faces:
         prim = occ.face_primitive(face, 1.0)
@@ -383,24 +385,8 @@ def _hull_rest_rotation(shape: TopoDS_Shape) -> np.ndarray:
                 best_dir, best_area = d, props.Mass()
     if best_dir is not None:
         a = np.arctan2(best_dir[1], best_dir[0])
-        c, s = np.cos(-a), np.sin(-a)
-        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ rot
+        rot = Rotation.from_rotvec([0.0, 0.0, -a]).as_matrix() @ rot
     return rot
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Smallest rotation taking unit vector a to unit vector b."""
-    v = np.cross(a, b)
-    c = float(a @ b)
-    if np.linalg.norm(v) < 1e-12:
-        if c > 0:
-            return np.eye(3)
-        p = np.eye(3)[int(np.argmin(np.abs(a)))]
-        v = np.cross(a, p)
-        v /= np.linalg.norm(v)
-        return 2 * np.outer(v, v) - np.eye(3)
-    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + vx + vx @ vx / (1 + c)
 
 
 @lru_cache(maxsize=32)

@@ -148,6 +148,7 @@ def _sample_print(rng: np.random.Generator, part_size: float, base: np.ndarray) 
 
 def _look_at(eye: np.ndarray, target: np.ndarray, roll: float) -> np.ndarray:
     """Rotation (rows: camera x, y, z in world) of an OpenCV camera at `eye` looking at `target`, world Z up."""
+    # kept: scipy's Rotation has no look-at; the frame is three cross products (synthetic scenes stay bit for bit)
     f = target - eye
     f /= np.linalg.norm(f)
     r = np.cross(f, [0.0, 0.0, 1.0])
