@@ -170,3 +170,20 @@ def test_train_never_replaces_weights_without_force(tmp_path: Path) -> None:
     (tmp_path / "unet.pt").write_bytes(b"x")
     res = CliRunner().invoke(main, ["train", "--data", str(tmp_path / "nodata"), "-o", f"{tmp_path}/"])
     assert res.exit_code == 1 and f"{tmp_path / 'unet.pt'}: exists; pass --force" in res.output, res.output
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="fixture STEP/STL files carry no v2c mark yet (fixtures_design/assembly.py writes them through build123d; "
+    "v2c.io_safe.written_by_v2c knows no STL): a re-run into the same folder needs --force",
+)
+def test_fixture_replaces_its_own_files_without_force(tmp_path: Path) -> None:
+    from scenes.vbrep import box_corner
+
+    src = tmp_path / "box.vbrep.json"
+    box_corner().save(src)
+    args = ["fixture", str(src), "--kind", "corner", "-o", str(tmp_path / "out"), "--min-confidence", "0.9"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    assert all(written_by_v2c(p) for p in (tmp_path / "out").iterdir())
