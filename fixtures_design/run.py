@@ -91,15 +91,25 @@ def fixture_for_scan(
     part: PartChoice = "reconstructed",
     params: Params | None = None,
     roi: tuple[int, int, int, int] | None = None,
+    force: bool = True,
 ) -> FixtureRun:
     """Design a fixture of ``kind`` for a scan folder or VB-Rep JSON and write its files into ``out_dir``.
 
     out_dir: default ``<scan>/fixtures`` (or ``<file stem>_fixtures`` next to a JSON or STEP). part: which part goes
     into the assembly ("true" needs a synthetic scan's gt/part.step). Millimetres, ``frame`` as in `v2c to-step`;
     a STEP input keeps the STEP's own frame (``frame`` is ignored) and its faces are the reconstructed part.
-    Raises `NoReferenceError` when no intersection edge qualifies; nothing is written then.
+    Raises `NoReferenceError` when no intersection edge qualifies; nothing is written then. force: False refuses
+    (`v2c.errors.OutputError`, before any work) to replace an existing output file that v2c did not write
+    (`v2c.io_safe.check_replaceable`; `v2c fixture` without ``--force``).
     """
+    from v2c.io_safe import check_replaceable
+
     source = Path(source)
+    if out_dir is None:
+        out_dir = source / "fixtures" if source.is_dir() else source.with_name(source.stem + "_fixtures")
+    stem = f"fixture_{FixtureKind(kind).value}"  # the names `write_fixture` gives the set
+    for name in (f"{stem}.step", f"{stem}.stl", f"{stem}_assembly.step"):
+        check_replaceable(Path(out_dir) / name, force)
     vbrep, scan = load_vbrep(source, segmentation, roi)
     from_step = source.suffix.lower() in STEP_SUFFIXES
     if from_step:
@@ -119,7 +129,5 @@ def fixture_for_scan(
         shape = reconstructed_part(vbrep, fixture.fmap)
     else:
         shape = None
-    if out_dir is None:
-        out_dir = source / "fixtures" if source.is_dir() else source.with_name(source.stem + "_fixtures")
     files = write_fixture(fixture, out_dir, part=shape, part_label=f"{part}_part")
     return FixtureRun(vbrep, fixture, files)

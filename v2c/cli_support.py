@@ -1,4 +1,5 @@
-"""What every `v2c` command shares: the error policy, SIGINT, logging levels and the scan-limit option.
+"""What every `v2c` command shares: the error policy, SIGINT, logging levels (``-v``/``-q`` on the group and on
+every sub-command, `verbosity_options`), the output-path rule (`output_file`) and the scan-limit option.
 
 Error policy: a `v2c.errors.V2cError` (bad input, an output that cannot be written) and a
 `click.ClickException` print ``error: <message>`` and exit 1; Ctrl-C prints ``interrupted`` and exits 130
@@ -11,9 +12,11 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import signal
 import sys
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import click
@@ -82,6 +85,54 @@ def configure_logging(verbose: int, quiet: bool) -> None:
     root.handlers[:] = [handler]
     root.setLevel(level)
     root.propagate = False
+
+
+_VERBOSITY = "v2c.verbosity"
+
+
+def _set_verbosity(ctx: click.Context, param: click.Parameter, value: int | bool) -> None:
+    if not value:  # not given on this command: the group's -v / -q (or the default) stay
+        return
+    state = ctx.meta.setdefault(_VERBOSITY, {})
+    state[param.name] = value
+    configure_logging(int(state.get("verbose", 0)), bool(state.get("quiet", False)))
+
+
+def verbosity_options(f: Callable) -> Callable:
+    """``-v/--verbose`` (repeatable) and ``-q/--quiet`` on a sub-command: the same as ``v2c -v`` / ``v2c -q``
+    before it (``v2c -q bench`` = ``v2c bench -q``). ``-q`` also hides progress bars (`quiet`)."""
+    f = click.option(
+        "-q",
+        "--quiet",
+        is_flag=True,
+        expose_value=False,
+        callback=_set_verbosity,
+        help="Only errors on stderr: no progress bar, no stage messages, no warnings (as `v2c -q`).",
+    )(f)
+    return click.option(
+        "-v",
+        "--verbose",
+        count=True,
+        expose_value=False,
+        callback=_set_verbosity,
+        help="More messages on stderr: -v progress, -vv debug (as `v2c -v`).",
+    )(f)
+
+
+def quiet() -> bool:
+    """True under ``-q`` (the group's or the command's): show no progress bar."""
+    return logging.getLogger("v2c").level >= logging.ERROR
+
+
+def output_file(value: str | Path | None, default_name: str) -> Path | None:
+    """Where a one-file output goes for ``-o VALUE``: VALUE itself, or ``VALUE/default_name`` when VALUE ends
+    with a path separator (``-o new/``: the folder is made) or is an existing folder."""
+    if value is None:
+        return None
+    text = str(value)
+    if text.endswith(("/", os.sep)) or Path(text).is_dir():
+        return Path(text) / default_name
+    return Path(text)
 
 
 def run_with_error_policy(invoke: Callable[[], Any]) -> int:

@@ -15,14 +15,14 @@ instance's pixels). Definitions (BENCHMARK.md where it has one):
   is the fair figure: single-threaded, it is what the wall clock would be on an idle core.
 Lengths are divided by gt meta part_size_m (metrics only; the method never reads it).
 
-CLI: ``python -m v2c.bench.fit SCANS... [--ablation A ...] [--json OUT]`` (SCANS: scan folders or folders of them).
+CLI: ``v2c bench --stage fit --scans DIR --n N [--ablation A,B] [--json OUT]`` (DIR: a scan folder or a folder of
+them; without --scans, the bench's generated scans).
 """
 
 from __future__ import annotations
 
-import json
-import sys
-from collections.abc import Callable, Iterable, Sequence
+import contextlib
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,17 +37,24 @@ if TYPE_CHECKING:
     from v2c.segment.types import Segmentation
 
 
-def single_thread() -> None:
-    """Limit BLAS/OpenMP and OpenCV to one thread (the issue's 'one core' timing)."""
+@contextlib.contextmanager
+def single_thread() -> Iterator[None]:
+    """Inside the block BLAS/OpenMP and OpenCV use one thread (the issue's 'one core' timing); restored after."""
+    import cv2
+
     try:
         from threadpoolctl import threadpool_limits
 
-        threadpool_limits(1)
+        limits: contextlib.AbstractContextManager = threadpool_limits(1)
     except ImportError:  # timings then depend on OMP_NUM_THREADS / OPENBLAS_NUM_THREADS
-        pass
-    import cv2
-
+        limits = contextlib.nullcontext()
+    cv_threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
+    try:
+        with limits:
+            yield
+    finally:
+        cv2.setNumThreads(cv_threads)
 
 
 def scan_dirs(paths: Iterable[str | Path]) -> list[Path]:
@@ -209,30 +216,3 @@ def format_table(summary: dict[str, dict[str, float]]) -> str:
             f"{s['time_median_s']:.2f} / {s['cpu_median_s']:.2f} |"
         )
     return "\n".join(lines)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """CLI entry (see module docstring)."""
-    import argparse
-
-    ap = argparse.ArgumentParser(prog="python -m v2c.bench.fit", description=__doc__.split("\n")[0])
-    ap.add_argument("scans", nargs="+", help="scan folders, or folders of scan folders")
-    ap.add_argument("--ablation", action="append", choices=ABLATIONS, help="repeatable; default: all four")
-    ap.add_argument("--json", type=Path, help="write summary and per-scan rows here")
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
-    single_thread()
-    out = fit_benchmark(
-        args.scans,
-        args.ablation or ABLATIONS,
-        FitConfig(seed=args.seed),
-        log=lambda s: print(s, file=sys.stderr, flush=True),
-    )
-    print(format_table(out["summary"]))
-    if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -9,12 +9,12 @@
 - Semantic confusion (per-pixel labels, 255 ignored) for the mean IoU over the 18 classes.
 Per-scan numbers are averaged over scans (``summarise``); type/axis accuracies are also pooled over all pairs.
 
-``python -m v2c.bench.segmentation --data DIR --method learned --method geometric`` prints the table and writes JSON.
+``v2c bench --stage segmentation --scans DIR --n N --segmentation learned,geometric --json OUT`` prints the table of
+`run` and writes its JSON.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -228,26 +228,3 @@ def format_table(results: dict) -> str:
         cells = [str(s["scans"])] + [f"{s.get(c, float('nan')):.3f}" for c in cols[1:]]
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m v2c.bench.segmentation --data DIR [--method M ...]``: the table of `run`, optionally its JSON."""
-    import argparse
-
-    from v2c.segment.data import find_scans
-
-    ap = argparse.ArgumentParser(description="Segmentation metrics (face matching, type/axis accuracy, mIoU).")
-    ap.add_argument("--data", required=True, type=Path)
-    ap.add_argument("--method", action="append", default=None)
-    ap.add_argument("--limit", type=int, default=None)
-    ap.add_argument("--out", type=Path, default=None)
-    a = ap.parse_args(argv)
-    scans = find_scans(a.data)[: a.limit]
-    res = run(scans, a.method or ["learned", "geometric"])
-    print(format_table(res))
-    if a.out:
-        a.out.write_text(json.dumps(res, indent=1, default=float))
-
-
-if __name__ == "__main__":
-    main()

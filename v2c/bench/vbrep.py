@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from v2c.bench.config import MetricConfig
 from v2c.bench.surfaces import chamfer_distance, gt_points, part_size, reconstruction_points
 from v2c.camera import project
-from v2c.choices import DEFAULT_ABLATION, DEFAULT_SEGMENTATION, SEGMENTATION_METHODS
+from v2c.choices import DEFAULT_ABLATION, DEFAULT_SEGMENTATION
 from v2c.vbrep.gt_types import GTEdgeSamples, GTTypeConfig, gt_edge_samples
 from v2c.vbrep.model import EdgeType, VBRep
 
@@ -211,28 +211,3 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, float]:
         out[f"{k}_median"] = float(np.median([r[k] for r in rows]))
     out["scans"] = len(rows)
     return out
-
-
-if __name__ == "__main__":  # python -m v2c.bench.vbrep DIR [--n 30] [--json out.json]
-    import argparse
-    import json
-    from pathlib import Path
-
-    ap = argparse.ArgumentParser(description="VB-Rep chamfer and edge-type accuracy over a folder of scans")
-    ap.add_argument("folder", type=Path)
-    ap.add_argument("--n", type=int, default=None, help="first n scans (sorted by name)")
-    ap.add_argument("--segmentation", default=DEFAULT_SEGMENTATION, choices=SEGMENTATION_METHODS)
-    ap.add_argument("--json", type=Path, default=None)
-    a = ap.parse_args()
-    dirs = sorted(p for p in a.folder.iterdir() if (p / "camera.json").exists())[: a.n]
-    rows = evaluate([str(p) for p in dirs], a.segmentation)
-    for r in rows:
-        print(
-            f"{Path(r['scan']).name} {r['family'] or '':8s} chamfer {r['chamfer']:.4f} "
-            f"edge-type acc {r['matched_accuracy']:.3f} (strict {r['accuracy']:.3f}, coverage {r['coverage']:.3f})"
-            f" {r['t_total']:.1f} s"
-        )
-    s = summarize(rows)
-    print(json.dumps(s, indent=1))
-    if a.json:
-        a.json.write_text(json.dumps({"summary": s, "rows": rows}, indent=1))

@@ -1,7 +1,8 @@
 """Sub-commands of `v2c`; each module defines `command` (a click command). Heavy imports go inside the function.
 
-`executor_options` adds the options of the batch commands (to-step, synth, bench, train) that say where their
-one-task-per-scan work runs (`v2c.executors`, docs/scale.md)."""
+`executor_options` and `jobs_option` add the options of the batch commands (to-step, synth, bench, train) that say
+where their one-task-per-scan work runs and how much of it at once (`v2c.executors`, docs/scale.md). The flags
+every command shares, and what they mean, are in docs/cli.md (tests/test_cli_flags.py checks them)."""
 
 from __future__ import annotations
 
@@ -30,6 +31,22 @@ def executor_options(f: Callable[..., Any]) -> Callable[..., Any]:
         show_default=True,
         help="Where the per-scan tasks run: local processes, or a Ray cluster (needs "
         "`pip install 'v2c[ray]'`; docs/scale.md).",
+    )(f)
+
+
+#: ``--jobs`` of every batch command when not given: one worker process (locally; the whole cluster on Ray).
+DEFAULT_JOBS = 1
+
+
+def jobs_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--jobs N``: worker processes, one default for every batch command (`DEFAULT_JOBS`)."""
+    return click.option(
+        "--jobs",
+        default=DEFAULT_JOBS,
+        show_default=True,
+        type=click.IntRange(1),
+        help="Worker processes (one thread each); with --executor ray: most scans in flight "
+        "[default there: the whole cluster].",
     )(f)
 
 

@@ -1,7 +1,10 @@
 """`v2c bench`: every metric of BENCHMARK.md per ablation on synthetic scans, as a table like the paper's Table 1
 (docs/bench.md); ``--suite unseen`` / ``corpus-val``: parts nothing is tuned on (`v2c.bench.suite`); ``--real
-DIR``: `v2c to-step` on real frames with regions of interest; ``--segmentation-only``: the segmenters alone (their
-instances against the ground-truth faces, docs/segmentation.md)."""
+DIR``: `v2c to-step` on real frames with regions of interest. ``--stage`` measures one stage alone on the same
+scans: ``segmentation`` (the segmenters' instances against the ground-truth faces, `v2c.bench.segmentation`),
+``fit`` (the geometry stage on oracle segmentation, `v2c.bench.fit`), ``vbrep`` (Chamfer and edge-type accuracy
+per family, `v2c.bench.vbrep`), ``synth`` (the scan generator's speed, `v2c.synth.bench`), ``parts`` (the
+feature-based part builder's valid share and speed, `v2c.synth.features.measure`)."""
 
 from __future__ import annotations
 
@@ -13,7 +16,11 @@ from typing import TYPE_CHECKING
 import click
 
 from v2c.choices import ABLATIONS, DEFAULT_ABLATION, DEFAULT_SEGMENTATION, SEGMENTATION_METHODS
-from v2c.commands import executor_config, executor_options, jobs_given
+from v2c.cli_support import quiet, verbosity_options
+from v2c.commands import executor_config, executor_options, jobs_given, jobs_option
+
+#: What ``--stage`` measures: the whole pipeline (the Table-1 bench), or one stage alone.
+STAGES = ("pipeline", "segmentation", "fit", "vbrep", "synth", "parts")
 
 if TYPE_CHECKING:
     from v2c.bench.run import BenchConfig
@@ -86,14 +93,7 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     default=None,
     help="Write the summary and every per-scan row here.",
 )
-@click.option(
-    "--jobs",
-    default=2,
-    show_default=True,
-    type=click.IntRange(1),
-    help="Worker processes (one thread each); with --executor ray: most scans in flight "
-    "[default there: the whole cluster].",
-)
+@jobs_option
 @click.option(
     "--scans",
     "scans_dir",
@@ -125,11 +125,13 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     help="ROI file for --real (default: v2c/bench/real_rois.json).",
 )
 @click.option(
+    "-o",
+    "--output",
     "--out",
     "out_dir",
     type=click.Path(file_okay=False, path_type=Path),
     default=None,
-    help="Where --real writes its STEP files, VB-Reps and figures (default: a temporary folder).",
+    help="Folder where --real writes its STEP files, VB-Reps and figures (default: a temporary folder).",
 )
 @click.option(
     "--figures",
@@ -145,11 +147,30 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     help="Weights of the learned segmenter (default: the shipped v2c/segment/weights/unet.pt).",
 )
 @click.option(
+    "--stage",
+    default="pipeline",
+    show_default=True,
+    type=click.Choice(STAGES),
+    help="What to measure on the scans (generated, or --scans DIR): pipeline: every metric of the "
+    "reconstruction (the table); segmentation: the segmenters alone (instances matched to the gt faces: "
+    "precision, recall, type / axis accuracy, mean IoU, seconds per scan); fit: the geometry stage alone on "
+    "oracle segmentation (alignment, radius / plane-offset / torus errors, single-thread fit time, per "
+    "--ablation); vbrep: Chamfer and edge-type accuracy (matched, strict, coverage) per part family. "
+    "Without scans: synth: the scan generator's speed (--n timed scans of --size, --noise, --families); "
+    "parts: the feature-based part builder (--n parts of --families: valid share, parts per second).",
+)
+@click.option(
     "--segmentation-only",
     "seg_only",
     is_flag=True,
-    help="Instead: score the segmentation alone (its instances matched to the gt faces: precision, "
-    "recall, type / axis accuracy, mean IoU, seconds per scan) on the same scans.",
+    hidden=True,
+    help="The same as --stage segmentation (kept for old scripts).",
+)
+@click.option(
+    "--families",
+    default=None,
+    help="--stage synth / parts: part families or groups, comma-separated, as `v2c synth --families` "
+    "[default: synth: the procedural families; parts: the feature-based ones].",
 )
 @click.option(
     "--suite",
@@ -208,7 +229,8 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     help="Write the reliability diagram (PNG) of the first column's edge confidences here: share of "
     "edges whose type is right against their confidence, raw and calibrated, ECE in the legend.",
 )
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option("--force", is_flag=True, help="Replace an existing --json file that v2c did not write (default: refuse).")
+@verbosity_options
 @executor_options
 @click.pass_context
 def command(
@@ -230,7 +252,9 @@ def command(
     out_dir: Path | None,
     figure_dir: Path | None,
     weights: Path | None,
+    stage: str,
     seg_only: bool,
+    families: str | None,
     suite: str,
     views: int,
     corpus_dir: Path | None,
@@ -239,7 +263,7 @@ def command(
     family_scans: int,
     appearance: str,
     reliability: Path | None,
-    quiet: bool,
+    force: bool,
     executor: str,
     ray_address: str | None,
 ) -> None:
@@ -247,23 +271,53 @@ def command(
     face precision / recall, type / axis accuracy, depth error, edge-type accuracy and runtime by stage, printed
     as a Markdown table next to the paper's numbers (docs/bench.md). ``--suite unseen`` measures parts nothing
     is tuned on instead (the CAD corpus test split and the leave-out generator families), per source and size
-    band; ``--suite corpus-val`` the corpus validation split."""
+    band; ``--suite corpus-val`` the corpus validation split. ``--stage`` measures one stage alone instead
+    (segmentation, fit, vbrep on the scans; synth, parts: the generators' speed)."""
     from v2c.bench import run
     from v2c.executors import ExecutorError
     from v2c.synth.dataset import SynthError
 
+    def given(name: str) -> bool:
+        return jobs_given(ctx, name)
+
+    if seg_only:  # the old spelling of --stage segmentation
+        if given("stage") and stage != "segmentation":
+            raise click.UsageError(f"--segmentation-only contradicts --stage {stage}")
+        stage = "segmentation"
+    if families is not None and stage not in ("synth", "parts"):
+        raise click.UsageError("--families belongs to --stage synth / parts")
+    if stage != "pipeline":
+        for name, flag in (("real_dir", "--real"), ("suite", "--suite"), ("reliability", "--reliability")):
+            if given(name):
+                raise click.UsageError(f"{flag} belongs to --stage pipeline, not --stage {stage}")
+    if stage in ("fit", "vbrep", "synth", "parts"):
+        for name, flag in (("weights", "--weights"), ("figure_dir", "--figures"), ("no_step", "--no-step")):
+            if given(name):
+                raise click.UsageError(f"{flag} does not apply to --stage {stage}")
+    check_json_output(json_out, force)  # before the work, not after
+    progress = not quiet()
+    if stage in ("synth", "parts"):
+        for name, flag in (("scans_dir", "--scans"), ("cad_dir", "--cad"), ("segmentation", "--segmentation")):
+            if given(name):
+                raise click.UsageError(f"{flag} does not apply to --stage {stage} (it makes its own parts)")
+        _generator_stage(stage, n=n, seed=seed, noise=noise, size=size, families=families, json_out=json_out)
+        return
     where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
     if real_dir is not None:
         from v2c.bench import real
 
-        report = real.real_bench(real_dir, rois or run.DEFAULT_ROIS, segmentation, out_dir, progress=not quiet)
+        report = real.real_bench(real_dir, rois or run.DEFAULT_ROIS, segmentation, out_dir, progress=progress)
         click.echo(real.format_table(report))
         click.echo(f"outputs in {report['out_dir']}")
         _write_json(json_out, report)
         return
     order = (*ABLATIONS, "gt")
     if ablation is None:
-        ablation = ABLATIONS if suite == "family" else (DEFAULT_ABLATION,)
+        ablation = ABLATIONS if suite == "family" and stage in ("pipeline", "fit") else (DEFAULT_ABLATION,)
+    if stage in ("fit", "vbrep") and "gt" in ablation:
+        raise click.UsageError(f"--ablation gt (the ideal VB-Rep) belongs to --stage pipeline, not {stage}")
+    if stage == "fit" and given("segmentation") and segmentation != ("oracle",):
+        raise click.UsageError("--stage fit measures the geometry stage on oracle segmentation only")
     if suite != "family":
         _suite(
             suite,
@@ -280,7 +334,6 @@ def command(
             no_step=no_step,
             figure_dir=figure_dir,
             weights=weights,
-            seg_only=seg_only,
             views=views,
             corpus_dir=corpus_dir,
             parts=parts,
@@ -288,7 +341,7 @@ def command(
             family_scans=family_scans,
             appearance=appearance,
             reliability=reliability,
-            quiet=quiet,
+            progress=progress,
         )
         return
     if appearance != "plain":
@@ -302,7 +355,7 @@ def command(
         noise=noise,
         size=size,
         cad_dir=cad_dir,
-        segmentations=segmentation,
+        segmentations=("oracle",) if stage == "fit" else segmentation,
         ablations=tuple(a for a in order if a in ablation),
         jobs=jobs,
         cache_dir=cache_dir,
@@ -314,11 +367,17 @@ def command(
         ray_address=where.address,
         ray_jobs=where.jobs if where.kind == "ray" else None,
     )
-    if seg_only:
-        _segmentation_only(cfg, json_out, quiet)
+    if stage in ("segmentation", "fit", "vbrep"):
+        try:
+            scans = run.prepare_scans(cfg, progress=progress)
+        except (ValueError, ExecutorError, SynthError) as e:
+            raise click.ClickException(str(e)) from None
+        {"segmentation": _segmentation_stage, "fit": _fit_stage, "vbrep": _vbrep_stage}[stage](
+            cfg, scans, json_out, progress
+        )
         return
     try:
-        result = run.run_benchmark(cfg, progress=not quiet)
+        result = run.run_benchmark(cfg, progress=progress)
     except (ValueError, ExecutorError, SynthError) as e:
         raise click.ClickException(str(e)) from None
     what = (
@@ -359,7 +418,6 @@ def _suite(
     no_step: bool,
     figure_dir: Path | None,
     weights: Path | None,
-    seg_only: bool,
     views: int,
     corpus_dir: Path | None,
     parts: str | None,
@@ -367,13 +425,13 @@ def _suite(
     family_scans: int,
     appearance: str,
     reliability: Path | None,
-    quiet: bool,
+    progress: bool,
 ) -> None:
     """``--suite unseen`` / ``corpus-val``: `v2c.bench.suite.run_and_report`."""
     from v2c.bench import run
     from v2c.bench import suite as S
 
-    for flag, given in (("--cad", cad_dir), ("--scans", scans_dir), ("--segmentation-only", seg_only)):
+    for flag, given in (("--cad", cad_dir), ("--scans", scans_dir)):
         if given:
             raise click.UsageError(f"{flag} belongs to --suite family, not --suite {suite}")
     fams = None
@@ -413,38 +471,159 @@ def _suite(
         appearance=appearance,
     )
     try:
-        result = S.run_and_report(cfg, progress=not quiet, echo=click.echo)
+        result = S.run_and_report(cfg, progress=progress, echo=click.echo)
     except ValueError as e:
         raise click.ClickException(str(e)) from None
     _reliability(reliability, result, f"suite {suite}, seed {seed}, {len(result['scans'])} scans")
     _write_json(json_out, result)
 
 
-def _segmentation_only(cfg: BenchConfig, json_out: Path | None, quiet: bool) -> None:
-    """The segmenters of ``cfg`` on its scans, scored alone (`v2c.bench.segmentation`)."""
+def _segmentation_stage(cfg: BenchConfig, scans: list[Path], json_out: Path | None, progress: bool) -> None:
+    """``--stage segmentation``: the segmenters of ``cfg`` on the scans, scored alone (`v2c.bench.segmentation`)."""
     from v2c.bench import run
     from v2c.bench import segmentation as S
-    from v2c.executors import ExecutorError
-    from v2c.synth.dataset import SynthError
 
-    try:
-        scans = run.prepare_scans(cfg, progress=not quiet)
-    except (ValueError, ExecutorError, SynthError) as e:
-        raise click.ClickException(str(e)) from None
     result = S.run(
         scans,
         list(cfg.segmentations),
         lambda scan, method: run.segment_scan(scan, method, cfg.weights),
-        log=(lambda *a: None) if quiet else (lambda m: click.echo(m, err=True)),
+        log=(lambda m: click.echo(m, err=True)) if progress else (lambda m: None),
     )
     click.echo(f"{len(scans)} scans, segmentation alone")
     click.echo(S.format_table(result))
     _write_json(json_out, run.jsonable(result))
 
 
+def _fit_stage(cfg: BenchConfig, scans: list[Path], json_out: Path | None, progress: bool) -> None:
+    """``--stage fit``: the geometry stage alone on oracle segmentation, one thread (`v2c.bench.fit`)."""
+    from v2c.bench import fit as F
+    from v2c.bench import run
+
+    with F.single_thread():
+        result = F.fit_benchmark(scans, cfg.ablations, log=(lambda m: click.echo(m, err=True)) if progress else None)
+    click.echo(f"{len(scans)} scans, geometry stage alone (oracle segmentation, one thread)")
+    click.echo(F.format_table(result["summary"]))
+    _write_json(json_out, run.jsonable(result))
+
+
+def _vbrep_stage(cfg: BenchConfig, scans: list[Path], json_out: Path | None, progress: bool) -> None:
+    """``--stage vbrep``: Chamfer and edge-type accuracy of the reconstruction, per segmentation / ablation and
+    per part family (`v2c.bench.vbrep`)."""
+    from v2c.bench import run
+    from v2c.bench import vbrep as V
+
+    result: dict = {"scans": [str(d) for d in scans], "columns": {}}
+    for seg in cfg.segmentations:
+        for abl in cfg.ablations:
+            rows = []
+            for d in scans:
+                rows += V.evaluate([str(d)], seg, abl)
+                r = rows[-1]
+                if progress:
+                    click.echo(
+                        f"{seg}/{abl} {d.name} {r['family'] or '':8s} chamfer {r['chamfer']:.4f} edge-type acc "
+                        f"{r['matched_accuracy']:.3f} (strict {r['accuracy']:.3f}, coverage {r['coverage']:.3f}) "
+                        f"{r['t_total']:.1f} s",
+                        err=True,
+                    )
+            fams = sorted({str(r["family"]) for r in rows if r["family"] is not None})
+            result["columns"][f"{seg}/{abl}"] = {
+                "summary": V.summarize(rows),
+                "families": {f: V.summarize([r for r in rows if str(r["family"]) == f]) for f in fams},
+                "rows": rows,
+            }
+    click.echo(f"{len(scans)} scans, VB-Rep metrics")
+    click.echo(format_vbrep_table(result))
+    _write_json(json_out, run.jsonable(result))
+
+
+def format_vbrep_table(result: dict) -> str:
+    """Markdown table of ``--stage vbrep``: one row per column and family, then the column's mean over scans."""
+    lines = [
+        "| segmentation/ablation | family | scans | Chamfer (max) | edge-type accuracy | strict accuracy | coverage "
+        "| seconds per scan (median) |",
+        "|" + " --- |" * 8,
+    ]
+    for col, c in result["columns"].items():
+        for fam, s in [*c["families"].items(), ("**all**", c["summary"])]:
+            lines.append(
+                f"| {col} | {fam} | {s['scans']} | {s['chamfer']:.4f} ({s['chamfer_max']:.4f}) | "
+                f"{100 * s['matched_accuracy']:.1f} % | {100 * s['accuracy']:.1f} % | {100 * s['coverage']:.1f} % | "
+                f"{s['t_total_median']:.2f} |"
+            )
+    return "\n".join(lines)
+
+
+def _generator_stage(
+    stage: str,
+    *,
+    n: int,
+    seed: int,
+    noise: str,
+    size: tuple[int, int],
+    families: str | None,
+    json_out: Path | None,
+) -> None:
+    """``--stage synth`` (`v2c.synth.bench.generator_speed`) or ``parts`` (`v2c.synth.features.measure`)."""
+    from v2c.synth.families import FAMILY_GROUPS, FEATURE_FAMILIES, PROCEDURAL_FAMILIES
+
+    known = FEATURE_FAMILIES if stage == "parts" else (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES)
+    names = None
+    if families is not None:
+        given = [f.strip() for f in families.split(",") if f.strip()]
+        names = tuple(dict.fromkeys(f for v in given for f in FAMILY_GROUPS.get(v, (v,))))
+        bad = [f for f in names if f not in known]
+        if bad or not names:
+            raise click.BadParameter(
+                f"{', '.join(bad) or 'nothing'}: --stage {stage} takes {', '.join(known)} or a group "
+                f"{', '.join(FAMILY_GROUPS)}",
+                param_hint="--families",
+            )
+    if stage == "synth":
+        from v2c.synth.bench import format_speed, generator_speed
+        from v2c.synth.dataset import SynthConfig
+
+        cfg = SynthConfig(width=size[0], height=size[1], noise=noise, **({"families": names} if names else {}))
+        result = generator_speed(cfg, n, seed)
+        click.echo(format_speed(result))
+    else:
+        from v2c.synth.features import measure
+
+        result = measure(n, seed, names or FEATURE_FAMILIES)
+        click.echo(format_parts(result))
+    _write_json(json_out, result)
+
+
+def format_parts(r: dict) -> str:
+    """Lines of a `v2c.synth.features.measure` result: valid share, speed, features applied and skipped."""
+    kinds = ", ".join(f"{k} {c}" for k, c in r["kinds"].items())
+    skipped = ", ".join(f"{k} {c}" for k, c in r["features_skipped"].items()) or "none"
+    return "\n".join(
+        [
+            f"{r['parts']} parts: {r['valid']} valid ({100 * r['valid_share']:.1f} %), {r['parts_per_cpu_s']:.2f} "
+            f"parts per CPU second, {r['parts_per_wall_s']:.2f} per wall second, {r['mean_features']:.2f} "
+            "features per part",
+            f"valid per family: {', '.join(f'{k} {c}' for k, c in r['valid_per_family'].items())}",
+            f"features applied ({r['features_applied']}): {kinds}",
+            f"features skipped: {skipped}",
+        ]
+    )
+
+
+def check_json_output(path: Path | None, force: bool) -> None:
+    """Refuse (`v2c.errors.OutputError`) a --json file that exists and that v2c did not write, unless ``force``."""
+    if path is not None:
+        from v2c.io_safe import check_replaceable
+
+        check_replaceable(path, force)
+
+
 def _write_json(path: Path | None, data: dict) -> None:
+    """Write ``data`` atomically, its first key ``generator`` (the mark by which v2c knows the file as its own)."""
     if path is None:
         return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
+    from v2c.io_safe import v2c_origin, write_text_atomic
+
+    marked = {"generator": f"{v2c_origin()} bench", **{k: v for k, v in data.items() if k != "generator"}}
+    write_text_atomic(path, json.dumps(marked, indent=1, allow_nan=False) + "\n")
     click.echo(f"wrote {path}")

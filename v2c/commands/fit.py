@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from v2c.cli_support import max_pixels_option, roi_option
+from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
 from v2c.commands import ablation_option, segmentation_option
 
 
@@ -37,30 +37,32 @@ def _short_params(d: dict) -> str:
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=click.Path(path_type=str),
     default=None,
-    help="JSON file to write (default: SCAN/fit.json).",
+    help="JSON file to write, or a folder (an existing one, or one ending in /) for fit.json (default: SCAN/fit.json).",
 )
 @roi_option
 @click.option("--seed", default=0, show_default=True, help="Seed of the RANSAC sampling.")
 @click.option("--force", is_flag=True, help="Replace an existing file that v2c did not write.")
+@verbosity_options
 def command(
     scan_dir: str,
     method: str,
     ablation: str,
-    output: Path | None,
+    output: str | None,
     roi: tuple[int, int, int, int] | None,
     seed: int,
     force: bool,
 ) -> None:
     """Fit primitives to the scan folder SCAN: print type, axis class, parameters, inliers and RMS of each, and
     write them (camera frame, metres) as JSON."""
+    from v2c.cli_support import output_file
     from v2c.fit import FitConfig, fit_scan
     from v2c.io_safe import check_replaceable, write_text_atomic
     from v2c.scan import ScanError, load_scan
     from v2c.segment import segment
 
-    out = output or Path(scan_dir) / "fit.json"
+    out = output_file(output, "fit.json") or Path(scan_dir) / "fit.json"
     check_replaceable(out, force)  # before the work, not after
     try:
         scan = load_scan(scan_dir, roi=roi)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from v2c.cli_support import max_pixels_option, roi_option
+from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
 from v2c.commands import segmentation_option
 
 
@@ -60,7 +60,9 @@ from v2c.commands import segmentation_option
     show_default=True,
     help="Part placed in the assembly STEP (true: a synthetic scan's gt/part.step).",
 )
+@click.option("--force", is_flag=True, help="Replace existing files that v2c did not write.")
 @roi_option
+@verbosity_options
 def command(
     scan: Path,
     kind: str,
@@ -70,6 +72,7 @@ def command(
     segmentation: str,
     clearance: float | None,
     part: str,
+    force: bool,
     roi: tuple[int, int, int, int] | None,
 ) -> None:
     """Design a fixture for SCAN (a scan folder, a VB-Rep JSON, or a STEP written by `v2c to-step`) and write
@@ -101,6 +104,7 @@ def command(
             part=part,
             params=params,
             roi=roi,
+            force=force,
         )
     except (ScanError, NoReferenceError, FileNotFoundError) as exc:
         raise click.ClickException(str(exc)) from None

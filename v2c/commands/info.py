@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from v2c.cli_support import max_pixels_option, roi_option
+from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
 
 if TYPE_CHECKING:
     from v2c.scan import Scan
@@ -86,6 +86,7 @@ def describe_scan(scan: Scan) -> list[str]:
 @max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(file_okay=True, dir_okay=True, path_type=str))
 @roi_option
+@verbosity_options
 def command(scan_dir: str, roi: tuple[int, int, int, int] | None) -> None:
     """Load the scan folder SCAN, check it and print what it holds (resolution, depth, intrinsics, mask/ROI,
     ground truth). Writes nothing."""

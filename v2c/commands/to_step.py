@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from v2c.cli_support import max_pixels_option, roi_option
+from v2c.cli_support import max_pixels_option, quiet, roi_option, verbosity_options
 from v2c.commands import executor_config, executor_options, segmentation_option
 
 if TYPE_CHECKING:
@@ -69,6 +69,7 @@ def _to_step_task(
 @segmentation_option()
 @click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
 @roi_option
+@verbosity_options
 @executor_options
 def command(
     scans: tuple[Path, ...],
@@ -83,9 +84,10 @@ def command(
 ) -> None:
     """Reconstruct each SCAN folder (or every scan folder inside a folder) and write its STEP.
 
-    One failing scan does not stop the others; the exit status is non-zero if any failed. With --executor ray
-    each scan is one Ray task: workers read the scan folders (and write next to them or under -o) at the same
-    paths, so those must be on a file system every node shares.
+    One failing scan does not stop the others; the exit status is non-zero if any failed. The scans run one at a
+    time here (no --jobs: each uses the cores it can); with --executor ray each scan is one Ray task: workers read
+    the scan folders (and write next to them or under -o) at the same paths, so those must be on a file system
+    every node shares.
     """
     from tqdm import tqdm
 
@@ -124,7 +126,7 @@ def command(
     except ExecutorError as e:
         raise click.ClickException(str(e)) from None
     done, failed = [], []
-    bar = tqdm(total=len(paths), desc="to-step", unit="scan", disable=not batch, leave=False)
+    bar = tqdm(total=len(paths), desc="to-step", unit="scan", disable=not batch or quiet(), leave=False)
     if where.kind == "local":  # one at a time, in order: name the scan being worked on
         bar.set_postfix_str(paths[0].name)
     for scan, res, exc in results:

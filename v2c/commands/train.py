@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from v2c.commands import executor_config, executor_options
+from v2c.cli_support import verbosity_options
+from v2c.commands import executor_config, executor_options, jobs_given, jobs_option
 from v2c.segment.train_config import TrainConfig
 
 
@@ -24,13 +25,20 @@ from v2c.segment.train_config import TrainConfig
     default=None,
     help="First generate this training set's missing scans under DATA (MODEL_CARD.md: base = stages "
     "1-3, stage4, stage5 = stages 5-7; features = stage5 plus 1500 scans of the feature-based "
-    "training families); resumable, 2 processes.",
+    "training families); resumable, --jobs processes.",
 )
 @click.option(
+    "-o",
+    "--output",
     "--out",
+    "out",
     required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Weights file to write (the best checkpoint by validation mIoU).",
+    type=click.Path(path_type=str),
+    help="Weights file to write (the best checkpoint by validation mIoU), or a folder (an existing one, or one "
+    "ending in /) for unet.pt.",
+)
+@click.option(
+    "--force", is_flag=True, help="Replace an existing weights file (never replaced without it: hours of training)."
 )
 @click.option("--seed", default=0, show_default=True, help="Seed of the weights and of the crop sequence.")
 @click.option("--steps", default=TrainConfig.steps, show_default=True, help="Optimiser steps (schedule length).")
@@ -67,11 +75,16 @@ from v2c.segment.train_config import TrainConfig
 )
 @click.option("--threads", default=TrainConfig.threads, show_default=True, help="torch CPU threads.")
 @click.option("--fp32", is_flag=True, help="Disable bf16 autocast even where the CPU supports it.")
+@jobs_option
+@verbosity_options
 @executor_options
+@click.pass_context
 def command(
+    ctx: click.Context,
     data_dir: Path,
     recipe: str | None,
-    out: Path,
+    out: str,
+    force: bool,
     seed: int,
     steps: int,
     stop_step: int | None,
@@ -84,15 +97,21 @@ def command(
     init: Path | None,
     threads: int,
     fp32: bool,
+    jobs: int,
     executor: str,
     ray_address: str | None,
 ) -> None:
     """Train the segmentation network on the scans under DATA and write OUT (+ OUT.json, the training record).
 
-    --executor / --ray-address say where --recipe generates its scans (the training itself runs here)."""
+    --jobs / --executor / --ray-address say where --recipe generates its scans (the training itself runs here)."""
+    from v2c.cli_support import output_file
     from v2c.segment.train import train
 
-    where = executor_config(executor, ray_address, jobs=2, jobs_given=False)
+    weights = output_file(out, "unet.pt")
+    for dest in (weights, Path(f"{weights}.json")):  # before the work: a weights file is hours of training
+        if (dest.exists() or dest.is_symlink()) and not force:
+            raise click.ClickException(f"{dest}: exists; pass --force to replace it (or choose another -o)")
+    where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
     if recipe is not None:
         from v2c.executors import ExecutorError
         from v2c.segment.train import RECIPES, generate_training_data
@@ -100,7 +119,7 @@ def command(
 
         click.echo(f"generating the {recipe} training set under {data_dir} (missing scans only)")
         try:
-            generate_training_data(data_dir, jobs=2, recipe=RECIPES[recipe], executor=where)
+            generate_training_data(data_dir, jobs=jobs, recipe=RECIPES[recipe], executor=where)
         except (ExecutorError, SynthError) as e:
             raise click.ClickException(str(e)) from None
     if not data_dir.is_dir():
@@ -118,11 +137,11 @@ def command(
         bf16=False if fp32 else None,
     )
     try:
-        rec = train(data_dir, out, cfg, cache_dir=cache_dir, init=init, log=lambda m: click.echo(m))
+        rec = train(data_dir, weights, cfg, cache_dir=cache_dir, init=init, log=lambda m: click.echo(m))
     except ValueError as e:
         raise click.ClickException(str(e)) from None
     best = rec.get("best") or {}
     click.echo(
-        f"wrote {out}: best mIoU {best.get('miou', float('nan')):.3f} at step {best.get('step')}, "
+        f"wrote {weights}: best mIoU {best.get('miou', float('nan')):.3f} at step {best.get('step')}, "
         f"{rec['steps_done']} steps in {rec['minutes']:.1f} min"
     )

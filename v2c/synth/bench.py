@@ -1,4 +1,4 @@
-"""Generator speed: `python -m v2c.synth.bench --size 256x256 --n 40` prints scans/s of one process (one core).
+"""Generator speed: `v2c bench --stage synth --size 256x256 --n 40` prints scans/s of one process (one core).
 
 Imports and one warm-up scan are excluded; every timed scan is a distinct random scene (seed, i). Both the CPU
 time of the process (all its threads; what one core delivers, robust to other users of a shared machine) and the
@@ -7,10 +7,10 @@ wall-clock time are reported.
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -18,43 +18,41 @@ from v2c.synth.dataset import SynthConfig, generate_scan
 from v2c.synth.occ import silence_occt
 
 
-def main() -> None:
-    """Time `generate_scan` on ``--n`` scans (after a warm-up) and print the seconds per scan."""
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--size", default="256x256", help="WxH pixels")
-    ap.add_argument("--n", type=int, default=40, help="timed scans")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--noise", default="sensor")
-    ap.add_argument(
-        "--families",
-        default=None,
-        help="comma-separated families or groups as `v2c synth --families` (default: its default mix)",
-    )
-    args = ap.parse_args()
-    w, h = (int(x) for x in args.size.split("x"))
-    extra = {}
-    if args.families:
-        from v2c.synth.families import FAMILY_GROUPS
+def generator_speed(cfg: SynthConfig, n: int, seed: int = 0) -> dict[str, Any]:
+    """Time `generate_scan` on ``n`` scans (seed, 0..n-1) after a warm-up scan, into a temporary folder.
 
-        names = [f.strip() for f in args.families.split(",") if f.strip()]
-        extra["families"] = tuple(dict.fromkeys(f for v in names for f in FAMILY_GROUPS.get(v, (v,))))
-    cfg = SynthConfig(width=w, height=h, noise=args.noise, **extra)
+    Returns the per-scan CPU and wall seconds (``cpu_s``, ``wall_s``) and their summaries: ``scans_per_cpu_s``,
+    ``cpu_mean_ms``, ``cpu_max_ms``, ``scans_per_wall_s``, ``wall_median_ms``."""
     silence_occt()
     with tempfile.TemporaryDirectory() as tmp:
-        generate_scan(Path(tmp), args.seed, 10**6, cfg)  # warm-up: lazy imports, caches
+        generate_scan(Path(tmp), seed, 10**6, cfg)  # warm-up: lazy imports, caches
         wall, cpu = [], []
-        for i in range(args.n):
+        for i in range(n):
             t0, c0 = time.perf_counter(), time.process_time()
-            generate_scan(Path(tmp), args.seed, i, cfg)
+            generate_scan(Path(tmp), seed, i, cfg)
             wall.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
     c, t = np.asarray(cpu), np.asarray(wall)
-    print(
-        f"{args.size} noise={args.noise} n={len(t)}: {len(c) / c.sum():.2f} scans/s per core by CPU time "
-        f"(mean {1e3 * c.mean():.0f} ms, max {1e3 * c.max():.0f} ms); wall clock {len(t) / t.sum():.2f} scans/s "
-        f"(median {1e3 * np.median(t):.0f} ms)"
+    return {
+        "size": f"{cfg.width}x{cfg.height}",
+        "noise": cfg.noise,
+        "families": list(cfg.families),
+        "seed": seed,
+        "scans": n,
+        "scans_per_cpu_s": float(n / c.sum()),
+        "cpu_mean_ms": float(1e3 * c.mean()),
+        "cpu_max_ms": float(1e3 * c.max()),
+        "scans_per_wall_s": float(n / t.sum()),
+        "wall_median_ms": float(1e3 * np.median(t)),
+        "cpu_s": c.tolist(),
+        "wall_s": t.tolist(),
+    }
+
+
+def format_speed(r: dict[str, Any]) -> str:
+    """One line of a `generator_speed` result."""
+    return (
+        f"{r['size']} noise={r['noise']} n={r['scans']}: {r['scans_per_cpu_s']:.2f} scans/s per core by CPU time "
+        f"(mean {r['cpu_mean_ms']:.0f} ms, max {r['cpu_max_ms']:.0f} ms); wall clock {r['scans_per_wall_s']:.2f} "
+        f"scans/s (median {r['wall_median_ms']:.0f} ms)"
     )
-
-
-if __name__ == "__main__":
-    main()

@@ -1469,15 +1469,3 @@ def measure(
         "features_applied": int(sum(kinds.values())),
         "features_skipped": dict(skipped.most_common()),
     }
-
-
-if __name__ == "__main__":
-    import argparse
-    import json
-
-    ap = argparse.ArgumentParser(description="Build feature-based parts in one process: valid share and speed.")
-    ap.add_argument("--n", type=int, default=200, help="parts to build")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--families", default=",".join(FEATURE_FAMILIES), help="comma-separated feat_* families")
-    args = ap.parse_args()
-    print(json.dumps(measure(args.n, args.seed, tuple(args.families.split(","))), indent=1))
