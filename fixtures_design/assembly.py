@@ -24,7 +24,7 @@ from OCP.TopoDS import TopoDS_Compound, TopoDS_Iterator
 from fixtures_design.frames import FrameMap, camera_mm_matrix
 from fixtures_design.model import Fixture, transformed
 from v2c.errors import OutputError
-from v2c.io_safe import OutputSet
+from v2c.io_safe import OutputSet, v2c_origin
 from v2c.vbrep.model import VBRep
 
 FIXTURE_COLOR = (0.85, 0.55, 0.1)
@@ -110,10 +110,26 @@ def assembly(fixture: Fixture, part: Shape | None, part_label: str = "part") -> 
     return Compound(children=children, label=f"{fixture.kind.value}_assembly")
 
 
+def _mark(tmp: Path) -> None:
+    """Put v2c's mark (`v2c.io_safe.written_by_v2c`) into a written temporary: a STEP's originating system
+    (build123d writes its own name there), a binary STL's 80-byte header."""
+    if tmp.suffix.lower() == ".stl":
+        with open(tmp, "r+b") as fp:
+            fp.write(f"{v2c_origin()} fixture".encode()[:80].ljust(80, b" "))
+        return
+    text = tmp.read_bytes()
+    end = text.find(b"ENDSEC;")
+    head = text[:end].replace(b"'build123d'", f"'{v2c_origin()}'".encode(), 1)
+    tmp.write_bytes(head + text[end:])
+
+
 def _export(out: OutputSet, path: Path, write: Callable[[Path], bool]) -> Path:
-    """Write one file of the set through its exclusive temporary; the exporter's False is an error."""
-    if not write(out.temp(path)):
+    """Write one file of the set through its exclusive temporary, marked as v2c's; the exporter's False is an
+    error."""
+    tmp = out.temp(path)
+    if not write(tmp):
         raise OutputError(f"{path}: the exporter reported a failure; the previous files were left as they were")
+    _mark(tmp)
     return path
 
 

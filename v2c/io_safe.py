@@ -15,8 +15,8 @@ Every file v2c writes goes through here (`atomic_write` for one file, `OutputSet
 
 Ownership: `v2c` never replaces a file it did not write unless asked to (``--force``; `OutputSet(force=False)`).
 Its files say who wrote them: a STEP's FILE_NAME names ``v2c`` as the originating system, a figure PNG carries
-the text chunk ``Software: v2c``, a JSON starts with ``"format": "v2c.vbrep"`` or ``"generator": "v2c ..."``
-(`written_by_v2c`).
+the text chunk ``Software: v2c``, a binary STL's header starts with ``v2c``, a JSON starts with
+``"format": "v2c.vbrep"`` or ``"generator": "v2c ..."`` (`written_by_v2c`).
 
 A SIGKILL or power loss leaves the old set and possibly hidden temporaries ``.<stem>.<pid>.<random>.tmp<suffix>``;
 the next write of the same file removes those whose process is gone (`sweep_stale_temporaries`). The one window
@@ -66,6 +66,8 @@ def written_by_v2c(path: str | Path) -> bool:
     if head.startswith(b"ISO-10303-21"):
         end = head.find(b"ENDSEC;")
         return f"'{V2C_MARK} ".encode() in head[: end if end > 0 else None]
+    if path.suffix.lower() == ".stl":  # a binary STL's 80-byte header: "v2c <version> fixture"
+        return head.startswith(V2C_MARK.encode() + b" ")
     if head.startswith(b"\x89PNG\r\n\x1a\n"):
         return b"tEXtSoftware\x00" + V2C_MARK.encode() in head
     # a JSON whose first key says so: {"format": "v2c.vbrep", ...} or {"generator": "v2c <version> ...", ...}
