@@ -73,7 +73,7 @@ class RefineConfig:
     flat_sigma: float = 1.5  # ... robust residual sigma (1.4826 MAD) of their plane within this many sensor sigmas
     # (ratio) ...
     flat_min_px: int = 30  # ... and at least this many valid pixels (pixels)
-    merge_joint: bool = False  # also merge touching flat pieces that one plane fitted to both explains, although
+    merge_joint: bool = True  # also merge touching flat pieces that one plane fitted to both explains, although
     # their own planes disagree by more than merge_angle_deg (a small piece's own plane is poorly determined on real
     # depth): each piece's points within merge_tol_part of the joint plane (median), joined greedily, best first,
     # the joint plane refitted to each grown group so a chain of pieces cannot bend round a curved surface
