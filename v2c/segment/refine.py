@@ -80,6 +80,15 @@ class RefineConfig:
     merge_joint_angle_deg: float = 12.0  # ... and each piece's own plane within this angle of the joint plane
     # (degrees)
     merge_joint_points: int = 4000  # points of a group its joint plane is fitted to (count; a seeded subsample)
+    merge_coax: bool = False  # merge touching cylinder-labelled pieces that one cylinder fitted to both explains
+    # (a hole wall or a shaft cut into several instances): each piece's points within merge_tol_part of the joint
+    # cylinder (median), joined greedily, best first, refitted to every grown group; before the coaxial step split,
+    # which cuts a true radius step apart again
+    merge_coax_min_px: int = 30  # pieces with fewer valid pixels are left alone (pixels)
+    merge_coax_max_radius: float = 2.0  # the joint radius at most this many times the largest piece's own (ratio;
+    # a near-flat union would otherwise pass as a huge cylinder)
+    merge_coax_any_label: bool = False  # pieces labelled plane or cone take part too, next to a cylinder-labelled one
+    # (the network calls strips of narrow hole walls planes); the group keeps a cylinder label
     noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
     # synthetic `sensor` profile's D4xx model
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
@@ -116,14 +125,15 @@ def refine_instances(
     normals: np.ndarray | None = None,
     ransac: RansacConfig | None = None,
 ) -> Segmentation:
-    """`split_plane_outliers`, `split_coaxial_steps`, then `merge_coplanar`, on one point map (normals: see
-    `split_plane_outliers`; ransac: the instance points, RANSAC and type-selection settings of the cylinder and
-    curvature tests, default `RansacConfig()`; a `v2c.fit.FitConfig` is one)."""
+    """`split_plane_outliers`, `merge_coaxial`, `split_coaxial_steps`, then `merge_coplanar`, on one point map
+    (normals: see `split_plane_outliers`; ransac: the instance points, RANSAC and type-selection settings of the
+    cylinder and curvature tests, default `RansacConfig()`; a `v2c.fit.FitConfig` is one)."""
     if not cfg.enabled:
         return seg
     ransac = ransac or RansacConfig()
     geometry = scan_geometry(depth, K, seg.instances, ransac)
     seg = split_plane_outliers(seg, depth, K, probs, cfg, geometry, normals)
+    seg = merge_coaxial(seg, depth, K, cfg, geometry, ransac)
     seg = split_coaxial_steps(seg, depth, K, cfg, geometry, ransac)
     return merge_coplanar(seg, depth, K, cfg, geometry, ransac)
 
@@ -422,6 +432,116 @@ def _merge_groups(
     for i in sorted(planes):
         out.setdefault(find(i), []).append(i)
     return [ids for ids in out.values() if len(ids) > 1]
+
+
+def touching_pairs(inst: np.ndarray) -> np.ndarray:
+    """(P, 2) int: the pairs (a < b) of instances (ids > 0) that touch (4-neighbour pixel pairs)."""
+    pairs = np.concatenate(
+        [np.stack([inst[:, :-1].ravel(), inst[:, 1:].ravel()], 1), np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)]
+    )
+    pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
+    return np.unique(np.sort(pairs, axis=1), axis=0).reshape(-1, 2)
+
+
+def _relabel(seg: Segmentation, inst: np.ndarray, groups: list[list[int]], keep: np.ndarray) -> Segmentation:
+    """``seg`` with each group of instance ids merged into its largest member among ``keep`` (bool per id; any
+    member where none is kept), ids renumbered 1..N in order (labels[k] stays instance k's)."""
+    labels = np.asarray(seg.labels)
+    lut = np.arange(len(labels), dtype=np.int32)
+    area = np.bincount(inst.ravel(), minlength=len(labels))
+    for ids in groups:
+        pool = [j for j in ids if keep[j]] or ids
+        lut[ids] = max(pool, key=lambda j: (area[j], -j))
+    roots = np.unique(lut)
+    compact = np.zeros(len(labels), np.int32)
+    compact[roots] = np.arange(len(roots), dtype=np.int32)
+    return Segmentation(compact[lut[inst]], labels[roots], np.asarray(seg.scores)[roots], seg.method)
+
+
+def merge_coaxial(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    cfg: RefineConfig = RefineConfig(),
+    geometry: tuple[np.ndarray, float] | None = None,
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
+    """``seg`` with touching cylinder-labelled instances merged where one cylinder explains them (merge_coax): the
+    network cut one hole wall or shaft at a highlight, a shadow or a change of axis class. Each piece needs its
+    own cylinder fit (`geometry.ransac.ransac_fit` with the settings of ``ransac``); pairs are joined best first
+    (the smaller median distance of one piece's points to the other's cylinder), each join only when a cylinder
+    fitted to both groups lies within merge_tol_part part sizes of every piece (median) with a radius at most
+    merge_coax_max_radius times the largest piece's own. The merged instance keeps its largest piece's label."""
+    inst = np.asarray(seg.instances).astype(np.int32)
+    valid = (np.asarray(depth) > 0) & (inst > 0)
+    if not (cfg.enabled and cfg.merge_coax) or not valid.any():
+        return seg
+    ransac = ransac or RansacConfig()
+    pts, size = geometry or scan_geometry(depth, K, inst, ransac)
+    tol = cfg.merge_tol_part * size
+    types = TYPE_OF_LABEL[np.asarray(seg.labels, np.int64)]
+    is_cyl = types == _CYLINDER
+    joins = is_cyl | (np.isin(types, [_PLANE, TYPE_NAMES.index("cone")]) if cfg.merge_coax_any_label else is_cyl)
+    pairs = touching_pairs(inst)
+    pairs = pairs[(is_cyl[pairs[:, 0]] | is_cyl[pairs[:, 1]]) & joins[pairs[:, 0]] & joins[pairs[:, 1]]]
+    if not len(pairs):
+        return seg
+    rng = np.random.default_rng(cfg.seed)
+    ids = np.unique(pairs)
+    got = instance_points(pts, valid, inst, ids, ransac)
+    own: dict[int, tuple[np.ndarray, np.ndarray, Cylinder | None]] = {}
+    for i in ids.tolist():  # loop over candidate instances
+        ip = got.get(int(i))
+        if ip is None or len(ip.points) < cfg.merge_coax_min_px:
+            continue
+        if not is_cyl[i]:  # a plane or cone piece: measured against its cylinder neighbours' cylinders only
+            own[int(i)] = (ip.points, ip.normals, None)
+            continue
+        fit = ransac_fit("cylinder", ip.points, ip.normals, size, ransac, rng)
+        if fit is not None and isinstance(fit.primitive, Cylinder):
+            own[int(i)] = (ip.points, ip.normals, fit.primitive)
+    scored = []
+    for a, b in pairs.tolist():  # loop over touching pairs
+        if a in own and b in own:
+            d = min(
+                float(np.median(np.abs(own[p][2].signed_distance(own[q][0]))))
+                for p, q in ((a, b), (b, a))
+                if own[p][2] is not None
+            )
+            scored.append((d, a, b))
+    parent = {i: i for i in own}
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for _, a, b in sorted(scored):  # loop over candidate pairs, best first
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            continue
+        members = [i for i in own if find(i) in (ra, rb)]
+        x = np.concatenate([own[i][0] for i in members])
+        n = np.concatenate([own[i][1] for i in members])
+        if len(x) > cfg.merge_joint_points:
+            pick = rng.choice(len(x), cfg.merge_joint_points, replace=False)
+            x, n = x[pick], n[pick]
+        fit = ransac_fit("cylinder", x, n, size, ransac, rng)
+        if fit is None or not isinstance(fit.primitive, Cylinder):
+            continue
+        cyl = fit.primitive
+        if cyl.radius > cfg.merge_coax_max_radius * max(own[i][2].radius for i in members if own[i][2] is not None):
+            continue
+        if all(float(np.median(np.abs(cyl.signed_distance(own[i][0])))) < tol for i in members):
+            parent[ra] = rb
+    groups: dict[int, list[int]] = {}
+    for i in sorted(own):
+        groups.setdefault(find(i), []).append(i)
+    merged = [g for g in groups.values() if len(g) > 1]
+    if not merged:
+        return seg
+    return _relabel(seg, inst, merged, is_cyl)
 
 
 def merge_coplanar(
