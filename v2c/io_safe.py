@@ -43,7 +43,8 @@ the text chunk ``Software: v2c``, a JSON starts with ``"format": "v2c.vbrep"`` o
 (`written_by_v2c`).
 
 Not covered: power loss (files are not fsync'ed; a journal makes no promise about data still in the page cache),
-and several processes writing the same set at once (each set is whole, the last one wins).
+and several processes writing the same set at once (committers settle the journals of a folder oldest first, one
+at a time, but which set ends up in place is not defined).
 """
 
 from __future__ import annotations
@@ -92,8 +93,10 @@ JOURNAL_FORMAT = "v2c.commit/1"
 _JOURNAL_RE = re.compile(rf"^{re.escape(JOURNAL_PREFIX)}[0-9a-f]{{16}}\.json$")
 _OWNER_RE = re.compile(r"^([0-9a-f]{8})-(\d+)-([a-z0-9_]+)(\..*)?$")
 _MAX_JOURNAL_BYTES = 1 << 20
-#: Exit status of a committer that put the old set back (its one-line reason on stderr).
+#: Exit status of a committer that put the old set back (its one-line reason on stderr), and of one that found
+#: its journal settled by another process (or never written).
 _ROLLED_BACK = 3
+_SETTLED_ELSEWHERE = 4
 #: Test hooks of the committer (environment): seconds to sleep after each rename; index of the rename after
 #: which to fail as a full disk would. Only the tests set them.
 _PAUSE_ENV = "V2C_TEST_COMMIT_PAUSE"
@@ -539,8 +542,9 @@ def settle_commits(folder: str | Path) -> list[str]:
     for path in _journal_paths(folder):
         outcome = _settle(path)
         lines.append(f"{path}: {outcome.state}" + (f": {outcome.message}" if outcome.message else ""))
+    prefix = f".{JOURNAL_PREFIX}"
     try:
-        names = [e.name for e in os.scandir(folder) if e.name.startswith(f".{JOURNAL_PREFIX}") and TMP_TAG in e.name]
+        names = [e.name for e in os.scandir(folder) if e.name.startswith(prefix) and TMP_TAG in e.name]
     except OSError:
         names = []
     for n in names:
@@ -566,7 +570,8 @@ def _test_hook() -> Callable[[int, Path], None] | None:
 
 def _committer_main(argv: Sequence[str]) -> int:
     """The committer (``--commit JOURNAL``): wait for the end of standard input (the writer closed it or died),
-    settle the folder's older journals, then this one. Exit 0, or `_ROLLED_BACK` with the reason on stderr."""
+    then settle the folder's journals, oldest first, this one in its turn. Exit 0 (committed), `_ROLLED_BACK`
+    (the reason on stderr) or `_SETTLED_ELSEWHERE`."""
     if len(argv) != 2 or argv[0] != "--commit":
         print("usage: python -m v2c.io_safe --commit JOURNAL", file=sys.stderr)
         return 2
@@ -575,12 +580,16 @@ def _committer_main(argv: Sequence[str]) -> int:
     with contextlib.suppress(OSError, ValueError):
         sys.stdin.buffer.read()
     journal = Path(argv[1])
-    for other in _journal_paths(journal.parent):
-        if other != journal:
-            _settle(other)
-    outcome = _settle(journal, _test_hook()) if os.path.lexists(journal) else _Outcome("gone")
-    if outcome.state in ("committed", "gone"):
+    outcome = _Outcome("gone")  # settled by another process (or never written: the writer died before)
+    for path in _journal_paths(journal.parent):  # oldest first: a later set wins, as it would have anyway
+        if path == journal:
+            outcome = _settle(journal, _test_hook())
+        else:
+            _settle(path)
+    if outcome.state == "committed":
         return 0
+    if outcome.state == "gone":
+        return _SETTLED_ELSEWHERE
     with contextlib.suppress(OSError):
         print(outcome.message, file=sys.stderr)
     return _ROLLED_BACK
@@ -753,7 +762,7 @@ class OutputSet:
         path = self._folder / f"{JOURNAL_PREFIX}{secrets.token_hex(8)}.json"
         renames: list[_Rename] = []
         backups: list[Path | None] = []
-        reason = ""
+        reason, rc = "", None
         try:
             for dest in self.destinations + removes:
                 backups.append(_link_aside(dest))
@@ -762,26 +771,35 @@ class OutputSet:
             gone = [
                 _Remove(d.name, b.name if b else None) for d, b in zip(removes, backups[len(renames) :], strict=True)
             ]
-            journal = _Journal("commit", tuple(renames), tuple(gone))
             committer = self._start_committer(path)
             try:
-                _write_journal(path, journal)  # the commit point
+                _write_journal(path, _Journal("commit", tuple(renames), tuple(gone)))  # the commit point
             finally:
                 if committer is not None:  # end of its input: go (without a journal: nothing to do)
                     _, err = committer.communicate()
-                    if committer.returncode == _ROLLED_BACK and err.strip():
+                    rc = committer.returncode
+                    if rc == _ROLLED_BACK and err.strip():
                         reason = err.decode("utf-8", "replace").strip().splitlines()[-1]
-            outcome = _settle(path)  # "gone", unless the committer died or could not start
+            # the committer's verdict; else (it died, could not start, found the journal settled by another
+            # process) this process settles what is left and looks at the files
+            outcome = _settle(path) if rc not in (0, _ROLLED_BACK) else _Outcome("gone")
             reason = reason or outcome.message
         finally:
             if not os.path.lexists(path):  # a journal still there needs them to put the old set back
                 for bak in backups:  # none is left after a settled journal; these are of a set without one
                     if bak is not None:
                         _unlink_quietly(bak)
-        if not all(_ino(self._folder / r.dest) == r.ino for r in renames) or any(map(os.path.lexists, removes)):
+        if rc == 0 or outcome.state == "committed":
+            return
+        if rc == _ROLLED_BACK or outcome.state != "gone" or not self._in_place(renames, removes):
             raise OutputError(
                 reason or f"{self.destinations[0]}: not written; the previous files were left as they were"
             )
+
+    def _in_place(self, renames: list[_Rename], removes: list[Path]) -> bool:
+        """Whether the folder holds this set (its new files, none of those to remove)."""
+        assert self._folder is not None
+        return all(_ino(self._folder / r.dest) == r.ino for r in renames) and not any(map(os.path.lexists, removes))
 
     @staticmethod
     def _start_committer(journal: Path) -> subprocess.Popen | None:
