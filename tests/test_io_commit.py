@@ -348,7 +348,7 @@ def test_a_leftover_journal_is_rolled_forward_or_back(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     "bad",
-    ["not json {", "symlink", "other format", "slash in a name", "foreign temporary", "dest is a journal"],
+    ["not json {", "symlink", "fifo", "other format", "slash in a name", "foreign temporary", "dest is a journal"],
 )
 def test_a_bad_journal_is_removed_and_nothing_else_touched(bad: str, tmp_path: Path) -> None:
     out = tmp_path / "out"
@@ -370,6 +370,8 @@ def test_a_bad_journal_is_removed_and_nothing_else_touched(bad: str, tmp_path: P
     if bad == "symlink":
         (out / f"{JOURNAL_PREFIX}{'0' * 16}.json").symlink_to(tmp_path / "journal_elsewhere.json")
         (tmp_path / "journal_elsewhere.json").write_text(json.dumps(obj))
+    elif bad == "fifo":  # never opened for reading: it would wait for a writer forever
+        os.mkfifo(out / f"{JOURNAL_PREFIX}{'0' * 16}.json")
     elif bad == "not json {":
         (out / f"{JOURNAL_PREFIX}{'0' * 16}.json").write_text(bad)
     else:

@@ -1,6 +1,6 @@
 """Safe outputs: every file or folder v2c writes appears complete or not at all, and a set of files (STEP +
 VB-Rep JSON + figure) is committed as one: the folder holds the complete old set or the complete new set, even
-after SIGKILL (kill -9, the OOM killer) at any instant.
+after a SIGKILL (kill -9, the OOM killer) of the writer at any instant (once its committer, below, finished).
 
 Temporaries. A file (`temp_path`) or folder (`temp_dir`) is first made under an exclusive temporary name in the
 destination's own folder, ``.<name>.v2c-tmp-<host>-<pid>-<random><suffix>`` (the suffix of the destination is
@@ -61,6 +61,7 @@ import secrets
 import shutil
 import signal
 import socket
+import stat
 import subprocess
 import sys
 import tempfile
@@ -368,11 +369,12 @@ def _journal_names(folder: Path) -> set[str]:
     names: set[str] = set()
     for path in _journal_paths(folder):
         try:
-            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
         except OSError:
             continue
         try:
-            journal = _parse_journal(os.read(fd, _MAX_JOURNAL_BYTES))
+            regular = stat.S_ISREG(os.fstat(fd).st_mode)
+            journal = _parse_journal(os.read(fd, _MAX_JOURNAL_BYTES)) if regular else None
         except OSError:
             journal = None
         finally:
@@ -410,9 +412,12 @@ def _open_locked(path: Path) -> int | None:
     Raises OSError(ELOOP) for a symlink."""
     for _ in range(100):
         try:
-            fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW | os.O_CLOEXEC)
+            fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
         except FileNotFoundError:
             return None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO or device under a journal's name: never read
+            os.close(fd)
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
         _lock(fd)
         try:
             if os.path.samestat(os.fstat(fd), os.lstat(path)):
@@ -434,9 +439,9 @@ def _settle(path: Path, after_rename: Callable[[int, Path], None] | None = None)
     try:
         fd = _open_locked(path)
     except OSError as e:
-        if e.errno == errno.ELOOP:  # a symlink under a journal's name: not ours, never followed
+        if e.errno in (errno.ELOOP, errno.EINVAL):  # a symlink (never followed), a FIFO, ...: not ours
             _unlink_quietly(path)
-            return _Outcome("bad", f"{path}: a symlink, removed")
+            return _Outcome("bad", f"{path}: not a regular file, removed")
         return _Outcome("stuck", f"{path}: cannot open the commit journal ({_describe(e)})")
     if fd is None:
         return _Outcome("gone")
@@ -597,7 +602,8 @@ def _committer_main(argv: Sequence[str]) -> int:
 
 def _committer_command(journal: Path) -> list[str] | None:
     """The command line of a committer for ``journal``; None when this interpreter cannot start one (embedded
-    Python, e.g. in FreeCAD): the writer then renames itself."""
+    Python, e.g. in FreeCAD): the writer then renames itself, and a kill in the middle leaves the journal for the
+    next writer in the folder to settle."""
     exe = sys.executable
     if not exe or not os.path.basename(exe).lower().startswith(("python", "pypy")):
         return None
