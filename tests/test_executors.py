@@ -1,5 +1,6 @@
-"""`v2c.executors` and `v2c.atomic` without Ray: the local executor (here and in a process pool), the error that
-says how to get Ray, and atomic outputs that leave nothing behind (the Ray runs: tests/test_scale_ray.py)."""
+"""`v2c.executors` and the atomic outputs of its tasks (`v2c.io_safe`) without Ray: the local executor (here and in a
+process pool), the error that says how to get Ray, and atomic outputs that leave nothing behind, whichever machine
+a killed attempt ran on (the Ray runs: tests/test_scale_ray.py)."""
 
 from __future__ import annotations
 
@@ -9,10 +10,10 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from v2c.atomic import TMP_TAG, atomic_dir, atomic_file, sweep, temp_name
 from v2c.commands.synth import command as synth_command
 from v2c.commands.to_step import command as to_step_command
 from v2c.executors import RAY_INSTALL_HINT, ExecutorConfig, ExecutorError, run_tasks
+from v2c.io_safe import HOST_ID, TMP_TAG, atomic_dir, atomic_write, sweep_stale_temporaries, temp_dir, temp_path
 
 from conftest import listing, write_tiny_scan
 
@@ -72,24 +73,33 @@ def test_ray_address_needs_the_ray_executor(tmp_path: Path) -> None:
 # ------------------------------------------------------------------------------------------------- atomic
 
 
-def test_atomic_file_replaces_and_sweeps_a_killed_attempt(tmp_path: Path) -> None:
+def _left_by_another_node(final: Path, folder: bool = False) -> Path:
+    """What a killed attempt on another machine leaves next to ``final``: a temporary whose host is not this one
+    (its pid may well run here: pids of two machines say nothing about each other)."""
+    other = "ffffffff" if HOST_ID != "ffffffff" else "00000000"
+    p = final.with_name(f".{final.name}{TMP_TAG}{other}-1-abcdefgh{'' if folder else final.suffix}")
+    if folder:
+        (p / "gt").mkdir(parents=True)
+    else:
+        p.write_text("half")
+    return p
+
+
+def test_atomic_write_replaces_and_leaves_other_outputs_alone(tmp_path: Path) -> None:
     final = tmp_path / "part.step"
-    stale = temp_name(final)  # what a killed attempt leaves: a complete or partial temporary file
-    stale.write_text("half")
-    other = temp_name(tmp_path / "other.step")
-    other.write_text("not ours")
-    assert TMP_TAG in stale.name and stale.suffix == ".step" and stale.name.startswith(".part.step")
-    with atomic_file(final) as tmp:
+    other = temp_path(tmp_path / "other.step")  # a temporary of another output, in flight
+    with atomic_write(final) as tmp:
         assert tmp.parent == tmp_path and tmp.suffix == ".step" and tmp.exists() and not final.exists()
+        assert TMP_TAG in tmp.name and tmp.name.startswith(".part.step")
         tmp.write_text("complete")
     assert final.read_text() == "complete"
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([final.name, other.name])  # only ours swept
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([final.name, other.name])
 
 
-def test_atomic_file_leaves_nothing_on_error(tmp_path: Path) -> None:
+def test_atomic_write_leaves_nothing_on_error(tmp_path: Path) -> None:
     final = tmp_path / "fig.png"
     final.write_bytes(b"old")
-    with pytest.raises(OSError, match="disk full"), atomic_file(final) as tmp:
+    with pytest.raises(OSError, match="disk full"), atomic_write(final) as tmp:
         tmp.write_bytes(b"new, half")
         raise OSError("disk full")
     assert final.read_bytes() == b"old"
@@ -98,13 +108,16 @@ def test_atomic_file_leaves_nothing_on_error(tmp_path: Path) -> None:
 
 def test_atomic_dir_new_and_merged(tmp_path: Path) -> None:
     final = tmp_path / "scan_00001"
-    stale = temp_name(final)
-    (stale / "gt").mkdir(parents=True)  # a killed attempt's half-written folder
+    stale = _left_by_another_node(final, folder=True)  # a killed attempt's half-written folder, another node
+    stale_file = _left_by_another_node(tmp_path / "scan_00001.png")  # not this output's: stays
     with atomic_dir(final, last=("gt/meta.json",)) as tmp:
+        assert tmp.parent == tmp_path and tmp.name.startswith(f".scan_00001{TMP_TAG}{HOST_ID}-")
         (tmp / "gt").mkdir()
         (tmp / "gt" / "meta.json").write_text("1")
         (tmp / "color.png").write_bytes(b"c1")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["scan_00001"]
+    assert not stale.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["scan_00001", stale_file.name])
+    stale_file.unlink()
     assert (final / "gt" / "meta.json").read_text() == "1" and (final / "color.png").read_bytes() == b"c1"
     # an existing folder is updated file by file; its other files stay (e.g. a reconstruction written into it)
     (final / "reconstruction.step").write_text("kept")
@@ -115,4 +128,32 @@ def test_atomic_dir_new_and_merged(tmp_path: Path) -> None:
     assert (final / "gt" / "meta.json").read_text() == "2" and (final / "color.png").read_bytes() == b"c2"
     assert (final / "reconstruction.step").read_text() == "kept"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scan_00001"]
-    assert sweep(final) == []
+    assert sweep_stale_temporaries(final, single_writer=True) == []
+    # a failed attempt leaves nothing; a temporary folder is exclusive and never a planted symlink's target
+    with pytest.raises(RuntimeError), atomic_dir(tmp_path / "scan_00002") as tmp:
+        (tmp / "color.png").write_bytes(b"half")
+        raise RuntimeError("renderer failed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scan_00001"]
+    assert temp_dir(final) != temp_dir(final)
+
+
+def test_atomic_dir_never_merges_through_a_symlink(tmp_path: Path) -> None:
+    victim = tmp_path / "elsewhere"
+    (victim / "gt").mkdir(parents=True)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "scan_00001").symlink_to(victim, target_is_directory=True)
+    with pytest.raises(OSError), atomic_dir(out / "scan_00001") as tmp:
+        (tmp / "color.png").write_bytes(b"c")
+    assert sorted(p.name for p in victim.rglob("*")) == ["gt"]
+    (out / "scan_00001").unlink()
+    (out / "scan_00001" / "gt").mkdir(parents=True)
+    (out / "scan_00001" / "gt" / "x").write_text("x")
+    (out / "scan_00001" / "sub").symlink_to(victim, target_is_directory=True)
+    with (
+        pytest.raises(OSError, match="a symlink where a folder of the output should be"),
+        atomic_dir(out / "scan_00001") as tmp,
+    ):
+        (tmp / "sub").mkdir()
+        (tmp / "sub" / "color.png").write_bytes(b"c")
+    assert sorted(p.name for p in victim.rglob("*")) == ["gt"]

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from test_io_commit import committers, wait_for_committers
 
 from v2c.cli import main as v2c_main
-from v2c.errors import OutputError
-from v2c.io_safe import OutputSet, atomic_write, write_text_atomic
+from v2c.io_safe import _PAUSE_ENV, OutputSet, atomic_write, write_text_atomic
 from v2c.vbrep.model import VBRep
 
 from conftest import write_tiny_scan
@@ -99,28 +99,6 @@ def _old_set(folder: Path) -> dict[str, bytes]:
     for n in SET:
         (folder / n).write_bytes(f"old {n}".encode())
     return _files(folder)
-
-
-@pytest.mark.parametrize("fail_after", [0, 1, 2])
-@pytest.mark.parametrize("exc", [OSError(28, "No space left on device"), KeyboardInterrupt()])
-def test_failure_in_the_middle_of_the_commit_leaves_the_old_set(
-    fail_after: int, exc: BaseException, tmp_path: Path
-) -> None:
-    out = tmp_path / "out"
-    before = _old_set(out)
-    s = OutputSet()
-    for n in SET:
-        s.temp(out / n).write_bytes(f"new {n}".encode())
-
-    def boom(i: int) -> None:
-        if i == fail_after:
-            raise exc
-
-    with pytest.raises(OutputError if isinstance(exc, OSError) else KeyboardInterrupt) as err:
-        s.commit(_after_rename=boom)
-    if isinstance(exc, OSError):
-        assert "previous files were left as they were" in str(err.value)
-    assert _files(out) == before  # the complete old set, no temporary, no backup link
 
 
 def test_a_set_is_new_after_a_clean_commit_and_old_after_a_failed_writer(tmp_path: Path) -> None:
@@ -246,6 +224,7 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
         time.sleep(delay)
         p.send_signal(signal.SIGINT)
         text, _ = p.communicate(timeout=120)
+        wait_for_committers(out)
         assert "Traceback" not in text, text
         after = _files(out)
         assert sorted(after) == sorted(SET), (delay, sorted(after))
@@ -265,7 +244,8 @@ def test_sigint_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tm
 
 
 def test_sigkill_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, tmp_path: Path) -> None:
-    """SIGKILL (no clean-up possible) at several moments: the visible files are the complete old set or the
+    """SIGKILL (no clean-up possible) at several moments, and once while the committer renames (its test hook
+    sleeps between the renames): once the committer finished, the visible files are the complete old set or the
     complete new set; hidden temporaries it left are removed by the next run, which completes the new set."""
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=str(REPO))
@@ -281,41 +261,88 @@ def test_sigkill_at_any_time_leaves_the_old_or_the_new_set(tiny_gt_scan: Path, t
         "oracle",
         "--force",
     ]
-    for delay in (1.5, 3.5, 5.0):
+    for delay in (1.5, 3.5, 5.0, "in the commit"):
         before = _old_set(out)
-        p = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        time.sleep(delay)
+        p = subprocess.Popen(
+            cmd, env=dict(env, **{_PAUSE_ENV: "0.3"}), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+        if delay == "in the commit":
+            end = time.monotonic() + 120
+            while not committers(out):  # the committer's first rename follows within ~0.1 s
+                assert time.monotonic() < end and p.poll() is None, "no commit seen"
+                time.sleep(0.005)
+            time.sleep(0.45)  # after its first rename (and its 0.3 s pause), before the second one
+            split = {n: b for n, b in _files(out).items() if not n.startswith(".")}
+            assert split != before and sorted(split) == sorted(SET) and any(split[n] == before[n] for n in SET)
+        else:
+            time.sleep(delay)
         p.kill()
         p.wait(timeout=60)
+        wait_for_committers(out)
         after = {n: b for n, b in _files(out).items() if not n.startswith(".")}
         assert sorted(after) == sorted(SET), (delay, sorted(after))
         assert after == before or all(after[n] != before[n] for n in SET), delay
+        if delay == "in the commit":
+            assert all(after[n] != before[n] for n in SET)  # the committer completed the set after the kill
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120, check=False)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert sorted(_files(out)) == sorted(SET)  # no temporary of a killed run left
+    assert sorted(_files(out)) == sorted(SET)  # no temporary or journal of a killed run left
 
 
 def test_stale_temporaries_of_dead_processes_are_swept(tmp_path: Path) -> None:
-    from v2c.io_safe import sweep_stale_temporaries
+    from v2c.io_safe import HOST_ID, OTHER_HOST_STALE_S, TMP_TAG, sweep_stale_temporaries
 
     dead = subprocess.run(
         [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True
     )
     dead_pid = int(dead.stdout)
     alive_pid = os.getppid()  # the process that started this test: running
+    other_host = "ffffffff" if HOST_ID != "ffffffff" else "00000000"
+
+    def name(dest: str, host: str, pid: int, rand: str) -> str:
+        return f".{dest}{TMP_TAG}{host}-{pid}-{rand}{Path(dest).suffix}"
+
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
-    (tmp_path / f".part.{dead_pid}.abc123.tmp.step").write_text("half a STEP")
-    (tmp_path / f".part.{dead_pid}.link00.tmp.step").symlink_to(victim)
-    (tmp_path / f".part.{alive_pid}.def456.tmp.step").write_text("being written")
-    (tmp_path / f".other.{dead_pid}.abc123.tmp.step").write_text("another file's")
+    (tmp_path / name("part.step", HOST_ID, dead_pid, "abc123")).write_text("half a STEP")
+    (tmp_path / name("part.step", HOST_ID, dead_pid, "link00")).symlink_to(victim)
+    (tmp_path / name("part.step", HOST_ID, dead_pid, "fold00")).mkdir()  # a killed folder writer's
+    (tmp_path / name("part.step", HOST_ID, alive_pid, "def456")).write_text("being written")
+    (tmp_path / name("part.step", other_host, dead_pid, "new000")).write_text("another machine's, recent")
+    old_other = tmp_path / name("part.step", other_host, alive_pid, "old000")
+    old_other.write_text("another machine's, old")
+    os.utime(old_other, (time.time() - OTHER_HOST_STALE_S - 60,) * 2)
+    (tmp_path / name("other.step", HOST_ID, dead_pid, "abc123")).write_text("another file's")
     (tmp_path / "part.step").write_text("the output")
     removed = sweep_stale_temporaries(tmp_path / "part.step")
-    assert sorted(p.name for p in removed) == [f".part.{dead_pid}.abc123.tmp.step", f".part.{dead_pid}.link00.tmp.step"]
+    assert sorted(p.name for p in removed) == sorted(
+        [
+            name("part.step", HOST_ID, dead_pid, "abc123"),
+            name("part.step", HOST_ID, dead_pid, "link00"),
+            name("part.step", HOST_ID, dead_pid, "fold00"),
+            old_other.name,
+        ]
+    )
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        [f".part.{alive_pid}.def456.tmp.step", f".other.{dead_pid}.abc123.tmp.step", "part.step", "victim.txt"]
+        [
+            name("part.step", HOST_ID, alive_pid, "def456"),
+            name("part.step", other_host, dead_pid, "new000"),
+            name("other.step", HOST_ID, dead_pid, "abc123"),
+            "part.step",
+            "victim.txt",
+        ]
     )
     assert victim.read_text() == "precious"
+    # the only writer of part.step (a task retried on another node): every other process's temporary goes
+    mine = tmp_path / name("part.step", HOST_ID, os.getpid(), "mine00")
+    mine.write_text("this process's, in flight")
+    removed = sweep_stale_temporaries(tmp_path / "part.step", single_writer=True)
+    assert sorted(p.name for p in removed) == sorted(
+        [name("part.step", HOST_ID, alive_pid, "def456"), name("part.step", other_host, dead_pid, "new000")]
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [mine.name, name("other.step", HOST_ID, dead_pid, "abc123"), "part.step", "victim.txt"]
+    )
 
 
 def test_unwritable_output_folder_is_one_error_line(

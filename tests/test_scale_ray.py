@@ -21,11 +21,11 @@ from click.testing import CliRunner
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'v2c[ray]'): the Ray executor tests need it")
 
 # the imports below come after the skip on purpose: without Ray, none of this module runs
-from v2c.atomic import TMP_TAG  # noqa: E402
 from v2c.commands.synth import command as synth_command  # noqa: E402
 from v2c.commands.to_step import _to_step_task  # noqa: E402
 from v2c.commands.to_step import command as to_step_command  # noqa: E402
 from v2c.executors import ExecutorConfig, run_tasks  # noqa: E402
+from v2c.io_safe import JOURNAL_PREFIX, TMP_TAG  # noqa: E402
 from v2c.synth.dataset import SynthConfig, generate_scan, scan_name  # noqa: E402
 
 from conftest import write_tiny_scan  # noqa: E402
@@ -119,9 +119,9 @@ def _files(folder: Path) -> list[Path]:
 
 
 def _is_temporary(p: Path) -> bool:
-    """A temporary of `v2c.atomic` (synth scan folders) or `v2c.io_safe` (STEP, JSON, figure):
-    ``.<name>.v2c-tmp-...`` or ``.<stem>.<pid>.<random>.tmp<suffix>``."""
-    return TMP_TAG in p.name or (p.name.startswith(".") and ".tmp" in p.name)
+    """A temporary of `v2c.io_safe` (synth scan folders, STEP, JSON, figure): ``.<name>.v2c-tmp-...``, or a commit
+    journal ``.v2c-commit-...`` (or any other hidden name with "tmp" in it)."""
+    return TMP_TAG in p.name or p.name.startswith(JOURNAL_PREFIX) or (p.name.startswith(".") and "tmp" in p.name)
 
 
 def _no_temporaries(folder: Path) -> list[str]:

@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from v2c.commands import executor_config, executor_options, jobs_given
 from v2c.synth.families import FAMILY_GROUPS, FEATURE_FAMILIES, PROCEDURAL_FAMILIES
 
+if TYPE_CHECKING:
+    from v2c.synth.dataset import SynthConfig
+
 PROCEDURAL = PROCEDURAL_FAMILIES  # today's default mix
 KNOWN_FAMILIES = (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES, "cad")
 NOISE_PROFILES = ("sensor", "paper", "none")
+SCAN_NAME = re.compile(r"^scan_\d{5,}$")  # v2c.synth.dataset.scan_name
 
 
 def _parse_size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, int]:
@@ -38,6 +45,58 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
         )
     # Groups expand in place; a family named twice is drawn once (order kept: it fixes which family a draw picks).
     return tuple(dict.fromkeys(f for v in given for f in FAMILY_GROUPS.get(v, (v,))))
+
+
+def _differences(folder: Path, seed: int, cfg: SynthConfig) -> list[str]:
+    """How the complete scan ``folder`` (its gt/meta.json and camera.json) differs from scans of run ``seed``
+    with config ``cfg``: "seed 1, not 0", ...; [] when it could be one."""
+    from v2c.synth.dataset import GENERATOR
+
+    try:
+        meta = json.loads((folder / "gt" / "meta.json").read_text(encoding="utf-8"))
+        camera = json.loads((folder / "camera.json").read_text(encoding="utf-8"))
+        have = {
+            "generator": meta["generator"],
+            "seed": meta["seed"],
+            "size": f"{camera['width']}x{camera['height']}",
+            "noise": meta["noise"]["profile"],
+            "appearance": meta.get("appearance", {}).get("mode", "plain"),
+            "framing": meta.get("framing", {}).get("mode", "fill"),
+        }
+        family = meta["family"]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):
+        return ["its gt/meta.json or camera.json cannot be read"]
+    want = {
+        "generator": GENERATOR,
+        "seed": seed,
+        "size": f"{cfg.width}x{cfg.height}",
+        "noise": cfg.noise,
+        "appearance": cfg.appearance,
+        "framing": cfg.framing,
+    }
+    out = [f"{key} {have[key]}, not {want[key]}" for key in want if have[key] != want[key]]
+    if family not in cfg.families:
+        out.append(f"family {family}, not one of {','.join(cfg.families)}")
+    return out
+
+
+def _refuse_another_run(out: Path, seed: int, cfg: SynthConfig) -> None:
+    """ClickException when ``out`` already holds scans of another run (seed, size, noise, families, look):
+    adding to them would mix two sets. The first and the last complete scan are looked at (a run writes one
+    config; a resumed or extended run of the same config passes)."""
+    try:
+        scans = sorted((p for p in out.iterdir() if SCAN_NAME.match(p.name)), key=lambda p: int(p.name[5:]))
+    except OSError:  # no folder yet (or not readable: generating into it will say why)
+        return
+    first = next((p for p in scans if (p / "gt" / "meta.json").is_file()), None)  # the marker of a complete scan
+    last = next((p for p in reversed(scans) if (p / "gt" / "meta.json").is_file()), None)
+    for folder in dict.fromkeys(p for p in (first, last) if p is not None):
+        diff = _differences(folder, seed, cfg)
+        if diff:
+            raise click.ClickException(
+                f"{out}: holds scans of another run ({folder.name}: {'; '.join(diff)}); adding to them would mix "
+                "two sets: choose another folder, or pass --force to add to it anyway"
+            )
 
 
 @click.command("synth")
@@ -123,6 +182,11 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
     "30-70 % of the smaller image side (SCAN_FORMAT.md).  [default: extent with --appearance "
     "random, else fill]",
 )
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Write into OUT even when it holds scans of another run (other seed, size, noise, families or look).",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @executor_options
 @click.pass_context
@@ -142,13 +206,16 @@ def command(
     print_share: float,
     appearance: str,
     framing: str | None,
+    force: bool,
     quiet: bool,
     executor: str,
     ray_address: str | None,
 ) -> None:
     """Render N synthetic scans of random CAD parts into OUT/scan_XXXXX (color, depth, camera, mask, gt/).
 
-    Each scan is written to a temporary folder and renamed into place. With --executor ray every scan is one Ray
+    Each scan is written to a temporary folder and renamed into place. OUT may hold scans of the same run
+    (same seed, size, noise, families and look: a resumed or extended run); scans of another run are refused
+    unless --force. With --executor ray every scan is one Ray
     task writing into OUT itself: OUT (and --cad) must be on a file system every node shares."""
     from v2c.executors import ExecutorError
     from v2c.synth.dataset import SynthConfig, SynthError, generate_dataset
@@ -176,6 +243,8 @@ def command(
         appearance=appearance,
         framing=framing or ("extent" if appearance == "random" else "fill"),
     )
+    if not force:
+        _refuse_another_run(out, seed, cfg)
     where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
     try:
         folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start, executor=where)

@@ -18,8 +18,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from v2c.atomic import atomic_dir
 from v2c.executors import ExecutorConfig, run_tasks
+from v2c.io_safe import atomic_dir
 from v2c.labels import IGNORE, axis_class, label_of
 from v2c.synth import appearance as appearance_mod
 from v2c.synth import noise as noise_mod
@@ -111,7 +111,7 @@ def _to_units(depth_m: np.ndarray) -> np.ndarray:
 def generate_scan(out_dir: Path, seed: int, index: int, cfg: SynthConfig = SynthConfig()) -> Path:
     """Render scan `index` of run `seed` into out_dir/scan_XXXXX and return that folder.
 
-    The files are written into a temporary folder next to it (`v2c.atomic.atomic_dir`), renamed into place when
+    The files are written into a temporary folder next to it (`v2c.io_safe.atomic_dir`), renamed into place when
     complete: a killed or retried generator leaves no half-written scan."""
     with atomic_dir(Path(out_dir) / scan_name(index), last=(COMPLETE_MARKER,)) as folder:
         _render_scan_into(folder, seed, index, cfg)
