@@ -116,7 +116,9 @@ def scan_to_step(
     t = time.perf_counter()
     vbrep, seg, _ = reconstruct(scan, segmentation=segmentation, ablation=ablation, config=config, return_stages=True)
     seconds["reconstruct"] = time.perf_counter() - t
-    with OutputSet(force=force) as files:  # committed together on leaving the block; nothing changed on an exception
+    # Committed together on leaving the block; nothing changed on an exception. One task per scan: this process is
+    # its outputs' only writer, so a killed attempt's leftovers (on any machine: a retried Ray task) go at once.
+    with OutputSet(force=force, single_writer=True) as files:
         t = time.perf_counter()
         tmp = files.temp(out)
         try:

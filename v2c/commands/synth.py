@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from v2c.cli_support import quiet, verbosity_options
 from v2c.commands import executor_config, executor_options, jobs_given
 from v2c.synth.families import FAMILY_GROUPS, FEATURE_FAMILIES, PROCEDURAL_FAMILIES
 
@@ -187,7 +188,7 @@ def _refuse_another_run(out: Path, seed: int, cfg: SynthConfig) -> None:
     is_flag=True,
     help="Write into OUT even when it holds scans of another run (other seed, size, noise, families or look).",
 )
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@verbosity_options
 @executor_options
 @click.pass_context
 def command(
@@ -207,7 +208,6 @@ def command(
     appearance: str,
     framing: str | None,
     force: bool,
-    quiet: bool,
     executor: str,
     ray_address: str | None,
 ) -> None:
@@ -247,12 +247,12 @@ def command(
         _refuse_another_run(out, seed, cfg)
     where = executor_config(executor, ray_address, jobs, jobs_given(ctx))
     try:
-        folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet, start=start, executor=where)
+        folders = generate_dataset(out, n, seed, cfg, jobs=jobs, progress=not quiet(), start=start, executor=where)
     except (ExecutorError, SynthError) as e:
         raise click.ClickException(str(e)) from None
     if preview is not None:
         from v2c.synth.preview import write_preview
 
         write_preview(folders[:4], preview)
-    if not quiet:
+    if not quiet():
         click.echo(f"wrote {len(folders)} scans to {out}")
