@@ -303,3 +303,31 @@ def test_joint_plane_merges_a_noisy_fragment_but_not_a_crease() -> None:
     # the joint rule's own angle limit: a crease the distances alone would pass at a looser tolerance
     loose = replace(on, merge_tol_part=0.2, merge_joint_angle_deg=3.0)
     assert merge_coplanar(crease_seg, _two_planes(15.0, rng, 3.5e-4), K, loose).num_instances == 2
+
+
+def test_pieces_of_one_shaft_merge_and_a_radius_step_stays_apart() -> None:
+    """A shaft the network cut into three instances (two axis classes) merges into one cylinder instance; the two
+    sections of a shaft with a 4 mm radius step (0.01 part sizes) stay two instances after the whole refinement
+    (merged, then cut again by the coaxial step split); with merge_coax off the pieces stay apart."""
+    from v2c.segment.refine import merge_coaxial, refine_instances
+
+    depth, part, _ = _stepped_shaft((0.03,), (), 0.0005, seed=7)
+    u = np.arange(W)[None, :].repeat(H, 0)
+    inst = np.where(part, 1 + (u >= 60).astype(np.int32) + (u >= 110).astype(np.int32), 0).astype(np.int32)
+    cyl_x, cyl_u = label_of("cylinder", "X"), label_of("cylinder", "U")
+    seg = Segmentation(inst, np.array([0, cyl_x, cyl_u, cyl_x], np.uint8), np.full(4, 0.8, np.float32), "learned")
+    out = merge_coaxial(seg, depth, K, RefineConfig())
+    assert out.num_instances == 1 and np.array_equal(out.instances > 0, part)
+    assert out.labels[1] == cyl_x  # the largest piece's label
+    assert merge_coaxial(seg, depth, K, RefineConfig(merge_coax=False)).num_instances == 3
+    # a true radius step: the pieces may merge, the step split cuts them apart again at the step
+    depth, part, section = _stepped_shaft((0.03, 0.034), (0.0,), 0.0005, seed=8)
+    inst = np.where(part, 1 + (u >= 60).astype(np.int32) + (u >= 110).astype(np.int32), 0).astype(np.int32)
+    seg = Segmentation(inst, np.array([0, cyl_x, cyl_x, cyl_x], np.uint8), np.full(4, 0.8, np.float32), "learned")
+    probs = _probs(np.where(part, cyl_x, 0))
+    out = refine_instances(seg, depth, K, probs, RefineConfig())
+    assert out.num_instances >= 2
+    for k in (0, 1):  # each section is mostly one instance of its own
+        ids, counts = np.unique(out.instances[section == k], return_counts=True)
+        assert counts.max() / counts.sum() > 0.9
+    assert len({int(np.bincount(out.instances[section == k]).argmax()) for k in (0, 1)}) == 2

@@ -80,7 +80,7 @@ class RefineConfig:
     merge_joint_angle_deg: float = 12.0  # ... and each piece's own plane within this angle of the joint plane
     # (degrees)
     merge_joint_points: int = 4000  # points of a group its joint plane is fitted to (count; a seeded subsample)
-    merge_coax: bool = False  # merge touching cylinder-labelled pieces that one cylinder fitted to both explains
+    merge_coax: bool = True  # merge touching cylinder-labelled pieces that one cylinder fitted to both explains
     # (a hole wall or a shaft cut into several instances): each piece's points within merge_tol_part of the joint
     # cylinder (median), joined greedily, best first, refitted to every grown group; before the coaxial step split,
     # which cuts a true radius step apart again
