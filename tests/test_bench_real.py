@@ -35,7 +35,7 @@ def test_format_table_rows_and_summary() -> None:
         "ok": True,
         "faces": 4,
         "faces_per_side": 2.0,
-        "can": {"radius_mm": 34.0, "error_pct": 3.03},
+        "can": {"cylinder_faces": 1, "radius_mm": 34.0, "error_pct": 3.03},
         "expected": {"radius_mm": 33.0},
         "depth_rms_mm": 1.5,
         "coverage_3mm": 0.91,
@@ -54,7 +54,13 @@ def test_format_table_rows_and_summary() -> None:
         "| f1 | can | learned | 4 | 2.0 | radius 34.0 mm (+3.0 %) | 33.0 mm | 1.50 | 91.0 / 95.0 % | 4.2 (3.9) |"
         in text
     )
-    assert "can radius error 3.0 %" in text and "within 3 mm 91.0 %" in text
+    assert "can radius error 3.0 % (1 of 1 cans with a cylindrical face)" in text and "within 3 mm 91.0 %" in text
+    # a can whose reconstruction has no cylindrical face is said so, and counted in the summary
+    bare = {**row, "frame": "f2", "can": {"cylinder_faces": 0, "radius_mm": float("nan")}}
+    report = {**report, "frames": [row, bare], "summary": {"learned": R._summary([row, bare])}}
+    text = R.format_table(report)
+    assert "| f2 | can | learned | 4 | 2.0 | no cylindrical face | 33.0 mm |" in text
+    assert "can radius error 3.0 % (1 of 2 cans with a cylindrical face)" in text
 
 
 def test_bench_real_one_frame(shared_data: Path, tmp_path: Path) -> None:

@@ -311,7 +311,11 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "failed": len(rows) - len(ok),
         "faces_per_side": mean([r["faces_per_side"] for r in ok if r.get("faces_per_side")]),
         "box_angle_error_deg": mean([abs(90.0 - r["box"]["largest_two_deg"]) for r in boxes]),
+        # over the cans that have a cylindrical face; `cans_without_cylinder` says how many have none (a mean over
+        # the others alone would hide them)
         "can_radius_error_pct": mean([abs(r["can"].get("error_pct", float("nan"))) for r in cans]),
+        "cans": len(cans),
+        "cans_without_cylinder": sum(1 for r in cans if not r["can"].get("cylinder_faces")),
         "coverage_3mm": mean([r["coverage_3mm"] for r in ok]),
         "depth_rms_mm": mean([r["depth_rms_mm"] for r in ok]),
         "seconds_median": float(np.median([r["seconds"] for r in ok])) if ok else float("nan"),
@@ -345,7 +349,10 @@ def format_table(report: dict[str, Any]) -> str:
         else:
             c = r["can"]
             rad = r["expected"].get("radius_mm")
-            meas = f"radius {_f(c['radius_mm'])} mm" + (f" ({_f(c.get('error_pct'), '+.1f')} %)" if rad else "")
+            if not c.get("cylinder_faces"):
+                meas = "no cylindrical face"
+            else:
+                meas = f"radius {_f(c['radius_mm'])} mm" + (f" ({_f(c.get('error_pct'), '+.1f')} %)" if rad else "")
             exp = f"{rad:.1f} mm" if rad else ""
         cov = f"{_f(100 * r['coverage_3mm'])} / {_f(100 * r['coverage_3mm_faces'])} %" if r.get("ok") else ""
         lines.append(
@@ -358,7 +365,8 @@ def format_table(report: dict[str, Any]) -> str:
         lines.append(
             f"{m}: {s['frames'] - s['failed']} of {s['frames']} frames ok; faces per visible side "
             f"{_f(s['faces_per_side'], '.2f')}; box angle error {_f(s['box_angle_error_deg'])} deg; can "
-            f"radius error {_f(s['can_radius_error_pct'])} %; within {report['near_mm']:g} mm "
+            f"radius error {_f(s['can_radius_error_pct'])} % ({s['cans'] - s['cans_without_cylinder']} of {s['cans']} "
+            f"cans with a cylindrical face); within {report['near_mm']:g} mm "
             f"{_f(100 * s['coverage_3mm'])} %; depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
             f"{_f(s['seconds_median'])} s ({_f(s['cpu_seconds_median'])} CPU s) per frame + "
             f"{_f(report['process_start_s'])} s process start"
