@@ -31,6 +31,7 @@ from v2c.geometry.config import RansacConfig
 from v2c.geometry.points import estimate_part_size, instance_points
 from v2c.geometry.ransac import RansacFit, ransac_fit
 from v2c.geometry.selection import select_type, supported
+from v2c.groups import UnionFind
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
 from v2c.primitives import Cylinder, Plane
 from v2c.primitives.directions import tangent_basis
@@ -411,27 +412,17 @@ def _merge_groups(
     always), then with merge_joint the remaining flat pairs best first, each joining two groups only when one
     plane explains every piece of both (`_explained_by_one_plane`)."""
     agree, joint = _coplanar_pairs(pairs, planes, tol, cfg)
-    parent = {i: i for i in planes}
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    sets = UnionFind(sorted(planes))
     for a, b in agree:
-        parent[find(a)] = find(b)
+        sets.union(a, b)
     for _, a, b in joint:  # loop over candidate pairs, best first
-        ra, rb = find(a), find(b)
+        ra, rb = sets.find(a), sets.find(b)
         if ra == rb:
             continue
-        members = [i for i in planes if find(i) in (ra, rb)]
+        members = sets.members((ra, rb))
         if _explained_by_one_plane([planes[i][2] for i in members], [planes[i][0] for i in members], tol, cfg, rng):
-            parent[ra] = rb
-    out: dict[int, list[int]] = {}
-    for i in sorted(planes):
-        out.setdefault(find(i), []).append(i)
-    return [ids for ids in out.values() if len(ids) > 1]
+            sets.union(ra, rb)
+    return sets.groups()
 
 
 def touching_pairs(inst: np.ndarray) -> np.ndarray:
@@ -509,19 +500,12 @@ def merge_coaxial(
                 if own[p][2] is not None
             )
             scored.append((d, a, b))
-    parent = {i: i for i in own}
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    sets = UnionFind(sorted(own))
     for _, a, b in sorted(scored):  # loop over candidate pairs, best first
-        ra, rb = find(a), find(b)
+        ra, rb = sets.find(a), sets.find(b)
         if ra == rb:
             continue
-        members = [i for i in own if find(i) in (ra, rb)]
+        members = sets.members((ra, rb))
         x = np.concatenate([own[i][0] for i in members])
         n = np.concatenate([own[i][1] for i in members])
         if len(x) > cfg.merge_joint_points:
@@ -534,11 +518,8 @@ def merge_coaxial(
         if cyl.radius > cfg.merge_coax_max_radius * max(own[i][2].radius for i in members if own[i][2] is not None):
             continue
         if all(float(np.median(np.abs(cyl.signed_distance(own[i][0])))) < tol for i in members):
-            parent[ra] = rb
-    groups: dict[int, list[int]] = {}
-    for i in sorted(own):
-        groups.setdefault(find(i), []).append(i)
-    merged = [g for g in groups.values() if len(g) > 1]
+            sets.union(ra, rb)
+    merged = sets.groups()
     if not merged:
         return seg
     return _relabel(seg, inst, merged, is_cyl)
