@@ -580,7 +580,7 @@ def _committer_main(argv: Sequence[str]) -> int:
     then settle the folder's journals, oldest first, this one in its turn. Exit 0 (committed), `_ROLLED_BACK`
     (the reason on stderr) or `_SETTLED_ELSEWHERE`."""
     if len(argv) != 2 or argv[0] != "--commit":
-        print("usage: python -m v2c.io_safe --commit JOURNAL", file=sys.stderr)
+        print("usage: _committer_main --commit JOURNAL (started by OutputSet.commit)", file=sys.stderr)
         return 2
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
@@ -899,7 +899,3 @@ def _merge(src: Path, dst: Path, last: Sequence[str]) -> None:
                 raise OutputError(f"{dst / parent}: a symlink where a folder of the output should be")
         target.parent.mkdir(parents=True, exist_ok=True)
         os.replace(src / rel, target)
-
-
-if __name__ == "__main__":
-    sys.exit(_committer_main(sys.argv[1:]))
