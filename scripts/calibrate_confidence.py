@@ -60,6 +60,19 @@ def collect(dirs: list[Path], seg: str, records: dict, jobs: int) -> list[dict]:
     return [r for d in dirs for r in records[f"{d}|{seg}"]]
 
 
+def corpus_scans(suite: str, views: int, jobs: int) -> list[Path]:
+    """The rendered scans of a corpus split (`v2c bench --suite corpus-train / corpus-val`), rendering the missing
+    ones; none when ``views`` is 0. Never the test split."""
+    if not views:
+        return []
+    from v2c.bench.config import BenchConfig
+    from v2c.bench.suite import SuiteConfig, plan_scans, render_missing
+
+    scans, _ = plan_scans(SuiteConfig(suite=suite, views=views, bench=BenchConfig(ablations=("full",), jobs=jobs)))
+    failed = render_missing(scans, jobs, progress=True)
+    return [s.path for s in scans if s.label not in failed and (s.path / "gt" / "meta.json").is_file()]
+
+
 def arrays(rows: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return (
         np.array([r["type"] for r in rows], object),
@@ -74,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--train-n", type=int, default=80)
     ap.add_argument("--val-seed", type=int, default=9600)
     ap.add_argument("--val-n", type=int, default=20)
+    ap.add_argument("--corpus-train-views", type=int, default=0, help="also fit on the corpus training split")
+    ap.add_argument("--corpus-val-views", type=int, default=0, help="also report the corpus validation split")
     ap.add_argument("--segmentation", default="learned")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--records", type=Path, default=Path.home() / ".cache" / "v2c" / "calibration_records.json")
@@ -87,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     train = prepare_scans(BenchConfig(n=a.train_n, seed=a.train_seed, jobs=a.jobs), progress=False)
     val = prepare_scans(BenchConfig(n=a.val_n, seed=a.val_seed, jobs=a.jobs), progress=False) if a.val_n else []
     records = json.loads(a.records.read_text()) if a.records.is_file() else {}
+    train += corpus_scans("corpus-train", a.corpus_train_views, a.jobs)
+    val += corpus_scans("corpus-val", a.corpus_val_views, a.jobs)
     tr = collect(train, a.segmentation, records, a.jobs)
     va = collect(val, a.segmentation, records, a.jobs) if val else []
     a.records.parent.mkdir(parents=True, exist_ok=True)
@@ -97,7 +114,12 @@ def main(argv: list[str] | None = None) -> int:
         raw,
         ok,
         meta={
-            "fitted_on": f"v2c bench cache seed {a.train_seed}, scans 0..{a.train_n - 1} (640x480, sensor noise)",
+            "fitted_on": f"v2c bench cache seed {a.train_seed}, scans 0..{a.train_n - 1} (640x480, sensor noise)"
+            + (
+                f" + the corpus training split, {a.corpus_train_views} view(s) a part (v2c bench --suite corpus-train)"
+                if a.corpus_train_views
+                else ""
+            ),
             "segmentation": a.segmentation,
             "edges": len(tr),
             "label": "v2c.bench.vbrep.edge_correctness",

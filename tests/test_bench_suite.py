@@ -47,6 +47,16 @@ def test_committed_split_test_parts_by_band() -> None:
     assert {p.file: p.n_faces for p in test}[WASHER] == 4 and {p.file: p.n_faces for p in test}[GEAR] == 51
 
 
+def test_each_suite_renders_one_split_and_only_unseen_has_the_families() -> None:
+    """corpus-train renders the training split (what a map may be fitted on), corpus-val the validation split,
+    unseen the test split plus the leave-out families; the three splits share no file."""
+    splits = {name: S.SuiteConfig(suite=name).corpus_split for name in ("corpus-train", "corpus-val", "unseen")}
+    assert splits == {"corpus-train": "train", "corpus-val": "val", "unseen": "test"}
+    assert S.SUITES_WITH_FAMILIES == ("unseen",)
+    files = {k: {p.file for p in S.read_split() if p.split == k} for k in ("train", "val", "test")}
+    assert len(files["train"]) == 104 and not (files["train"] & files["val"]) and not (files["train"] & files["test"])
+
+
 def test_leave_out_families_come_from_the_feature_module(monkeypatch, tmp_path: Path) -> None:
     cfg = S.SuiteConfig(
         suite="unseen", parts=(), family_scans=3, bench=R.BenchConfig(ablations=("full",), cache_dir=tmp_path)

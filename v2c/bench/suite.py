@@ -6,6 +6,8 @@ unchanged. The suites here render parts that no training run and no threshold ch
 - ``unseen``: the **test** split of the CAD corpus (``../shared/data/cad_corpus``, split by file SHA-1 in
   ``v2c/bench/splits/cad_corpus.csv``) and the **leave-out generator families** (`unseen_families`);
 - ``corpus-val``: the **validation** split of the corpus, the only split anyone may tune on.
+- ``corpus-train``: the **training** split (what a model or a calibration map may be fitted on; never reported
+  as generalisation).
 
 Scans. Every corpus part is rendered exactly as ``v2c synth --cad`` renders a STEP part (`v2c.synth.dataset`,
 family ``cad``: OCCT reads the file in millimetres, the part rests on its largest hull facet, a random scene),
@@ -47,7 +49,7 @@ if TYPE_CHECKING:
     from v2c.synth.dataset import SynthConfig
 
 #: Suite name -> the corpus split it renders (None: the family suite of `v2c.bench.run`).
-SUITES: dict[str, str | None] = {"family": None, "unseen": "test", "corpus-val": "val"}
+SUITES: dict[str, str | None] = {"family": None, "unseen": "test", "corpus-val": "val", "corpus-train": "train"}
 #: Suites that add the leave-out generator families (tuning suites never do: those families are for testing).
 SUITES_WITH_FAMILIES = ("unseen",)
 SPLIT_FILE = Path(__file__).with_name("splits") / "cad_corpus.csv"

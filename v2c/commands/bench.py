@@ -176,10 +176,10 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     "--suite",
     default="family",
     show_default=True,
-    type=click.Choice(["family", "unseen", "corpus-val"]),
+    type=click.Choice(["family", "unseen", "corpus-val", "corpus-train"]),
     help="family: the generator families (or --cad DIR), as always; unseen: the corpus test split and "
     "the leave-out generator families, which nothing is tuned on; corpus-val: the corpus "
-    "validation split, the only one to tune on (docs/bench.md).",
+    "validation split, the only one to tune on; corpus-train: the training split (docs/bench.md).",
 )
 @click.option(
     "--views",
