@@ -88,8 +88,6 @@ class RefineConfig:
     merge_coax_min_px: int = 30  # pieces with fewer valid pixels are left alone (pixels)
     merge_coax_max_radius: float = 2.0  # the joint radius at most this many times the largest piece's own (ratio;
     # a near-flat union would otherwise pass as a huge cylinder)
-    merge_vote_axis: bool = False  # a merged group's axis class by the network's probabilities summed over all its
-    # pixels (instead of its largest piece's class)
     merge_coax_any_label: bool = False  # pieces labelled plane or cone take part too, next to a cylinder-labelled one
     # (the network calls strips of narrow hole walls planes); the group keeps a cylinder label
     noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
@@ -136,9 +134,9 @@ def refine_instances(
     ransac = ransac or RansacConfig()
     geometry = scan_geometry(depth, K, seg.instances, ransac)
     seg = split_plane_outliers(seg, depth, K, probs, cfg, geometry, normals)
-    seg = merge_coaxial(seg, depth, K, cfg, geometry, ransac, probs)
+    seg = merge_coaxial(seg, depth, K, cfg, geometry, ransac)
     seg = split_coaxial_steps(seg, depth, K, cfg, geometry, ransac)
-    return merge_coplanar(seg, depth, K, cfg, geometry, ransac, probs)
+    return merge_coplanar(seg, depth, K, cfg, geometry, ransac)
 
 
 def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.Generator) -> tuple[np.ndarray, float]:
@@ -436,38 +434,15 @@ def touching_pairs(inst: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(pairs, axis=1), axis=0).reshape(-1, 2)
 
 
-def _voted_label(ptype: str, mask: np.ndarray, probs: np.ndarray) -> int:
-    """The 18-class label of type ``ptype`` whose axis class has the largest probability summed over ``mask``
-    (``probs``: (18, H, W) the network's class probabilities)."""
-    labels = []
-    for axis in ("X", "Y", "Z", "U"):
-        try:
-            labels.append(label_of(ptype, axis))
-        except (KeyError, ValueError):  # an axis class the type does not have
-            continue
-    return max(labels, key=lambda lab: float(probs[lab][mask].sum()))
-
-
-def _relabel(
-    seg: Segmentation,
-    inst: np.ndarray,
-    groups: list[list[int]],
-    keep: np.ndarray,
-    ptype: str,
-    probs: np.ndarray | None = None,
-) -> Segmentation:
+def _relabel(seg: Segmentation, inst: np.ndarray, groups: list[list[int]], keep: np.ndarray) -> Segmentation:
     """``seg`` with each group of instance ids merged into its largest member among ``keep`` (bool per id; any
-    member where none is kept), ids renumbered 1..N in order (labels[k] stays instance k's). With ``probs``, the
-    group's label is the ``ptype`` label its pixels vote for (`_voted_label`); else its largest member's."""
-    labels = np.array(seg.labels)
+    member where none is kept), ids renumbered 1..N in order (labels[k] stays instance k's)."""
+    labels = np.asarray(seg.labels)
     lut = np.arange(len(labels), dtype=np.int32)
     area = np.bincount(inst.ravel(), minlength=len(labels))
     for ids in groups:
         pool = [j for j in ids if keep[j]] or ids
-        root = max(pool, key=lambda j: (area[j], -j))
-        lut[ids] = root
-        if probs is not None:
-            labels[root] = _voted_label(ptype, np.isin(inst, ids), probs)
+        lut[ids] = max(pool, key=lambda j: (area[j], -j))
     roots = np.unique(lut)
     compact = np.zeros(len(labels), np.int32)
     compact[roots] = np.arange(len(roots), dtype=np.int32)
@@ -481,7 +456,6 @@ def merge_coaxial(
     cfg: RefineConfig = RefineConfig(),
     geometry: tuple[np.ndarray, float] | None = None,
     ransac: RansacConfig | None = None,
-    probs: np.ndarray | None = None,
 ) -> Segmentation:
     """``seg`` with touching cylinder-labelled instances merged where one cylinder explains them (merge_coax): the
     network cut one hole wall or shaft at a highlight, a shadow or a change of axis class. Each piece needs its
@@ -548,8 +522,7 @@ def merge_coaxial(
     merged = sets.groups()
     if not merged:
         return seg
-    vote = probs if cfg.merge_vote_axis else None
-    return _relabel(seg, inst, merged, is_cyl, "cylinder", vote)
+    return _relabel(seg, inst, merged, is_cyl)
 
 
 def merge_coplanar(
@@ -559,7 +532,6 @@ def merge_coplanar(
     cfg: RefineConfig = RefineConfig(),
     geometry: tuple[np.ndarray, float] | None = None,
     ransac: RansacConfig | None = None,
-    probs: np.ndarray | None = None,
 ) -> Segmentation:
     """``seg`` with adjacent plane instances merged where they lie on one plane (normals within merge_angle_deg,
     each one's points within merge_tol_part part sizes of the other's plane, median): the network cut a face where
@@ -611,8 +583,6 @@ def merge_coplanar(
         root = max(flat_ids, key=lambda j: (area[j], -j))
         if not is_plane[root]:
             out_labels[root] = label_of("plane", "U")
-        if cfg.merge_vote_axis and probs is not None:
-            out_labels[root] = _voted_label("plane", np.isin(inst, ids), probs)
         lut[ids] = root
     roots = np.unique(lut)  # ids 0..N renumbered without the merged ones (labels[k] is instance k's)
     compact = np.zeros(len(labels), np.int32)
