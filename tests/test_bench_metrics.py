@@ -208,7 +208,7 @@ def test_box_angles_and_can_radius_on_hand_built_vbreps():
 def test_real_rois_fit_their_frames(shared_data):
     import cv2
 
-    rois = R.load_rois()
+    rois = R.load_frames()
     assert len(rois) >= 5
     for name, spec in rois.items():
         img = cv2.imread(str(shared_data / "real" / name / "color.png"))

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from v2c.bench.tables import format_value, jsonable
+from v2c.bench.tables import jsonable
 from v2c.bench.workers import error_text, process_start_seconds
 
 if TYPE_CHECKING:
@@ -59,9 +59,6 @@ def load_frames(path: Path = DEFAULT_ROIS) -> dict[str, dict[str, Any]]:
     """Frame folder name -> {"roi": [x0, y0, x1, y1] pixels, "object": "box" | "can", "name", "expected",
     "visible_sides"} of ``path``."""
     return json.loads(Path(path).read_text())["frames"]
-
-
-load_rois = load_frames  # the name `real_frames_report` (once in v2c.bench.run) reads them by
 
 
 def face_area(f: VFace) -> float:
@@ -370,107 +367,5 @@ def format_table(report: dict[str, Any]) -> str:
             f"{_f(100 * s['coverage_3mm'])} %; depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
             f"{_f(s['seconds_median'])} s ({_f(s['cpu_seconds_median'])} CPU s) per frame + "
             f"{_f(report['process_start_s'])} s process start"
-        )
-    return "\n".join(lines)
-
-
-# ----------------------------------------------------------------- the earlier report (`v2c.bench.run` had it)
-
-
-def real_frames_report(
-    data_dir: Path,
-    rois_path: Path = DEFAULT_ROIS,
-    segmentation: str = "learned",
-    out_dir: Path | None = None,
-    progress: bool = True,
-) -> dict[str, Any]:
-    """Run `v2c to-step` (`v2c.api.scan_to_step`, camera frame, with the VB-Rep JSON and figure) on every frame of
-    ``rois_path`` found in ``data_dir`` with its region of interest; per frame: ok / error, seconds, faces, and the
-    box angles (`box_angles`) or can radius (`can_radius`) against the expected value."""
-    from tqdm import tqdm
-
-    from v2c.api import scan_to_step
-    from v2c.vbrep.model import VBRep
-
-    rois = load_rois(rois_path)
-    out_dir = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="v2c-real-"))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    frames: dict[str, Any] = {}
-    for name, spec in tqdm(rois.items(), desc="real", unit="frame", disable=not progress):
-        folder = Path(data_dir) / name
-        entry: dict[str, Any] = {
-            "object": spec["object"],
-            "name": spec.get("name"),
-            "roi": spec["roi"],
-            "expected": spec.get("expected", {}),
-        }
-        frames[name] = entry
-        if not folder.is_dir():
-            entry.update(ok=False, error=f"{folder}: not found")
-            continue
-        t = time.perf_counter()
-        try:
-            res = scan_to_step(
-                folder, out_dir / f"{name}.step", frame="camera", segmentation=segmentation, roi=tuple(spec["roi"])
-            )
-            entry.update(
-                ok=True,
-                error=None,
-                step=str(res.step),
-                figure=str(res.figure) if res.figure else None,
-                warnings=res.warnings,
-                seconds=time.perf_counter() - t,
-                stage_seconds=res.seconds,
-                step_faces=res.report.n_faces,
-            )
-            vbrep = VBRep.load(res.vbrep_json)
-            entry["faces"] = {
-                t_: sum(f.primitive.get("type") == t_ for f in vbrep.faces)
-                for t_ in ("plane", "cylinder", "cone", "sphere", "torus")
-            }
-            if spec["object"] == "box":
-                entry["box"] = box_angles(vbrep)
-            else:
-                entry["can"] = can_radius(vbrep)
-                exp = spec.get("expected", {}).get("radius_mm")
-                if exp:
-                    entry["can"]["error_mm"] = entry["can"]["radius_mm"] - float(exp)
-        except Exception as exc:  # noqa: BLE001 - the report says which frame failed and why
-            entry.update(ok=False, error=error_text(exc), seconds=time.perf_counter() - t)
-    return jsonable(
-        {"data_dir": str(data_dir), "segmentation": segmentation, "out_dir": str(out_dir), "frames": frames}
-    )
-
-
-def format_real_table(report: dict[str, Any]) -> str:
-    """Markdown table of `real_frames_report`."""
-    lines = [
-        "| frame | object | ROI | ok | s | faces (plane/cyl/other) | measured | expected |",
-        "| --- | --- | --- | --- | ---: | --- | --- | --- |",
-    ]
-    for name, e in report["frames"].items():
-        faces = e.get("faces") or {}
-        fc = (
-            (
-                f"{faces.get('plane', 0)}/{faces.get('cylinder', 0)}/"
-                f"{sum(v for k, v in faces.items() if k not in ('plane', 'cylinder'))}"
-            )
-            if faces
-            else ""
-        )
-        if not e.get("ok"):
-            meas, exp = f"error: {e.get('error')}", ""
-        elif e["object"] == "box":
-            angles = ", ".join(f"{p['angle_deg']:.1f}" for p in e["box"]["pairs"])
-            meas = f"angles {angles} deg (max error {format_value(e['box']['max_error_deg'], 'f1')} deg)"
-            exp = "90 deg"
-        else:
-            meas = f"radius {format_value(e['can']['radius_mm'], 'f1')} mm"
-            r = e.get("expected", {}).get("radius_mm")
-            exp = f"{r:.1f} mm" if r else ""
-        secs = f"{e['seconds']:.1f}" if e.get("seconds") is not None else ""
-        lines.append(
-            f"| {name} | {e.get('name') or e['object']} | {','.join(map(str, e['roi']))} | "
-            f"{'yes' if e.get('ok') else 'no'} | {secs} | {fc} | {meas} | {exp} |"
         )
     return "\n".join(lines)

@@ -16,8 +16,8 @@
 The pseudo-ablation ``gt`` evaluates the ideal VB-Rep of each scan (`v2c.bench.metrics.vbrep_from_gt`): the floor
 of every metric (Chamfer's is set by the point sampling, not by the geometry).
 
-The names the run's parts define stay importable from here (``from v2c.bench.run import BenchConfig``), as does
-`real_frames_report` (`v2c to-step` on real frames with a region of interest), now in `v2c.bench.real`.
+The names the run's parts define stay importable from here (``from v2c.bench.run import BenchConfig``); the
+real-frame bench is `v2c.bench.real`.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from v2c.bench.config import (
     columns_of,
     executor_of,
 )
-from v2c.bench.real import DEFAULT_ROIS, box_angles, can_radius, format_real_table, load_rois, real_frames_report
+from v2c.bench.real import DEFAULT_ROIS, box_angles, can_radius, load_frames
 from v2c.bench.tables import (
     ECE_BINS,
     MEAN_OVER_OK,
@@ -93,14 +93,12 @@ __all__ = [
     "executor_of",
     "figure_grid",
     "format_notes",
-    "format_real_table",
     "format_table",
     "jsonable",
     "limit_threads",
-    "load_rois",
+    "load_frames",
     "prepare_scans",
     "process_start_seconds",
-    "real_frames_report",
     "run_benchmark",
     "scan_cache_dir",
     "segment_scan",
