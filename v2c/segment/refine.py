@@ -434,16 +434,26 @@ def touching_pairs(inst: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(pairs, axis=1), axis=0).reshape(-1, 2)
 
 
-def _relabel(seg: Segmentation, inst: np.ndarray, groups: list[list[int]], keep: np.ndarray) -> Segmentation:
+def _relabel(
+    seg: Segmentation,
+    inst: np.ndarray,
+    groups: list[list[int]],
+    keep: np.ndarray,
+    unkept_label: int | None = None,
+) -> Segmentation:
     """``seg`` with each group of instance ids merged into its largest member among ``keep`` (bool per id; any
-    member where none is kept), ids renumbered 1..N in order (labels[k] stays instance k's)."""
-    labels = np.asarray(seg.labels)
+    member where none is kept, taking ``unkept_label`` when given), ids renumbered 1..N in order (labels[k] stays
+    instance k's); the member's score stands."""
+    labels = np.array(seg.labels)
     lut = np.arange(len(labels), dtype=np.int32)
     area = np.bincount(inst.ravel(), minlength=len(labels))
     for ids in groups:
         pool = [j for j in ids if keep[j]] or ids
-        lut[ids] = max(pool, key=lambda j: (area[j], -j))
-    roots = np.unique(lut)
+        root = max(pool, key=lambda j: (area[j], -j))
+        if not keep[root] and unkept_label is not None:
+            labels[root] = unkept_label
+        lut[ids] = root
+    roots = np.unique(lut)  # ids 0..N renumbered without the merged ones
     compact = np.zeros(len(labels), np.int32)
     compact[roots] = np.arange(len(roots), dtype=np.int32)
     return Segmentation(compact[lut[inst]], labels[roots], np.asarray(seg.scores)[roots], seg.method)
@@ -550,11 +560,7 @@ def merge_coplanar(
     tol = cfg.merge_tol_part * size
     labels = np.asarray(seg.labels)
     is_plane = _is_plane(labels)
-    pairs = np.concatenate(
-        [np.stack([inst[:, :-1].ravel(), inst[:, 1:].ravel()], 1), np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)]
-    )
-    pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
-    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
+    pairs = touching_pairs(inst)
     if not cfg.merge_flat:
         pairs = pairs[is_plane[pairs[:, 0]] & is_plane[pairs[:, 1]]]
     if not len(pairs):
@@ -573,18 +579,6 @@ def merge_coplanar(
     groups = _merge_groups(pairs, planes, tol, cfg, rng)
     if not groups:
         return seg
-    lut = np.arange(len(labels), dtype=np.int32)
-    area = np.bincount(inst.ravel(), minlength=len(labels))
-    out_labels, out_scores = np.array(labels), np.array(seg.scores)
-    for ids in groups:
-        # the largest plane-labelled piece's label and score stand (the largest piece's where none is a plane:
-        # then a merged group of flat pieces is a plane of no axis class, at that piece's score)
-        flat_ids = [j for j in ids if is_plane[j]] or ids
-        root = max(flat_ids, key=lambda j: (area[j], -j))
-        if not is_plane[root]:
-            out_labels[root] = label_of("plane", "U")
-        lut[ids] = root
-    roots = np.unique(lut)  # ids 0..N renumbered without the merged ones (labels[k] is instance k's)
-    compact = np.zeros(len(labels), np.int32)
-    compact[roots] = np.arange(len(roots), dtype=np.int32)
-    return Segmentation(compact[lut[inst]], out_labels[roots], out_scores[roots], seg.method)
+    # the largest plane-labelled piece's label and score stand (the largest piece's where none is a plane: then a
+    # merged group of flat pieces is a plane of no axis class, at that piece's score)
+    return _relabel(seg, inst, groups, is_plane, unkept_label=label_of("plane", "U"))
