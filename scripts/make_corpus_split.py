@@ -1,4 +1,4 @@
-"""Write v2c/bench/splits/cad_corpus.csv: the fixed train / validation / test split of ../shared/data/cad_corpus.
+"""Write v2c/synth/splits/cad_corpus.csv: the fixed train / validation / test split of ../shared/data/cad_corpus.
 
 A file's split depends on its SHA-1 alone (``int(sha1[:8], 16) % 100``: under 70 train, 70-79 validation, 80 and
 over test), so it does not move when files are added or renamed. Run once; the committed list is the reference.
@@ -26,7 +26,7 @@ def split_of(sha1: str) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--index", type=Path, default=Path("../shared/data/cad_corpus/index.csv"))
-    ap.add_argument("--out", type=Path, default=Path("v2c/bench/splits/cad_corpus.csv"))
+    ap.add_argument("--out", type=Path, default=Path("v2c/synth/splits/cad_corpus.csv"))
     args = ap.parse_args()
     rows = sorted(csv.DictReader(args.index.open()), key=lambda r: r["file"])
     lines = [f"{r['file']},{r['sha1']},{split_of(r['sha1'])},{r['n_faces']}\n" for r in rows]

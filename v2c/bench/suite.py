@@ -4,7 +4,7 @@
 unchanged. The suites here render parts that no training run and no threshold choice may see:
 
 - ``unseen``: the **test** split of the CAD corpus (``../shared/data/cad_corpus``, split by file SHA-1 in
-  ``v2c/bench/splits/cad_corpus.csv``) and the **leave-out generator families** (`unseen_families`);
+  ``v2c/synth/splits/cad_corpus.csv``, `v2c.synth.corpus`) and the **leave-out generator families** (`unseen_families`);
 - ``corpus-val``: the **validation** split of the corpus, the only split anyone may tune on.
 - ``corpus-train``: the **training** split (what a model or a calibration map may be fitted on; never reported
   as generalisation).
@@ -28,11 +28,9 @@ and named, never stopping the run).
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import math
-import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -44,6 +42,7 @@ from v2c.bench.cache import default_cache_dir, scan_complete
 from v2c.bench.config import GT, BenchConfig, columns_of
 from v2c.bench.tables import format_value, jsonable, summarise
 from v2c.bench.workers import error_text, evaluate_dirs, failed_rows, process_start_seconds
+from v2c.synth.corpus import SPLIT_FILE, CorpusPart, default_corpus_dir, read_split
 
 if TYPE_CHECKING:
     from v2c.synth.dataset import SynthConfig
@@ -52,7 +51,6 @@ if TYPE_CHECKING:
 SUITES: dict[str, str | None] = {"family": None, "unseen": "test", "corpus-val": "val", "corpus-train": "train"}
 #: Suites that add the leave-out generator families (tuning suites never do: those families are for testing).
 SUITES_WITH_FAMILIES = ("unseen",)
-SPLIT_FILE = Path(__file__).with_name("splits") / "cad_corpus.csv"
 #: Where the leave-out family names come from: (module, constant). The feature generator (branch ``gen``) defines
 #: them; until it is merged the suite runs without that source and says so.
 UNSEEN_FAMILIES_SOURCE = ("v2c.synth.families", "LEAVE_OUT_FAMILIES")
@@ -60,13 +58,6 @@ SUITE_GENERATOR = "v2c.bench.suite/1"  # bump when the way suite scans are drawn
 
 CORPUS = "corpus"
 FAMILY = "family"
-
-
-def default_corpus_dir() -> Path:
-    """``$V2C_SHARED_DATA/cad_corpus``, else ``../shared/data/cad_corpus`` next to the repository."""
-    env = os.environ.get("V2C_SHARED_DATA")
-    root = Path(env) if env else Path(__file__).resolve().parents[2].parent / "shared" / "data"
-    return root / "cad_corpus"
 
 
 @dataclass(frozen=True)
@@ -119,28 +110,6 @@ class SuiteConfig:
 
 
 # --------------------------------------------------------------------------------------------------- sources
-
-
-@dataclass(frozen=True)
-class CorpusPart:
-    """One row of the split file: file name, SHA-1 (hex), split, face count."""
-
-    file: str
-    sha1: str
-    split: str
-    n_faces: int
-
-
-def read_split(path: Path = SPLIT_FILE) -> list[CorpusPart]:
-    """The committed corpus split (``#`` lines are comments), sorted by file name."""
-    lines = [ln for ln in Path(path).read_text().splitlines() if ln.strip() and not ln.startswith("#")]
-    out = []
-    for r in csv.DictReader(lines):
-        try:
-            out.append(CorpusPart(r["file"], r["sha1"], r["split"], int(r["n_faces"])))
-        except (KeyError, ValueError) as exc:
-            raise ValueError(f"{path}: bad row {r} (expected file,sha1,split,n_faces): {exc}") from None
-    return sorted(out, key=lambda p: p.file)
 
 
 def corpus_parts(cfg: SuiteConfig) -> list[CorpusPart]:

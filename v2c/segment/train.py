@@ -57,12 +57,28 @@ APPEARANCE_RECIPE: tuple[tuple, ...] = (
     *FEATURES_RECIPE,
     (640, 480, "sensor", 1500, 131, 0.0, FAMILY_GROUPS["train"], "random"),
 )
+#: The generator family name of a recipe row that renders the CAD corpus's **train** split (`v2c.synth.corpus`;
+#: one random training file per scan, OCCT units in mm). Validation and test files are never rendered for training.
+CORPUS_TRAIN = "corpus-train"
+#: Stage 9 (MODEL_CARD.md): what a part a user scans looks like. The validation-size procedural rows kept (half
+#: printed) so in-family parts are not forgotten, the feature-based training families, appearance and framing
+#: randomization (random/dark/shiny materials, printed art, clutter; extent 30-70 %) over all training families,
+#: and renders of the corpus's training files (plain and with random appearance).
+STAGE9_RECIPE: tuple[tuple, ...] = (
+    (640, 480, "sensor", 1000, 107, 0.0),
+    (640, 480, "sensor", 1000, 111, 0.3),
+    (640, 480, "sensor", 1500, 121, 0.3, FAMILY_GROUPS["features"]),
+    (640, 480, "sensor", 1500, 131, 0.0, FAMILY_GROUPS["train"], "random"),
+    (640, 480, "sensor", 400, 141, 0.0, (CORPUS_TRAIN,)),
+    (640, 480, "sensor", 400, 142, 0.0, (CORPUS_TRAIN,), "random"),
+)
 RECIPES = {
     "base": TRAINING_RECIPE,
     "stage4": STAGE4_RECIPE,
     "stage5": STAGE5_RECIPE,
     "features": FEATURES_RECIPE,
     "appearance": APPEARANCE_RECIPE,
+    "stage9": STAGE9_RECIPE,
 }
 
 
@@ -72,6 +88,7 @@ def generate_training_data(
     jobs: int = 1,
     recipe: tuple = TRAINING_RECIPE,
     executor: str | ExecutorConfig = "local",
+    corpus_dir: Path | None = None,
 ) -> list[Path]:
     """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
 
@@ -80,7 +97,8 @@ def generate_training_data(
     [, families[, appearance]]]); rows naming families go to DATA/<width>x<height>_<noise>[_print]_<tag>[_look]_s<seed>/
     (tag: the family group's name, or the families joined by '+'; _look: appearance "random", which also frames
     the part by its extent, like `v2c synth --appearance random`). A leave-out family
-    (families.LEAVE_OUT_FAMILIES) is refused.
+    (families.LEAVE_OUT_FAMILIES) is refused. The family `CORPUS_TRAIN` renders the CAD corpus's training files
+    (``corpus_dir``, default `v2c.synth.corpus.default_corpus_dir`), never its validation or test files.
     """
     from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
     from v2c.synth.scene import SceneConfig
@@ -100,6 +118,14 @@ def generate_training_data(
                 )
             named = [k for k, v in FAMILY_GROUPS.items() if v == families]
             tag = "_" + (named[0] if named else "+".join(families))
+        cad_files: tuple[str, ...] = ()
+        if families == (CORPUS_TRAIN,):
+            from v2c.synth.corpus import split_files
+
+            cad_files = tuple(str(f.resolve()) for f in split_files("train", corpus_dir))
+            families = ("cad",)
+        elif families is not None and CORPUS_TRAIN in families:
+            raise ValueError(f"recipe row {w}x{h} seed {seed}: {CORPUS_TRAIN} must be a row's only family")
         look_tag = "_look" if look != "plain" else ""
         sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}{tag}{look_tag}_s{seed}"
         n = max(1, round(n * scale))
@@ -114,6 +140,7 @@ def generate_training_data(
                 noise=noise,
                 scene=SceneConfig(print_share=share),
                 **({"families": families} if families is not None else {}),
+                **({"cad_files": cad_files} if cad_files else {}),
                 **({"appearance": look, "framing": "extent"} if look != "plain" else {}),
             )
             done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have, executor=executor)
