@@ -342,3 +342,14 @@ def test_printed_parts_change_colour_only(scans, tmp_path):
         ]
         ratios.append(spread[1] / spread[0])
     assert min(ratios) > 1.5 and np.median(ratios) > 3.0, ratios
+
+
+def test_failed_run_names_the_first_few_scans_and_counts_the_rest(tmp_path) -> None:
+    from v2c.synth.dataset import MAX_FAILURES_SHOWN, SynthConfig, SynthError, generate_dataset
+
+    cfg = SynthConfig(width=32, height=24, noise="none", families=("cad",))  # "cad" without STEP files fails
+    with pytest.raises(SynthError) as err:
+        generate_dataset(tmp_path / "out", 8, 0, cfg, jobs=1, progress=False)
+    msg = str(err.value)
+    assert msg.startswith(f"8 of 8 scans failed ({tmp_path / 'out'}): scan_00000: ValueError: family 'cad' needs")
+    assert msg.count("needs STEP files") == MAX_FAILURES_SHOWN and msg.endswith("; and 3 more")

@@ -34,8 +34,12 @@ DEPTH_SCALE = 1e-4  # metres per depth unit in depth.png and gt/depth_clean.png
 COMPLETE_MARKER = "gt/meta.json"
 
 
+#: Failed scans named in a SynthError's message (the rest are counted): a broken worker pool fails every scan.
+MAX_FAILURES_SHOWN = 5
+
+
 class SynthError(RuntimeError):
-    """Scans of a run that could not be generated (the others were); the message names each and why."""
+    """Scans of a run that could not be generated (the others were); the message names the first few and why."""
 
 
 @dataclass(frozen=True)
@@ -269,5 +273,7 @@ def generate_dataset(
                 failed.append(f"{scan_name(task[2])}: {type(exc).__name__}: {exc}")
             bar.update()
     if failed:
-        raise SynthError(f"{len(failed)} of {n} scans failed ({out_dir}): " + "; ".join(sorted(failed)))
+        shown = sorted(failed)[:MAX_FAILURES_SHOWN]
+        more = f"; and {len(failed) - len(shown)} more" if len(failed) > len(shown) else ""
+        raise SynthError(f"{len(failed)} of {n} scans failed ({out_dir}): " + "; ".join(shown) + more)
     return [done[i] for i in sorted(done)]
