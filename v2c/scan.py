@@ -14,6 +14,7 @@ full image size (so K, pixel coordinates and ground truth stay valid) and the RO
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ import numpy as np
 
 from v2c.camera import DEFAULT_DEPTH_SCALE_M, Camera, backproject
 from v2c.errors import ScanError
+from v2c.pick import PickConfig, PickError, PickRequest, current_pick, large_frame_warning, pick_object, should_pick
 from v2c.scan_checks import (
     ScanLimits,
     check_depth_surface,
@@ -57,6 +59,8 @@ __all__ = [
 COLOR_NAMES = ("color.png", "color.jpg", "color.jpeg")
 DEPTH_NAMES = ("depth.png", "depth.npy")
 GT_DIR = "gt"
+
+log = logging.getLogger("v2c.scan")
 
 
 @dataclass
@@ -116,6 +120,7 @@ class Scan:
     camera_format: str = "v2c"  # "v2c" | "open3d" | "bop": which camera.json form was read
     files: dict[str, Path] = field(default_factory=dict)  # "color", "depth", "camera"[, "mask"]: files read
     notes: list[str] = field(default_factory=list)  # what the loader changed (readings dropped as implausible)
+    picked: str | None = None  # how `v2c.pick` chose ``mask`` (no mask.png, no ROI), None when it did not
 
     @property
     def height(self) -> int:
@@ -370,14 +375,20 @@ def load_ground_truth(
 
 
 def load_scan(
-    path: str | Path, roi: tuple[int, int, int, int] | str | None = None, limits: ScanLimits | None = None
+    path: str | Path,
+    roi: tuple[int, int, int, int] | str | None = None,
+    limits: ScanLimits | None = None,
+    pick: PickRequest | None = None,
 ) -> Scan:
     """Load and validate a scan folder (SCAN_FORMAT.md).
 
     path: the folder. roi: optional (x0, y0, x1, y1) pixels, x1/y1 exclusive, or the string "x0,y0,x1,y1"; it
     restricts :attr:`Scan.valid` and must lie inside the image. limits: what a plausible scan is (image size,
-    depth range, intrinsics, part size; default `current_limits()`). Returns a :class:`Scan` (depth in metres,
-    camera frame); raises :class:`ScanError` naming the file, the value and what was expected.
+    depth range, intrinsics, part size; default `current_limits()`). pick: whether to pick the object of a frame
+    with no mask.png and no ROI (`v2c.pick`; default `v2c.pick.current_pick()`, which never picks outside the
+    commands): the picked pixels become :attr:`Scan.mask` and :attr:`Scan.picked` says how. Returns a
+    :class:`Scan` (depth in metres, camera frame); raises :class:`ScanError` naming the file, the value and what
+    was expected.
     """
     limits = limits or current_limits()
     folder = Path(path)
@@ -443,9 +454,51 @@ def load_scan(
         files={"color": color_p, "depth": depth_p, "camera": cam_p} | ({"mask": mask_p} if mask is not None else {}),
         notes=notes,
     )
+    _pick_hook(scan, pick or current_pick(), depth_p)
     valid = scan.valid
     where = " and ".join(x for x, on in (("mask.png", mask is not None), (f"ROI {roi_t}", roi_t)) if on)
     if not valid.any():
         raise ScanError(f"{depth_p}: no depth reading inside {where}")
     check_depth_surface(scan.depth, valid, scan.K, depth_p, limits, f" inside {where}" if where else "")
     return scan
+
+
+def _pick_hook(scan: Scan, request: PickRequest, depth_p: Path, cfg: PickConfig | None = None) -> None:
+    """Pick the object of a frame with no mask.png and no ROI (`v2c.pick`): set ``scan.mask`` and ``scan.picked``
+    and say so on stderr; warn when a large frame stays whole. An explicit --pick centre / --point that finds
+    nothing raises ScanError; auto falls back to the whole frame with the warning."""
+    cfg = cfg or PickConfig()
+    if not should_pick(request, scan.mask is not None, scan.roi is not None, scan.gt is not None):
+        if scan.mask is None and scan.roi is None and scan.gt is None:
+            warning = large_frame_warning(int((scan.depth > 0).sum()), cfg)
+            if warning:
+                log.warning("%s: %s", scan.path, warning)
+        return
+    has = scan.depth > 0
+    n_valid = int(has.sum())
+    explicit = request.mode == "centre" or request.point is not None
+    if not explicit and n_valid <= cfg.large_frame_px:
+        return  # auto: a small frame is cheap to reconstruct whole
+    try:
+        result = pick_object(scan.depth, scan.K, has, request.point, cfg)
+    except PickError as e:
+        if explicit:
+            raise ScanError(f"{depth_p}: {e}; give --roi x0,y0,x1,y1 or a mask.png instead") from None
+        log.warning("%s: %s (%s)", scan.path, large_frame_warning(n_valid, cfg), e)
+        return
+    if not explicit and result.plane_share < cfg.scene_plane_share:
+        log.warning(
+            "%s: %s (not a scene: the largest plane holds %.0f %% of the valid pixels, under %.0f %%)",
+            scan.path,
+            large_frame_warning(n_valid, cfg),
+            100 * result.plane_share,
+            100 * cfg.scene_plane_share,
+        )
+        return
+    scan.mask = result.mask
+    scan.picked = result.how
+    log.warning(
+        "%s: no mask.png or --roi: %s; override with --roi x0,y0,x1,y1, a mask.png, --point X,Y or --pick none",
+        scan.path,
+        result.how,
+    )

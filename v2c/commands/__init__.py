@@ -2,10 +2,12 @@
 
 `executor_options` and `jobs_option` add the options of the batch commands (to-step, synth, bench, train) that say
 where their one-task-per-scan work runs and how much of it at once (`v2c.executors`, docs/scale.md). The flags
-every command shares, and what they mean, are in docs/cli.md (tests/test_cli_flags.py checks them)."""
+every command shares, and what they mean, are in docs/cli.md (tests/test_cli_flags.py checks them). `pick_options`
+adds ``--pick`` and ``--point`` to the commands that read a scan (with ``--roi``; `v2c.pick`)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -94,3 +96,44 @@ def ablation_option(f: Callable[..., Any]) -> Callable[..., Any]:
         type=click.Choice(ABLATIONS),
         help="full: shared axis frame + intersection refinement; no-axis / no-int drop one; fit-only both.",
     )(f)
+
+
+def _parse_point(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[int, int] | None:
+    from v2c.pick import PickError, parse_point
+
+    try:
+        return parse_point(value)
+    except PickError as e:
+        raise click.BadParameter(str(e), ctx=ctx, param=param) from None
+
+
+def pick_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--pick auto|centre|none`` and ``--point X,Y`` on a command that reads a scan (and has ``--roi``): the
+    command body runs inside `v2c.pick.pick_request`, so `v2c.scan.load_scan` picks the object of a cluttered frame
+    that has no mask.png and no ROI. --point or --pick centre together with --roi is a usage error."""
+
+    @functools.wraps(f)
+    def run(*args: Any, pick: str, point: tuple[int, int] | None, **kwargs: Any) -> Any:
+        from v2c.pick import PickRequest, pick_request
+
+        if kwargs.get("roi") is not None and (point is not None or pick == "centre"):
+            raise click.UsageError("--roi and --point/--pick centre both say where the part is: give one")
+        with pick_request(PickRequest(mode=pick, point=point)):
+            return f(*args, **kwargs)
+
+    run = click.option(
+        "--point",
+        callback=_parse_point,
+        default=None,
+        metavar="X,Y",
+        help="Pick the object under this pixel (column, row) of a frame with no mask.png and no --roi: the "
+        "support plane is dropped and the depth-connected object there becomes the mask.",
+    )(run)
+    return click.option(
+        "--pick",
+        type=click.Choice(["auto", "centre", "none"]),
+        default="auto",
+        show_default=True,
+        help="A frame with no mask.png and no --roi: auto = pick the object under the image centre (or --point) "
+        "when the frame is a large scene on a support plane; centre = always; none = the whole frame.",
+    )(run)

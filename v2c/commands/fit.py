@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
-from v2c.commands import ablation_option, segmentation_option
+from v2c.commands import ablation_option, pick_options, segmentation_option
 
 
 def _short_params(d: dict) -> str:
@@ -42,6 +42,7 @@ def _short_params(d: dict) -> str:
     help="JSON file to write, or a folder (an existing one, or one ending in /) for fit.json (default: SCAN/fit.json).",
 )
 @roi_option
+@pick_options
 @click.option("--seed", default=0, show_default=True, help="Seed of the RANSAC sampling.")
 @click.option("--force", is_flag=True, help="Replace an existing file that v2c did not write.")
 @verbosity_options

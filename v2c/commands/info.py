@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
+from v2c.commands import pick_options
 
 if TYPE_CHECKING:
     from v2c.scan import Scan
@@ -42,7 +43,9 @@ def describe_scan(scan: Scan) -> list[str]:
     )
     if abs(float(scan.K[0, 1])) > 0:
         lines.append(f"            skew {float(scan.K[0, 1]):.4f}")
-    if scan.mask is not None:
+    if scan.mask is not None and getattr(scan, "picked", None):
+        lines.append(f"mask        picked: {int(scan.mask.sum())} px ({100.0 * scan.mask.mean():.1f} %); {scan.picked}")
+    elif scan.mask is not None:
         lines.append(f"mask        mask.png: {int(scan.mask.sum())} px ({100.0 * scan.mask.mean():.1f} %)")
     else:
         lines.append("mask        none")
@@ -86,6 +89,7 @@ def describe_scan(scan: Scan) -> list[str]:
 @max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(file_okay=True, dir_okay=True, path_type=str))
 @roi_option
+@pick_options
 @verbosity_options
 def command(scan_dir: str, roi: tuple[int, int, int, int] | None) -> None:
     """Load the scan folder SCAN, check it and print what it holds (resolution, depth, intrinsics, mask/ROI,

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
-from v2c.commands import ablation_option, segmentation_option
+from v2c.commands import ablation_option, pick_options, segmentation_option
 
 
 @click.command("reconstruct")
@@ -27,6 +27,7 @@ from v2c.commands import ablation_option, segmentation_option
 @click.option("--no-figure", is_flag=True, help="Write only the VB-Rep JSON.")
 @click.option("--force", is_flag=True, help="Replace existing files that v2c did not write.")
 @roi_option
+@pick_options
 @verbosity_options
 def command(
     scan_dir: Path,

@@ -10,10 +10,11 @@ from typing import TYPE_CHECKING
 import click
 
 from v2c.cli_support import max_pixels_option, quiet, roi_option, verbosity_options
-from v2c.commands import executor_config, executor_options, segmentation_option
+from v2c.commands import executor_config, executor_options, pick_options, segmentation_option
 
 if TYPE_CHECKING:
     from v2c.api import ScanExport
+    from v2c.pick import PickRequest
 
 
 def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
@@ -35,14 +36,23 @@ def _to_step_task(
     extras: bool,
     roi: tuple[int, int, int, int] | None,
     force: bool = False,
+    pick: PickRequest | None = None,
 ) -> ScanExport:
-    """One scan's task (here, in a pool or on a Ray worker): reads SCAN, writes its outputs, returns the small
-    `v2c.api.ScanExport` record."""
+    """One scan's task (here, in a pool or on a Ray worker): reads SCAN (picking its object as ``pick`` says,
+    `v2c.pick`), writes its outputs, returns the small `v2c.api.ScanExport` record."""
     from v2c.api import scan_to_step
+    from v2c.pick import PickRequest, pick_request
 
-    return scan_to_step(
-        scan, _output_for(scan, out, batch), frame=frame, segmentation=segmentation, extras=extras, roi=roi, force=force
-    )
+    with pick_request(pick or PickRequest()):  # in this task's process, which may not be the command's
+        return scan_to_step(
+            scan,
+            _output_for(scan, out, batch),
+            frame=frame,
+            segmentation=segmentation,
+            extras=extras,
+            roi=roi,
+            force=force,
+        )
 
 
 @click.command("to-step")
@@ -69,6 +79,7 @@ def _to_step_task(
 @segmentation_option()
 @click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
 @roi_option
+@pick_options
 @verbosity_options
 @executor_options
 def command(
@@ -94,6 +105,7 @@ def command(
     from v2c.api import expand_scans
     from v2c.cli_support import describe_error, log, was_interrupted
     from v2c.executors import ExecutorError, run_tasks
+    from v2c.pick import current_pick
 
     where = executor_config(executor, ray_address)
     paths = expand_scans(list(scans))
@@ -120,6 +132,7 @@ def command(
         extras=not no_extras,
         roi=roi,
         force=force,
+        pick=current_pick(),
     )
     try:
         results = run_tasks(task, paths, where)
