@@ -26,11 +26,13 @@ import numpy as np
 from v2c.camera import DEFAULT_DEPTH_SCALE_M, Camera, backproject
 from v2c.errors import ScanError
 from v2c.pick import PickConfig, PickError, PickRequest, current_pick, large_frame_warning, pick_object, should_pick
+from v2c.recordings import current_frame_index, is_recording, read_bag_frame
 from v2c.scan_checks import (
     ScanLimits,
     check_depth_surface,
     check_depth_values,
     check_intrinsics_plausible,
+    check_pixels,
     current_limits,
     load_camera,
     parse_camera,
@@ -394,6 +396,8 @@ def load_scan(
     folder = Path(path)
     if not folder.exists():
         raise ScanError(f"{folder}: scan folder not found")
+    if is_recording(folder):
+        return _load_recording(folder, roi, limits, pick)
     if not folder.is_dir():
         raise ScanError(f"{folder}: not a folder (a scan is a folder with color, depth and camera.json)")
     roi_t = parse_roi(roi)
@@ -455,12 +459,56 @@ def load_scan(
         notes=notes,
     )
     _pick_hook(scan, pick or current_pick(), depth_p)
+    return _check_valid(scan, depth_p, limits)
+
+
+def _check_valid(scan: Scan, depth_p: Path, limits: ScanLimits) -> Scan:
+    """The last checks of a loaded scan: some depth inside its mask/ROI, and a surface rather than noise."""
     valid = scan.valid
-    where = " and ".join(x for x, on in (("mask.png", mask is not None), (f"ROI {roi_t}", roi_t)) if on)
+    mask_name = "the picked mask" if scan.picked else "mask.png"
+    where = " and ".join(x for x, on in ((mask_name, scan.mask is not None), (f"ROI {scan.roi}", scan.roi)) if on)
     if not valid.any():
         raise ScanError(f"{depth_p}: no depth reading inside {where}")
     check_depth_surface(scan.depth, valid, scan.K, depth_p, limits, f" inside {where}" if where else "")
     return scan
+
+
+def _load_recording(
+    path: Path, roi: tuple[int, int, int, int] | str | None, limits: ScanLimits, pick: PickRequest | None
+) -> Scan:
+    """A scan from one frame of a recording (`v2c.recordings`: a ROS1 .bag; frame `current_frame_index()`), checked
+    as a scan folder is (size, depth range, intrinsics, ROI), then picked as a scan folder is."""
+    roi_t = parse_roi(roi)
+    frame = read_bag_frame(path, current_frame_index())
+    h, w = frame.depth.shape
+    check_pixels(path, w, h, limits)
+    depth, notes = check_depth_values(frame.depth, path, limits, frame.depth_unit)
+    check_intrinsics_plausible(frame.K, w, h, path, limits)
+    if roi_t is not None:
+        x0, y0, x1, y1 = roi_t
+        if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+            raise ScanError(
+                f"ROI {roi_t} lies outside the image of {path} ({w}x{h}; need 0 <= x0 < x1 <= {w}, 0 <= y0 < y1 <= {h})"
+            )
+    scan = Scan(
+        path=path,
+        color=frame.color,
+        depth=depth,
+        K=frame.K,
+        mask=None,
+        roi=roi_t,
+        gt=None,
+        depth_scale=1.0,
+        camera_format="rosbag",
+        files={"recording": path},
+        notes=[
+            f"frame {frame.index} of {frame.n_pairs} colour+depth pairs ({frame.topics['color']}, "
+            f"{frame.topics['depth']}, intrinsics of {frame.topics['camera_info']})",
+            *notes,
+        ],
+    )
+    _pick_hook(scan, pick or current_pick(), path)
+    return _check_valid(scan, path, limits)
 
 
 def _pick_hook(scan: Scan, request: PickRequest, depth_p: Path, cfg: PickConfig | None = None) -> None:

@@ -3,7 +3,8 @@
 `executor_options` and `jobs_option` add the options of the batch commands (to-step, synth, bench, train) that say
 where their one-task-per-scan work runs and how much of it at once (`v2c.executors`, docs/scale.md). The flags
 every command shares, and what they mean, are in docs/cli.md (tests/test_cli_flags.py checks them). `pick_options`
-adds ``--pick`` and ``--point`` to the commands that read a scan (with ``--roi``; `v2c.pick`)."""
+adds ``--pick`` and ``--point`` to the commands that read a scan (with ``--roi``; `v2c.pick`), `frame_index_option`
+``--frame-index`` (which frame of a recording, `v2c.recordings`)."""
 
 from __future__ import annotations
 
@@ -137,3 +138,24 @@ def pick_options(f: Callable[..., Any]) -> Callable[..., Any]:
         help="A frame with no mask.png and no --roi: auto = pick the object under the image centre (or --point) "
         "when the frame is a large scene on a support plane; centre = always; none = the whole frame.",
     )(run)
+
+
+def _set_frame_index(ctx: click.Context, param: click.Parameter, value: int | None) -> None:
+    from v2c.recordings import recording_frame
+
+    if value is not None:
+        ctx.with_resource(recording_frame(value))
+
+
+def frame_index_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--frame-index N``: which colour+depth pair of a recording (a .bag given as SCAN) to read, for the rest of
+    the command (`v2c.recordings.recording_frame`); not ``--frame``, which is to-step's output frame."""
+    return click.option(
+        "--frame-index",
+        type=click.IntRange(min=0),
+        default=None,
+        expose_value=False,
+        callback=_set_frame_index,
+        metavar="N",
+        help="SCAN is a recording (.bag): read its N-th complete colour+depth pair [default: 0, the first].",
+    )(f)

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import click
 
 from v2c.cli_support import max_pixels_option, quiet, roi_option, verbosity_options
-from v2c.commands import executor_config, executor_options, pick_options, segmentation_option
+from v2c.commands import executor_config, executor_options, frame_index_option, pick_options, segmentation_option
 
 if TYPE_CHECKING:
     from v2c.api import ScanExport
@@ -21,7 +21,9 @@ def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
     """Where one scan's STEP goes: -o as given for one scan; for several (or -o DIR/ or an existing folder), -o
     is a folder of <name>.step."""
     if out is None:
-        return None
+        from v2c.recordings import is_recording
+
+        return scan.with_suffix(".step") if is_recording(scan) else None  # next to a recording, not inside it
     if batch or out.is_dir():
         return out / f"{scan.resolve().name}.step"
     return out
@@ -37,13 +39,17 @@ def _to_step_task(
     roi: tuple[int, int, int, int] | None,
     force: bool = False,
     pick: PickRequest | None = None,
+    frame_index: int = 0,
 ) -> ScanExport:
     """One scan's task (here, in a pool or on a Ray worker): reads SCAN (picking its object as ``pick`` says,
-    `v2c.pick`), writes its outputs, returns the small `v2c.api.ScanExport` record."""
+    `v2c.pick`; a recording's pair ``frame_index``), writes its outputs, returns the small `v2c.api.ScanExport`
+    record."""
     from v2c.api import scan_to_step
     from v2c.pick import PickRequest, pick_request
+    from v2c.recordings import recording_frame
 
-    with pick_request(pick or PickRequest()):  # in this task's process, which may not be the command's
+    # in this task's process, which may not be the command's
+    with pick_request(pick or PickRequest()), recording_frame(frame_index):
         return scan_to_step(
             scan,
             _output_for(scan, out, batch),
@@ -80,6 +86,7 @@ def _to_step_task(
 @click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
 @roi_option
 @pick_options
+@frame_index_option
 @verbosity_options
 @executor_options
 def command(
@@ -106,6 +113,7 @@ def command(
     from v2c.cli_support import describe_error, log, was_interrupted
     from v2c.executors import ExecutorError, run_tasks
     from v2c.pick import current_pick
+    from v2c.recordings import current_frame_index
 
     where = executor_config(executor, ray_address)
     paths = expand_scans(list(scans))
@@ -133,6 +141,7 @@ def command(
         roi=roi,
         force=force,
         pick=current_pick(),
+        frame_index=current_frame_index(),
     )
     try:
         results = run_tasks(task, paths, where)
