@@ -197,3 +197,23 @@ def test_parse_point() -> None:
     for bad in ("1", "1,2,3", "a,b", "-1,2", "1.5,2", "nan,1"):
         with pytest.raises(PickError, match="point"):
             parse_point(bad)
+
+
+def test_table_on_a_floor_drops_both_planes() -> None:
+    """The floor is the largest plane; the table top (0.5 m above it, parallel) is dropped too, so the box on the
+    table comes out alone rather than with the table top it stands on."""
+    table = 0.5  # table top height above the floor (metres)
+    faces = [
+        BoundedFace(_plane((0, 0, -table), (0, 0, 1)), lambda p: np.all(np.abs(p[:, :2]) <= 3.0, axis=1), 3, "Z"),
+        BoundedFace(_plane((0, 0, 0), (0, 0, 1)), lambda p: np.all(np.abs(p[:, :2]) <= 0.3, axis=1), 3, "Z"),
+    ]
+    box = _box_faces(0.0, 0.0, (0.08, 0.06, 0.10))
+    faces += box
+    target = np.array([0.0, 0.0, 0.0])
+    eye = target + 1.1 * np.array([0.1, -0.7, 0.7]) / np.linalg.norm([0.1, -0.7, 0.7])
+    r = render_scene(Scene(faces, eye, target, 0.5, K=K.copy(), image_size=(W, H)))
+    floor, top, box_mask = r.faces == 1, r.faces == 2, r.faces >= 3
+    assert floor.sum() > top.sum() > PickConfig().extra_plane_share * (r.depth > 0).sum() and box_mask[H // 2, W // 2]
+    res = pick_object(r.depth.astype(np.float64), K, r.depth > 0)
+    assert _iou(res.mask, box_mask) >= 0.9
+    assert not (res.mask & (floor | top)).any()

@@ -4,6 +4,7 @@ intrinsics written; --frame-index picks the pair; unaligned depth and broken bag
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -160,3 +161,34 @@ def test_bag_without_depth_names_what_it_holds(tmp_path: Path) -> None:
         w.write(c, T0, STORE.serialize_ros1(_image(T0, _color(0), "rgb8"), "sensor_msgs/msg/Image"))
     with pytest.raises(RecordingError, match=r"colour_only\.bag: no depth image topic .*/camera/color/image_raw"):
         load_scan(bag)
+
+
+def write_open3d_folder(folder: Path, n_frames: int = 2) -> Path:
+    """Open3D's RGBD layout: color/NNNNNN.jpg, depth/NNNNNN.png (millimetres), camera_intrinsic.json."""
+    import cv2
+
+    (folder / "color").mkdir(parents=True)
+    (folder / "depth").mkdir()
+    for f in range(n_frames):
+        cv2.imwrite(str(folder / "color" / f"{f:06d}.png"), _color(f)[..., ::-1])
+        mm = np.round(_depth_units(f).astype(np.float64) * DEPTH_UNIT * 1000.0).astype(np.uint16)
+        cv2.imwrite(str(folder / "depth" / f"{f:06d}.png"), mm)
+    intrinsic = {"width": W, "height": H, "intrinsic_matrix": K.T.reshape(-1).tolist()}  # column-major
+    (folder / "camera_intrinsic.json").write_text(json.dumps(intrinsic))
+    return folder
+
+
+def test_open3d_folder_loads_the_pair_asked_for(tmp_path: Path) -> None:
+    folder = write_open3d_folder(tmp_path / "o3d")
+    with recording_frame(1):
+        scan = load_scan(folder)
+    np.testing.assert_array_equal(scan.K, K)
+    np.testing.assert_array_equal(scan.color, _color(1))
+    want = np.round(_depth_units(1) * DEPTH_UNIT * 1000.0) / 1000.0  # written in millimetres, Open3D's default
+    np.testing.assert_allclose(scan.depth, want, rtol=1e-6, atol=1e-7)
+    assert scan.files["depth"] == folder / "depth" / "000001.png" and "frame 1 of 2" in scan.notes[0]
+    res = CliRunner().invoke(main, ["info", str(folder), "--frame-index", "2"])
+    assert res.exit_code == 1
+    assert res.output.strip() == f"error: {folder}: frame index 2, but the folder holds 2 colour+depth pairs " + (
+        "(2 in color/, 2 in depth/, paired by file name); expected 0..1"
+    )

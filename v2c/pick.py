@@ -3,7 +3,8 @@
 A real frame without ``mask.png`` or a ROI shows a table and several objects; reconstructing all of it is slow and
 not what a user wants. `pick_object` finds the support plane (RANSAC on the back-projected depth: the plane with
 the most points among those whose normal lies within `PickConfig.max_plane_tilt_deg` of the camera's viewing axis),
-drops every point within `PickConfig.plane_drop_mm` of it or behind it, splits what is left into depth-connected
+drops every point within `PickConfig.plane_drop_mm` of it or behind it (and of up to two more planes parallel to it
+and well above it, a table seen standing on a floor), splits what is left into depth-connected
 pieces (4-neighbours whose depths differ by less than `PickConfig.connect_step_mm` plus
 `PickConfig.connect_step_rel` of the depth) and returns the piece under the pixel asked for (the image centre by
 default), or the nearest one within `PickConfig.search_radius_px`.
@@ -69,7 +70,8 @@ class PickConfig:
     max_plane_tilt_deg: float = 80.0  # the support plane's normal within this angle of the viewing axis (degrees)
     max_planes: int = 3  # support planes dropped at most: the largest, then ones parallel to it (table on a floor)
     extra_plane_share: float = 0.06  # a further plane must hold this share of the valid pixels (0..1) ...
-    parallel_deg: float = 10.0  # ... and lie within this angle of the first plane (degrees)
+    parallel_deg: float = 10.0  # ... lie within this angle of the first plane (degrees) ...
+    extra_plane_height_mm: float = 250.0  # ... and this high above it: a table top over a floor, not a box top
     connect_step_mm: float = 8.0  # 4-neighbours join one object when their depths differ by less than this (mm) ...
     connect_step_rel: float = 0.01  # ... plus this fraction of their depth (a step grows with distance)
     min_object_px: int = 150  # smaller pieces are not objects (speckle, edges of the plane)
@@ -239,6 +241,8 @@ def pick_object(
             break
         if on2.sum() < cfg.extra_plane_share * valid.sum():
             break
+        if np.median(pts[keep][on2] @ n + d) < cfg.extra_plane_height_mm / 1000.0:
+            break  # a large flat face of an object on the support, not a further support
         keep &= np.abs(pts @ n2 + d2) > drop_m
     _, labels = _components(keep, depth.astype(np.float64), cfg)
     sizes = np.bincount(labels[keep], minlength=1)

@@ -1,5 +1,5 @@
 """Read one colour + depth frame from a sensor recording: a ROS1 ``.bag`` (the RealSense Viewer's and realsense-ros'
-recordings), read with the pure-Python `rosbags` package.
+recordings), read with the pure-Python `rosbags` package, or an Open3D RGBD folder (`open3d_frame_files`).
 
 `read_bag_frame` returns a `RecordedFrame` (colour RGB, depth in metres, K in pixels); `v2c.scan.load_scan` turns
 it into a `Scan` when its path is a ``.bag`` file. Which frame: the ``frame_index``-th complete colour+depth pair
@@ -13,6 +13,12 @@ are those of the colour stream's `sensor_msgs/CameraInfo` (the one whose topic s
 image topic). Depth must be aligned to colour: an ``aligned_depth_to_color`` topic, or a depth stream whose own
 camera info has the colour's size and intrinsics; otherwise `RecordingError` says so (v2c does not reproject
 depth; record with realsense-ros ``align_depth:=true`` or align with pyrealsense2's ``rs.align``).
+
+An Open3D RGBD folder (what Open3D's ``realsense_recorder.py`` writes, and its reconstruction system reads): colour
+images in ``color/``, depth images in ``depth/`` (registered to colour, 16-bit), the intrinsics in
+``camera_intrinsic.json`` (or ``intrinsic.json``; Open3D's ``PinholeCameraIntrinsic`` form). Pairs are the file
+stems present in both folders, in sorted order; `open3d_frame_files` names the files of one pair and
+`v2c.scan.load_scan` reads them as it reads a scan folder's ``color.png``, ``depth.png`` and ``camera.json``.
 """
 
 from __future__ import annotations
@@ -34,7 +40,9 @@ __all__ = [
     "RecordingConfig",
     "RecordingError",
     "current_frame_index",
+    "is_open3d_folder",
     "is_recording",
+    "open3d_frame_files",
     "read_bag_frame",
     "recording_frame",
 ]
@@ -291,3 +299,48 @@ def _depth_unit(reader: Any, store: Any, cfg: RecordingConfig) -> tuple[float, s
             if msg is not None and float(msg.data) > 0:
                 return float(msg.data), f"the bag's {c.topic}"
     return cfg.default_depth_unit_m, "no Depth Units option: millimetres, ROS REP 118"
+
+
+#: Open3D RGBD folder: its sub-folders and the intrinsics file names accepted (first found wins).
+OPEN3D_COLOR_DIR, OPEN3D_DEPTH_DIR = "color", "depth"
+OPEN3D_INTRINSIC_NAMES = ("camera_intrinsic.json", "intrinsic.json")
+_OPEN3D_COLOR_EXT = (".jpg", ".jpeg", ".png")
+_OPEN3D_DEPTH_EXT = (".png",)
+
+
+def is_open3d_folder(path: Path) -> bool:
+    """Whether ``path`` is an Open3D RGBD folder (``color/`` and ``depth/`` sub-folders, no ``color.png`` of a
+    scan folder)."""
+    return (
+        path.is_dir()
+        and (path / OPEN3D_COLOR_DIR).is_dir()
+        and (path / OPEN3D_DEPTH_DIR).is_dir()
+        and not any((path / n).exists() for n in ("color.png", "color.jpg", "color.jpeg"))
+    )
+
+
+def open3d_frame_files(folder: Path, frame_index: int = 0) -> tuple[Path, Path, Path, int]:
+    """(colour image, depth image, intrinsics JSON, pairs in the folder) of the ``frame_index``-th pair of an Open3D
+    RGBD folder (pairs: file stems present in both ``color/`` and ``depth/``, sorted). Raises RecordingError."""
+    folder = Path(folder)
+    intrinsic = next((folder / n for n in OPEN3D_INTRINSIC_NAMES if (folder / n).is_file()), None)
+    if intrinsic is None:
+        raise RecordingError(
+            f"{folder}: Open3D RGBD folder without intrinsics; expected {' or '.join(OPEN3D_INTRINSIC_NAMES)} "
+            "(Open3D PinholeCameraIntrinsic JSON)"
+        )
+
+    def stems(sub: str, exts: tuple[str, ...]) -> dict[str, Path]:
+        files = sorted(p for p in (folder / sub).iterdir() if p.suffix.lower() in exts and p.is_file())
+        return {p.stem: p for p in reversed(files)}  # one file per stem; the first in name order wins
+
+    colors, depths = stems(OPEN3D_COLOR_DIR, _OPEN3D_COLOR_EXT), stems(OPEN3D_DEPTH_DIR, _OPEN3D_DEPTH_EXT)
+    pairs = sorted(set(colors) & set(depths))
+    if frame_index < 0 or frame_index >= len(pairs):
+        raise RecordingError(
+            f"{folder}: frame index {frame_index}, but the folder holds {len(pairs)} colour+depth pairs "
+            f"({len(colors)} in {OPEN3D_COLOR_DIR}/, {len(depths)} in {OPEN3D_DEPTH_DIR}/, paired by file name)"
+            + (f"; expected 0..{len(pairs) - 1}" if pairs else "")
+        )
+    stem = pairs[frame_index]
+    return colors[stem], depths[stem], intrinsic, len(pairs)

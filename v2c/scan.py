@@ -26,7 +26,7 @@ import numpy as np
 from v2c.camera import DEFAULT_DEPTH_SCALE_M, Camera, backproject
 from v2c.errors import ScanError
 from v2c.pick import PickConfig, PickError, PickRequest, current_pick, large_frame_warning, pick_object, should_pick
-from v2c.recordings import current_frame_index, is_recording, read_bag_frame
+from v2c.recordings import current_frame_index, is_open3d_folder, is_recording, open3d_frame_files, read_bag_frame
 from v2c.scan_checks import (
     ScanLimits,
     check_depth_surface,
@@ -402,9 +402,16 @@ def load_scan(
         raise ScanError(f"{folder}: not a folder (a scan is a folder with color, depth and camera.json)")
     roi_t = parse_roi(roi)
 
-    cam_p = folder / "camera.json"
-    color_p = _pick(folder, COLOR_NAMES, "colour image")
-    depth_p = _pick(folder, DEPTH_NAMES, "depth")
+    recorded_note = None
+    if is_open3d_folder(folder):  # `v2c.recordings`: one pair of an Open3D RGBD folder, read as a scan folder's
+        color_p, depth_p, cam_p, n_pairs = open3d_frame_files(folder, current_frame_index())
+        recorded_note = (
+            f"frame {current_frame_index()} of {n_pairs} colour+depth pairs ({color_p.name}, {depth_p.name})"
+        )
+    else:
+        cam_p = folder / "camera.json"
+        color_p = _pick(folder, COLOR_NAMES, "colour image")
+        depth_p = _pick(folder, DEPTH_NAMES, "depth")
     cam = load_camera(cam_p, limits)
 
     color = _read_color(color_p, limits)
@@ -441,6 +448,8 @@ def load_scan(
                 f"0 <= y0 < y1 <= {h})"
             )
 
+    if recorded_note:
+        notes = [recorded_note, *notes]
     gt = None
     if (folder / GT_DIR).is_dir():
         gt = load_ground_truth(folder / GT_DIR, h, w, cam.depth_scale, depth_is_npy=depth_p.suffix == ".npy")
