@@ -14,6 +14,7 @@ full image size (so K, pixel coordinates and ground truth stay valid) and the RO
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from dataclasses import dataclass, field
@@ -24,11 +25,14 @@ import numpy as np
 
 from v2c.camera import DEFAULT_DEPTH_SCALE_M, Camera, backproject
 from v2c.errors import ScanError
+from v2c.pick import PickConfig, PickError, PickRequest, current_pick, large_frame_warning, pick_object, should_pick
+from v2c.recordings import current_frame_index, is_open3d_folder, is_recording, open3d_frame_files, read_bag_frame
 from v2c.scan_checks import (
     ScanLimits,
     check_depth_surface,
     check_depth_values,
     check_intrinsics_plausible,
+    check_pixels,
     current_limits,
     load_camera,
     parse_camera,
@@ -57,6 +61,8 @@ __all__ = [
 COLOR_NAMES = ("color.png", "color.jpg", "color.jpeg")
 DEPTH_NAMES = ("depth.png", "depth.npy")
 GT_DIR = "gt"
+
+log = logging.getLogger("v2c.scan")
 
 
 @dataclass
@@ -116,6 +122,7 @@ class Scan:
     camera_format: str = "v2c"  # "v2c" | "open3d" | "bop": which camera.json form was read
     files: dict[str, Path] = field(default_factory=dict)  # "color", "depth", "camera"[, "mask"]: files read
     notes: list[str] = field(default_factory=list)  # what the loader changed (readings dropped as implausible)
+    picked: str | None = None  # how `v2c.pick` chose ``mask`` (no mask.png, no ROI), None when it did not
 
     @property
     def height(self) -> int:
@@ -370,26 +377,41 @@ def load_ground_truth(
 
 
 def load_scan(
-    path: str | Path, roi: tuple[int, int, int, int] | str | None = None, limits: ScanLimits | None = None
+    path: str | Path,
+    roi: tuple[int, int, int, int] | str | None = None,
+    limits: ScanLimits | None = None,
+    pick: PickRequest | None = None,
 ) -> Scan:
     """Load and validate a scan folder (SCAN_FORMAT.md).
 
     path: the folder. roi: optional (x0, y0, x1, y1) pixels, x1/y1 exclusive, or the string "x0,y0,x1,y1"; it
     restricts :attr:`Scan.valid` and must lie inside the image. limits: what a plausible scan is (image size,
-    depth range, intrinsics, part size; default `current_limits()`). Returns a :class:`Scan` (depth in metres,
-    camera frame); raises :class:`ScanError` naming the file, the value and what was expected.
+    depth range, intrinsics, part size; default `current_limits()`). pick: whether to pick the object of a frame
+    with no mask.png and no ROI (`v2c.pick`; default `v2c.pick.current_pick()`, which never picks outside the
+    commands): the picked pixels become :attr:`Scan.mask` and :attr:`Scan.picked` says how. Returns a
+    :class:`Scan` (depth in metres, camera frame); raises :class:`ScanError` naming the file, the value and what
+    was expected.
     """
     limits = limits or current_limits()
     folder = Path(path)
     if not folder.exists():
         raise ScanError(f"{folder}: scan folder not found")
+    if is_recording(folder):
+        return _load_recording(folder, roi, limits, pick)
     if not folder.is_dir():
         raise ScanError(f"{folder}: not a folder (a scan is a folder with color, depth and camera.json)")
     roi_t = parse_roi(roi)
 
-    cam_p = folder / "camera.json"
-    color_p = _pick(folder, COLOR_NAMES, "colour image")
-    depth_p = _pick(folder, DEPTH_NAMES, "depth")
+    recorded_note = None
+    if is_open3d_folder(folder):  # `v2c.recordings`: one pair of an Open3D RGBD folder, read as a scan folder's
+        color_p, depth_p, cam_p, n_pairs = open3d_frame_files(folder, current_frame_index())
+        recorded_note = (
+            f"frame {current_frame_index()} of {n_pairs} colour+depth pairs ({color_p.name}, {depth_p.name})"
+        )
+    else:
+        cam_p = folder / "camera.json"
+        color_p = _pick(folder, COLOR_NAMES, "colour image")
+        depth_p = _pick(folder, DEPTH_NAMES, "depth")
     cam = load_camera(cam_p, limits)
 
     color = _read_color(color_p, limits)
@@ -426,6 +448,8 @@ def load_scan(
                 f"0 <= y0 < y1 <= {h})"
             )
 
+    if recorded_note:
+        notes = [recorded_note, *notes]
     gt = None
     if (folder / GT_DIR).is_dir():
         gt = load_ground_truth(folder / GT_DIR, h, w, cam.depth_scale, depth_is_npy=depth_p.suffix == ".npy")
@@ -443,9 +467,95 @@ def load_scan(
         files={"color": color_p, "depth": depth_p, "camera": cam_p} | ({"mask": mask_p} if mask is not None else {}),
         notes=notes,
     )
+    _pick_hook(scan, pick or current_pick(), depth_p)
+    return _check_valid(scan, depth_p, limits)
+
+
+def _check_valid(scan: Scan, depth_p: Path, limits: ScanLimits) -> Scan:
+    """The last checks of a loaded scan: some depth inside its mask/ROI, and a surface rather than noise."""
     valid = scan.valid
-    where = " and ".join(x for x, on in (("mask.png", mask is not None), (f"ROI {roi_t}", roi_t)) if on)
+    mask_name = "the picked mask" if scan.picked else "mask.png"
+    where = " and ".join(x for x, on in ((mask_name, scan.mask is not None), (f"ROI {scan.roi}", scan.roi)) if on)
     if not valid.any():
         raise ScanError(f"{depth_p}: no depth reading inside {where}")
     check_depth_surface(scan.depth, valid, scan.K, depth_p, limits, f" inside {where}" if where else "")
     return scan
+
+
+def _load_recording(
+    path: Path, roi: tuple[int, int, int, int] | str | None, limits: ScanLimits, pick: PickRequest | None
+) -> Scan:
+    """A scan from one frame of a recording (`v2c.recordings`: a ROS1 .bag; frame `current_frame_index()`), checked
+    as a scan folder is (size, depth range, intrinsics, ROI), then picked as a scan folder is."""
+    roi_t = parse_roi(roi)
+    frame = read_bag_frame(path, current_frame_index())
+    h, w = frame.depth.shape
+    check_pixels(path, w, h, limits)
+    depth, notes = check_depth_values(frame.depth, path, limits, frame.depth_unit)
+    check_intrinsics_plausible(frame.K, w, h, path, limits)
+    if roi_t is not None:
+        x0, y0, x1, y1 = roi_t
+        if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+            raise ScanError(
+                f"ROI {roi_t} lies outside the image of {path} ({w}x{h}; need 0 <= x0 < x1 <= {w}, 0 <= y0 < y1 <= {h})"
+            )
+    scan = Scan(
+        path=path,
+        color=frame.color,
+        depth=depth,
+        K=frame.K,
+        mask=None,
+        roi=roi_t,
+        gt=None,
+        depth_scale=1.0,
+        camera_format="rosbag",
+        files={"recording": path},
+        notes=[
+            f"frame {frame.index} of {frame.n_pairs} colour+depth pairs ({frame.topics['color']}, "
+            f"{frame.topics['depth']}, intrinsics of {frame.topics['camera_info']})",
+            *notes,
+        ],
+    )
+    _pick_hook(scan, pick or current_pick(), path)
+    return _check_valid(scan, path, limits)
+
+
+def _pick_hook(scan: Scan, request: PickRequest, depth_p: Path, cfg: PickConfig | None = None) -> None:
+    """Pick the object of a frame with no mask.png and no ROI (`v2c.pick`): set ``scan.mask`` and ``scan.picked``
+    and say so on stderr; warn when a large frame stays whole. An explicit --pick centre / --point that finds
+    nothing raises ScanError; auto falls back to the whole frame with the warning."""
+    cfg = cfg or PickConfig()
+    if not should_pick(request, scan.mask is not None, scan.roi is not None, scan.gt is not None):
+        if scan.mask is None and scan.roi is None and scan.gt is None:
+            warning = large_frame_warning(int((scan.depth > 0).sum()), cfg)
+            if warning:
+                log.warning("%s: %s", scan.path, warning)
+        return
+    has = scan.depth > 0
+    n_valid = int(has.sum())
+    explicit = request.mode == "centre" or request.point is not None
+    if not explicit and n_valid <= cfg.large_frame_px:
+        return  # auto: a small frame is cheap to reconstruct whole
+    try:
+        result = pick_object(scan.depth, scan.K, has, request.point, cfg)
+    except PickError as e:
+        if explicit:
+            raise ScanError(f"{depth_p}: {e}; give --roi x0,y0,x1,y1 or a mask.png instead") from None
+        log.warning("%s: %s (%s)", scan.path, large_frame_warning(n_valid, cfg), e)
+        return
+    if not explicit and result.plane_share < cfg.scene_plane_share:
+        log.warning(
+            "%s: %s (not a scene: the largest plane holds %.0f %% of the valid pixels, under %.0f %%)",
+            scan.path,
+            large_frame_warning(n_valid, cfg),
+            100 * result.plane_share,
+            100 * cfg.scene_plane_share,
+        )
+        return
+    scan.mask = result.mask
+    scan.picked = result.how
+    log.warning(
+        "%s: no mask.png or --roi: %s; override with --roi x0,y0,x1,y1, a mask.png, --point X,Y or --pick none",
+        scan.path,
+        result.how,
+    )

@@ -2,10 +2,13 @@
 
 `executor_options` and `jobs_option` add the options of the batch commands (to-step, synth, bench, train) that say
 where their one-task-per-scan work runs and how much of it at once (`v2c.executors`, docs/scale.md). The flags
-every command shares, and what they mean, are in docs/cli.md (tests/test_cli_flags.py checks them)."""
+every command shares, and what they mean, are in docs/cli.md (tests/test_cli_flags.py checks them). `pick_options`
+adds ``--pick`` and ``--point`` to the commands that read a scan (with ``--roi``; `v2c.pick`), `frame_index_option`
+``--frame-index`` (which frame of a recording, `v2c.recordings`)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -93,4 +96,66 @@ def ablation_option(f: Callable[..., Any]) -> Callable[..., Any]:
         show_default=True,
         type=click.Choice(ABLATIONS),
         help="full: shared axis frame + intersection refinement; no-axis / no-int drop one; fit-only both.",
+    )(f)
+
+
+def _parse_point(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[int, int] | None:
+    from v2c.pick import PickError, parse_point
+
+    try:
+        return parse_point(value)
+    except PickError as e:
+        raise click.BadParameter(str(e), ctx=ctx, param=param) from None
+
+
+def pick_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--pick auto|centre|none`` and ``--point X,Y`` on a command that reads a scan (and has ``--roi``): the
+    command body runs inside `v2c.pick.pick_request`, so `v2c.scan.load_scan` picks the object of a cluttered frame
+    that has no mask.png and no ROI. --point or --pick centre together with --roi is a usage error."""
+
+    @functools.wraps(f)
+    def run(*args: Any, pick: str, point: tuple[int, int] | None, **kwargs: Any) -> Any:
+        from v2c.pick import PickRequest, pick_request
+
+        if kwargs.get("roi") is not None and (point is not None or pick == "centre"):
+            raise click.UsageError("--roi and --point/--pick centre both say where the part is: give one")
+        with pick_request(PickRequest(mode=pick, point=point)):
+            return f(*args, **kwargs)
+
+    run = click.option(
+        "--point",
+        callback=_parse_point,
+        default=None,
+        metavar="X,Y",
+        help="Pick the object under this pixel (column, row) of a frame with no mask.png and no --roi: the "
+        "support plane is dropped and the depth-connected object there becomes the mask.",
+    )(run)
+    return click.option(
+        "--pick",
+        type=click.Choice(["auto", "centre", "none"]),
+        default="auto",
+        show_default=True,
+        help="A frame with no mask.png and no --roi: auto = pick the object under the image centre (or --point) "
+        "when the frame is a large scene on a support plane; centre = always; none = the whole frame.",
+    )(run)
+
+
+def _set_frame_index(ctx: click.Context, param: click.Parameter, value: int | None) -> None:
+    from v2c.recordings import recording_frame
+
+    if value is not None:
+        ctx.with_resource(recording_frame(value))
+
+
+def frame_index_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--frame-index N``: which colour+depth pair of a recording (a .bag given as SCAN) to read, for the rest of
+    the command (`v2c.recordings.recording_frame`); not ``--frame``, which is to-step's output frame."""
+    return click.option(
+        "--frame-index",
+        type=click.IntRange(min=0),
+        default=None,
+        expose_value=False,
+        callback=_set_frame_index,
+        metavar="N",
+        help="SCAN is a recording (.bag): read its N-th complete colour+depth pair [default: 0, the first].",
     )(f)

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
-from v2c.commands import ablation_option, segmentation_option
+from v2c.commands import ablation_option, frame_index_option, pick_options, segmentation_option
 
 
 def _short_params(d: dict) -> str:
@@ -42,6 +42,8 @@ def _short_params(d: dict) -> str:
     help="JSON file to write, or a folder (an existing one, or one ending in /) for fit.json (default: SCAN/fit.json).",
 )
 @roi_option
+@pick_options
+@frame_index_option
 @click.option("--seed", default=0, show_default=True, help="Seed of the RANSAC sampling.")
 @click.option("--force", is_flag=True, help="Replace an existing file that v2c did not write.")
 @verbosity_options
@@ -62,7 +64,8 @@ def command(
     from v2c.scan import ScanError, load_scan
     from v2c.segment import segment
 
-    out = output_file(output, "fit.json") or Path(scan_dir) / "fit.json"
+    base = Path(scan_dir).parent if Path(scan_dir).is_file() else Path(scan_dir)  # a recording: next to it
+    out = output_file(output, "fit.json") or base / "fit.json"
     check_replaceable(out, force)  # before the work, not after
     try:
         scan = load_scan(scan_dir, roi=roi)

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
-from v2c.commands import segmentation_option
+from v2c.commands import frame_index_option, pick_options, segmentation_option
 
 
 @click.command("fixture")
@@ -62,6 +62,8 @@ from v2c.commands import segmentation_option
 )
 @click.option("--force", is_flag=True, help="Replace existing files that v2c did not write.")
 @roi_option
+@pick_options
+@frame_index_option
 @verbosity_options
 def command(
     scan: Path,

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
+from v2c.commands import frame_index_option, pick_options
 
 if TYPE_CHECKING:
     from v2c.scan import Scan
@@ -29,20 +30,24 @@ def describe_scan(scan: Scan) -> list[str]:
             f"readings on {100.0 * has.sum() / n:.1f} % of pixels"
         )
     depth_file = scan.files.get("depth")
-    if depth_file is not None and depth_file.suffix == ".npy":
+    if scan.files.get("recording") is not None:
+        depth_src = f"recording {scan.files['recording'].name} (depth in metres)"
+    elif depth_file is not None and depth_file.suffix == ".npy":
         depth_src = f"{depth_file.name} (float metres)"
     else:
         depth_src = f"{depth_file.name if depth_file else 'depth.png'} x {scan.depth_scale:g} m/unit"
     lines.append(f"            source {depth_src}")
     for note in getattr(scan, "notes", []):
         lines.append(f"            note: {note}")
-    lines.append(
-        f"intrinsics  fx {scan.fx:.3f}  fy {scan.fy:.3f}  cx {scan.cx:.3f}  cy {scan.cy:.3f} px "
-        f"(camera.json form: {scan.camera_format})"
-    )
+    form = f"camera.json form: {scan.camera_format}"
+    if scan.camera_format == "rosbag":
+        form = "the recording's camera_info"
+    lines.append(f"intrinsics  fx {scan.fx:.3f}  fy {scan.fy:.3f}  cx {scan.cx:.3f}  cy {scan.cy:.3f} px ({form})")
     if abs(float(scan.K[0, 1])) > 0:
         lines.append(f"            skew {float(scan.K[0, 1]):.4f}")
-    if scan.mask is not None:
+    if scan.mask is not None and getattr(scan, "picked", None):
+        lines.append(f"mask        picked: {int(scan.mask.sum())} px ({100.0 * scan.mask.mean():.1f} %); {scan.picked}")
+    elif scan.mask is not None:
         lines.append(f"mask        mask.png: {int(scan.mask.sum())} px ({100.0 * scan.mask.mean():.1f} %)")
     else:
         lines.append("mask        none")
@@ -86,6 +91,8 @@ def describe_scan(scan: Scan) -> list[str]:
 @max_pixels_option
 @click.argument("scan_dir", metavar="SCAN", type=click.Path(file_okay=True, dir_okay=True, path_type=str))
 @roi_option
+@pick_options
+@frame_index_option
 @verbosity_options
 def command(scan_dir: str, roi: tuple[int, int, int, int] | None) -> None:
     """Load the scan folder SCAN, check it and print what it holds (resolution, depth, intrinsics, mask/ROI,

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import max_pixels_option, roi_option, verbosity_options
-from v2c.commands import ablation_option, segmentation_option
+from v2c.commands import ablation_option, frame_index_option, pick_options, segmentation_option
 
 
 @click.command("reconstruct")
@@ -27,6 +27,8 @@ from v2c.commands import ablation_option, segmentation_option
 @click.option("--no-figure", is_flag=True, help="Write only the VB-Rep JSON.")
 @click.option("--force", is_flag=True, help="Replace existing files that v2c did not write.")
 @roi_option
+@pick_options
+@frame_index_option
 @verbosity_options
 def command(
     scan_dir: Path,
@@ -48,6 +50,8 @@ def command(
         scan = load_scan(scan_dir, roi=roi)
     except ScanError as e:
         raise click.ClickException(str(e)) from None
+    if out_dir is None and scan.files.get("recording") is not None:
+        out_dir = scan_dir.parent  # a recording is a file: write next to it
     for dest in ("reconstruction.vbrep.json", "reconstruction.png"):  # before the work, not after
         check_replaceable((out_dir or scan_dir) / dest, force)
     try:

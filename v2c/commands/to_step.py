@@ -10,17 +10,20 @@ from typing import TYPE_CHECKING
 import click
 
 from v2c.cli_support import max_pixels_option, quiet, roi_option, verbosity_options
-from v2c.commands import executor_config, executor_options, segmentation_option
+from v2c.commands import executor_config, executor_options, frame_index_option, pick_options, segmentation_option
 
 if TYPE_CHECKING:
     from v2c.api import ScanExport
+    from v2c.pick import PickRequest
 
 
 def _output_for(scan: Path, out: Path | None, batch: bool) -> Path | None:
     """Where one scan's STEP goes: -o as given for one scan; for several (or -o DIR/ or an existing folder), -o
     is a folder of <name>.step."""
     if out is None:
-        return None
+        from v2c.recordings import is_recording
+
+        return scan.with_suffix(".step") if is_recording(scan) else None  # next to a recording, not inside it
     if batch or out.is_dir():
         return out / f"{scan.resolve().name}.step"
     return out
@@ -35,14 +38,27 @@ def _to_step_task(
     extras: bool,
     roi: tuple[int, int, int, int] | None,
     force: bool = False,
+    pick: PickRequest | None = None,
+    frame_index: int = 0,
 ) -> ScanExport:
-    """One scan's task (here, in a pool or on a Ray worker): reads SCAN, writes its outputs, returns the small
-    `v2c.api.ScanExport` record."""
+    """One scan's task (here, in a pool or on a Ray worker): reads SCAN (picking its object as ``pick`` says,
+    `v2c.pick`; a recording's pair ``frame_index``), writes its outputs, returns the small `v2c.api.ScanExport`
+    record."""
     from v2c.api import scan_to_step
+    from v2c.pick import PickRequest, pick_request
+    from v2c.recordings import recording_frame
 
-    return scan_to_step(
-        scan, _output_for(scan, out, batch), frame=frame, segmentation=segmentation, extras=extras, roi=roi, force=force
-    )
+    # in this task's process, which may not be the command's
+    with pick_request(pick or PickRequest()), recording_frame(frame_index):
+        return scan_to_step(
+            scan,
+            _output_for(scan, out, batch),
+            frame=frame,
+            segmentation=segmentation,
+            extras=extras,
+            roi=roi,
+            force=force,
+        )
 
 
 @click.command("to-step")
@@ -69,6 +85,8 @@ def _to_step_task(
 @segmentation_option()
 @click.option("--no-extras", is_flag=True, help="Write only the STEP, not the VB-Rep JSON and figure.")
 @roi_option
+@pick_options
+@frame_index_option
 @verbosity_options
 @executor_options
 def command(
@@ -94,6 +112,8 @@ def command(
     from v2c.api import expand_scans
     from v2c.cli_support import describe_error, log, was_interrupted
     from v2c.executors import ExecutorError, run_tasks
+    from v2c.pick import current_pick
+    from v2c.recordings import current_frame_index
 
     where = executor_config(executor, ray_address)
     paths = expand_scans(list(scans))
@@ -120,6 +140,8 @@ def command(
         extras=not no_extras,
         roi=roi,
         force=force,
+        pick=current_pick(),
+        frame_index=current_frame_index(),
     )
     try:
         results = run_tasks(task, paths, where)
