@@ -65,12 +65,12 @@ CORPUS_TRAIN = "corpus-train"
 #: randomization (random/dark/shiny materials, printed art, clutter; extent 30-70 %) over all training families,
 #: and renders of the corpus's training files (plain and with random appearance).
 STAGE9_RECIPE: tuple[tuple, ...] = (
-    (640, 480, "sensor", 500, 107, 0.0),
-    (640, 480, "sensor", 500, 111, 0.3),
+    (640, 480, "sensor", 300, 107, 0.0),
+    (640, 480, "sensor", 300, 111, 0.3),
     (640, 480, "sensor", 1500, 121, 0.3, FAMILY_GROUPS["features"]),
     (640, 480, "sensor", 1500, 131, 0.0, FAMILY_GROUPS["train"], "random"),
     (640, 480, "sensor", 300, 141, 0.0, (CORPUS_TRAIN,)),
-    (640, 480, "sensor", 300, 142, 0.0, (CORPUS_TRAIN,), "random"),
+    (640, 480, "sensor", 100, 142, 0.0, (CORPUS_TRAIN,), "random"),
 )
 RECIPES = {
     "base": TRAINING_RECIPE,
