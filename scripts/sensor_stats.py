@@ -2,7 +2,7 @@
 size (spatial correlation), the depth step, hole and flying-pixel shares, side by side.
 
     PYTHONPATH=$PWD python scripts/sensor_stats.py [--real ../shared/data/real] [--n 6] [--seed 9000]
-        [--plot docs/img/sensor_std_vs_z.png] [--json stats.json]
+        [--plot docs/img/sensor_std_vs_z.png] [--json stats.json] [--fit]
 
 Real: the frames of v2c/bench/real_rois.json, loaded with the depth clean-up off. Noise figures use every complete,
 edge-free patch of the whole frame (table, boxes, cans, walls; `v2c.synth.noise_stats.patch_noise`); hole share
@@ -15,7 +15,8 @@ box); and a fronto-parallel plane at the depths of the real bins (`plane_sweep`)
 0.4-1.2 m away and the real noise is seen out to 3 m.
 
 How the `structured_light` parameters were fitted (docs/synth.md): the white and correlated coefficients and the
-correlation length by matching the real patch-size profile (5-21 px patches at 0.8-1.0 m) on the plane; the depth
+correlation length by matching the real patch-size profile (5-21 px patches at 0.8-1.0 m) on the plane (``--fit``
+runs that grid search); the depth
 unit from the frames' distinct values; the flying-pixel probability from the flying share.
 """
 
@@ -50,6 +51,10 @@ PATCH_SIDES = (5, 7, 11, 15, 21)
 PROFILE_BAND_M = (0.8, 1.0)
 #: image size of the plane sweep (pixels) and the focal length of the YCB frames (pixels)
 PLANE_SIZE = (640, 480)
+#: the grid of `fit_structured_light`: correlation length (pixels), white and correlated coefficients (1/m)
+FIT_LENGTHS_PX = (2.0, 3.0, 4.0)
+FIT_WHITE = (0.0003, 0.0004, 0.0005)
+FIT_CORRELATED = (0.0012, 0.0016, 0.002, 0.0024)
 
 
 def real_stats(data: Path, rois: Path, cfg: NoiseStatsConfig) -> dict:
@@ -149,6 +154,33 @@ def synth_stats(profile: str, n: int, seed: int, z_bins: list[float], cfg: Noise
     }
 
 
+def fit_structured_light(real_profile: list[float], seed: int, cfg: NoiseStatsConfig) -> list[tuple]:
+    """The grid search behind `StructuredLightNoise`: [(RMS relative error against ``real_profile``, length px,
+    white coeff, correlated coeff, profile mm)] best first, each on a plane at the middle of PROFILE_BAND_M."""
+    from dataclasses import replace
+
+    base = noise_mod.StructuredLightNoise()
+    w, h = PLANE_SIZE
+    z = float(np.mean(PROFILE_BAND_M))
+    target = np.asarray(real_profile)
+    out = []
+    for length in FIT_LENGTHS_PX:
+        for white in FIT_WHITE:
+            for corr in FIT_CORRELATED:
+                c = replace(
+                    base,
+                    correlated_length_px=length,
+                    correlated_coeff_per_m=corr,
+                    sensor=replace(base.sensor, sigma_coeff_per_m=white),
+                )
+                d = noise_mod.apply_structured_light(
+                    np.full((h, w), z), np.ones((h, w)), np.random.default_rng(seed), c
+                )
+                prof = np.asarray(patch_profile([d], cfg))
+                out.append((float(np.sqrt(np.mean((prof / target - 1) ** 2))), length, white, corr, prof.round(2)))
+    return sorted(out, key=lambda t: t[0])
+
+
 def z2_fit(bins: list[tuple], quantum_m: float, min_z: float = 1.0) -> tuple[float, float]:
     """(coefficient c of std = c z^2 in 1/m, after removing the quantisation's q^2/12; log-log slope of std vs z
     over the bins at or beyond ``min_z`` metres)."""
@@ -219,6 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=9000, help="seed of the synthetic scans (a validation seed)")
     ap.add_argument("--plot", type=Path, default=None, help="PNG of std vs depth")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--fit", action="store_true", help="also run the grid search behind structured_light")
     args = ap.parse_args(argv)
     if not args.real.is_dir():
         print(f"{args.real}: real frames folder not found (give --real)", file=sys.stderr)
@@ -253,6 +286,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'Xtion':>12}" + "".join(f" {v:6.2f}" for v in real["patch_profile_xtion"]))
     for p in PROFILES:
         print(f"{p:>12.12}" + "".join(f" {v:6.2f}" for v in synth[p]["patch_profile"]))
+
+    if args.fit:
+        print("\nGrid search (best 5): RMS rel. error, length px, white, correlated, profile mm")
+        for row in fit_structured_light(real["patch_profile_xtion"], args.seed, cfg)[:5]:
+            print(f"  {row[0]:.3f}  {row[1]:.0f}  {row[2]:.4f}  {row[3]:.4f}  {row[4].tolist()}")
 
     print("\nPer frame / scan: depth step, holes, flying pixels")
     print(f"{'source':<28} {'z (m)':>6} {'step (mm)':>9} {'holes':>7} {'flying':>7}")
