@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from v2c.camera import DEFAULT_DEPTH_SCALE_M, Camera, backproject
+from v2c.depth_clean import clean_loaded_depth
 from v2c.errors import ScanError
 from v2c.pick import PickConfig, PickError, PickRequest, current_pick, large_frame_warning, pick_object, should_pick
 from v2c.recordings import current_frame_index, is_open3d_folder, is_recording, open3d_frame_files, read_bag_frame
@@ -453,6 +454,7 @@ def load_scan(
     gt = None
     if (folder / GT_DIR).is_dir():
         gt = load_ground_truth(folder / GT_DIR, h, w, cam.depth_scale, depth_is_npy=depth_p.suffix == ".npy")
+    depth = clean_loaded_depth(depth, gt is not None, notes)  # v2c.depth_clean: off unless asked
 
     scan = Scan(
         path=folder,

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
 PROCEDURAL = PROCEDURAL_FAMILIES  # today's default mix
 KNOWN_FAMILIES = (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES, "cad")
-NOISE_PROFILES = ("sensor", "paper", "none")
+NOISE_PROFILES = ("sensor", "paper", "none", "structured_light")
 SCAN_NAME = re.compile(r"^scan_\d{5,}$")  # v2c.synth.dataset.scan_name
 
 

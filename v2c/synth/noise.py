@@ -10,6 +10,11 @@ MILLIMETRES (`PaperNoise.amplitude_m` = 0.25e-3), i.e. 0.08-0.5 % of our 0.05-0.
 `sensor`: a RealSense D4xx at 0.3-1 m: Gaussian noise with sigma = 0.0015 z^2 m, the same fBm warp at 2 mm, missing
 readings at grazing angles, along occlusion edges and as sparse speckle, flying pixels between depth layers, and
 quantisation to the 0.1 mm depth unit.
+
+`structured_light`: fitted to the Asus Xtion frames of ../shared/data/real (docs/synth.md, "Sensor model against
+real frames"): the `sensor` steps with a weaker white noise (0.0005 z^2 m), a spatially correlated noise on top
+(0.0016 z^2 m, Gaussian-blurred over 3 px: a structured-light sensor matches a window, so neighbours err
+together), the 1 mm depth unit of the frames, and fewer flying pixels.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import cv2
 import numpy as np
 from pyfastnoiselite.pyfastnoiselite import FastNoiseLite, FractalType, NoiseType
 
-PROFILES = ("sensor", "paper", "none")
+PROFILES = ("sensor", "paper", "none", "structured_light")
 
 
 @dataclass(frozen=True)
@@ -62,6 +67,19 @@ class SensorNoise:
     speckle_prob: float = 0.002  # isolated missing readings anywhere
     quantum_m: float = 1e-4  # depth unit
     fbm: FbmConfig = FbmConfig()
+
+
+@dataclass(frozen=True)
+class StructuredLightNoise:
+    """An Asus Xtion / Kinect v1-like profile, fitted to the real frames (scripts/sensor_stats.py)."""
+
+    correlated_coeff_per_m: float = 0.0016  # correlated noise sigma = coeff * z^2 (z in metres)...
+    correlated_length_px: float = 3.0  # ...a white field Gaussian-blurred with this sigma (pixels), rescaled to std 1
+    sensor: SensorNoise = SensorNoise(
+        sigma_coeff_per_m=0.0005,  # the white (per-pixel) part: sigma = coeff * z^2
+        quantum_m=1e-3,  # the frames' depth unit (1 mm)
+        flying_prob=0.03,  # flying pixels at depth edges, fitted to their share in the frames
+    )
 
 
 @dataclass(frozen=True)
@@ -156,6 +174,21 @@ def apply_sensor(
     return np.where(missing | (noisy <= 0), 0.0, noisy)
 
 
+def apply_structured_light(
+    depth: np.ndarray,
+    cos_incidence: np.ndarray,
+    rng: np.random.Generator,
+    cfg: StructuredLightNoise = StructuredLightNoise(),
+) -> np.ndarray:
+    """Structured-light noise: the correlated field (drawn first) displaces the surface, then `apply_sensor` with
+    ``cfg.sensor`` adds its white noise, missing readings, flying pixels and quantisation."""
+    h, w = depth.shape
+    field = cv2.GaussianBlur(rng.standard_normal((h, w), dtype=np.float32), (0, 0), cfg.correlated_length_px)
+    field *= np.float32(1.0 / max(float(field.std()), 1e-12))
+    shifted = np.where(depth > 0, depth + (cfg.correlated_coeff_per_m * field) * (depth * depth), 0.0)
+    return apply_sensor(shifted, cos_incidence, rng, cfg.sensor)
+
+
 def apply_depth_noise(
     profile: str, depth: np.ndarray, cos_incidence: np.ndarray, rng: np.random.Generator
 ) -> np.ndarray:
@@ -166,6 +199,8 @@ def apply_depth_noise(
         return apply_paper(depth, rng)
     if profile == "sensor":
         return apply_sensor(depth, cos_incidence, rng)
+    if profile == "structured_light":
+        return apply_structured_light(depth, cos_incidence, rng)
     raise ValueError(f"unknown noise profile {profile!r} (choose from {', '.join(PROFILES)})")
 
 
@@ -177,6 +212,8 @@ def noise_params(profile: str) -> dict:
         return asdict(PaperNoise())
     if profile == "sensor":
         return asdict(SensorNoise())
+    if profile == "structured_light":
+        return asdict(StructuredLightNoise())
     return {}
 
 
