@@ -209,7 +209,7 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 )
 @click.option(
     "--family-scans",
-    default=14,
+    default=16,
     show_default=True,
     type=click.IntRange(1),
     help="--suite unseen: scans per leave-out family.",
