@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 
 from v2c.camera import backproject
-from v2c.scan import Scan, load_scan
+from v2c.scan import Scan, ScanError, load_scan
 
 NUM_INPUTS = 9
 MIRROR_SIGN_CHANNEL = 4  # the "left" normal component: the only channel a horizontal mirror negates
@@ -254,14 +254,16 @@ def build_cache(
 ) -> Path:
     """Write features (uint8), labels and boundaries of ``scans`` to ``cache_dir`` (x.u8, y.u8, b.u8, index.json).
 
-    Idempotent: an existing complete cache with the same scan list is reused.
+    Idempotent: an existing complete cache made from the same scan list is reused. A scan that `load_scan`
+    refuses (`ScanError`, e.g. a generated clutter object nearer than the depth limit) is left out with a line
+    naming it; the index lists the scans kept (``scans``) and the ones asked for (``requested``).
     """
     cache_dir = Path(cache_dir)
     index_p = cache_dir / "index.json"
     names = [str(p) for p in scans]
     if index_p.is_file():
         idx = json.loads(index_p.read_text())
-        if idx.get("scans") == names:
+        if idx.get("requested", idx.get("scans")) == names:
             return cache_dir
     cache_dir.mkdir(parents=True, exist_ok=True)
     entries = []
@@ -271,9 +273,15 @@ def build_cache(
         open(cache_dir / "y.u8", "wb") as fy,
         open(cache_dir / "b.u8", "wb") as fb,
     ):
+        kept: list[str] = []
         for i, p in enumerate(scans):
-            scan = load_scan(p)
+            try:
+                scan = load_scan(p)
+            except ScanError as exc:
+                print(f"cache: left out {p}: {exc}", flush=True)
+                continue
             assert scan.gt is not None
+            kept.append(str(p))
             q = quantise(scan_features(scan, cfg))
             fx.write(q.tobytes())
             fy.write(scan.gt.labels.astype(np.uint8).tobytes())
@@ -283,7 +291,7 @@ def build_cache(
             off += h * w
             if log_every and (i + 1) % log_every == 0:
                 print(f"cache: {i + 1}/{len(scans)} scans", flush=True)
-    index_p.write_text(json.dumps({"scans": names, "entries": entries, "channels": NUM_INPUTS}))
+    index_p.write_text(json.dumps({"scans": kept, "requested": names, "entries": entries, "channels": NUM_INPUTS}))
     return cache_dir
 
 
