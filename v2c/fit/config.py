@@ -18,7 +18,14 @@ class FitConfig(RansacConfig):
     fit and the intersection refinement)."""
 
     # -- instances and labels -------------------------------------------------------------------------------------
-    min_instance_px: int = 30  # instances with fewer valid pixels are not fitted (pixels)
+    min_instance_px: int = 30  # instances with fewer valid pixels get no RANSAC fit (pixels) ...
+    small_instance_px: int = 10  # ... but from this many on, one whose label names its type and a frame axis
+    # (X / Y / Z) is fitted with that type on that axis of the shared frame (`stage._small_instances`;
+    # pixels). Below it, or without such a label, it is left to the VB-Rep's fallbacks
+    small_chord_sigma: float = 2.0  # such a cylinder, and any joint solve's result, must hold its patch: the
+    # points' trimmed extent across its axis at most its diameter plus this many
+    # depth-noise sigmas (ratio; a 3-pixel strip came back as a 0.85 mm
+    # cylinder for a 5.5 mm one, and its face covered 10 of its 21 pixels)
     label_score_min: float = 0.6  # below this label confidence every type is tried ([0, 1]); the geometric
     # segmenter's 0.5 counts as weak (docs/geometry.md)
     # -- model selection against near-degenerate primitives (geometry.selection.supported, docs/geometry.md) -----

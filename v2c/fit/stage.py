@@ -14,13 +14,13 @@ import numpy as np
 from v2c.camera import backproject
 from v2c.fit.align import AXIS_NAMES, align_fit, frame_from_axes, init_frame
 from v2c.fit.config import FitConfig
-from v2c.fit.constrained import fit_with_axis
+from v2c.fit.constrained import fit_with_axis, start_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.result import ABLATIONS, FitResult
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, torus_ok
 from v2c.geometry.residuals import Term
-from v2c.geometry.selection import fit_instance, select_type, supported
+from v2c.geometry.selection import fit_instance, noise_sigma, select_type, supported
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive
 from v2c.primitives.directions import unit
@@ -215,6 +215,65 @@ def _planes_where_unsupported(
         fits.searched.append(i)
 
 
+def _holds_patch(prim: Primitive, x: np.ndarray, config: FitConfig) -> bool:
+    """False for a cylinder too thin to hold its patch ``x`` (N, 3): the points' trimmed (support_trim_pct)
+    extent across its axis exceeds its diameter by more than small_chord_sigma depth-noise sigmas
+    (`geometry.selection.noise_sigma`); True for every other primitive. On a strip a few pixels wide the
+    radius is barely constrained, and the rays of a thin cylinder miss most of the strip."""
+    if not isinstance(prim, Cylinder) or len(x) < 3:
+        return True
+    y = x - np.outer(x @ prim.axis, prim.axis)
+    y = y - y.mean(axis=0)
+    u = np.linalg.eigh(y.T @ y)[1][:, -1]
+    lo, hi = np.percentile(y @ u, [config.support_trim_pct, 100.0 - config.support_trim_pct])
+    sigma = float(np.median(noise_sigma(x, config)))
+    return float(hi - lo) <= 2.0 * prim.radius + config.small_chord_sigma * sigma
+
+
+def _small_instances(
+    fits: _Fits,
+    ipts: dict[int, InstancePoints],
+    seg: Segmentation,
+    axis_idx: dict[int, int | None],
+    frame: np.ndarray,
+    scale: float,
+    config: FitConfig,
+) -> None:
+    """Instances too small for RANSAC (``ipts``: small_instance_px to min_instance_px pixels) whose label names
+    their type and a frame axis (X / Y / Z), fitted in place with that type on that axis of the shared frame
+    (`constrained.fit_with_axis` from its closed-form starts): a few pixels cannot fix an axis, but the label and
+    the frame do, and they join the joint fit and the intersection refinement like any aligned instance. A fit
+    that is not plausible (`_keep_plausible`'s tests) or whose median distance to the points exceeds d_inlier
+    part sizes is left out (the VB-Rep's fallbacks then see the instance)."""
+    for i in sorted(ipts):  # loop over instances
+        ptype, k = _label_of(seg, i, config)
+        if ptype is None or ptype == "sphere" or not isinstance(k, int) or k < 0:
+            continue
+        ip = ipts[i]
+        a = frame[k]
+        start = start_with_axis(ptype, ip.points, ip.normals, a, by_points=ptype != "plane")
+        if start is None or not start.is_finite():
+            continue
+        q = fit_with_axis(start, ip.points, ip.normals, a, scale, config)
+        if not (
+            q.is_finite()
+            and plausible(q, scale, config)
+            and torus_ok(q, ip.points, config)
+            and cone_ok(q, ip.points, scale, config)
+            and float(np.median(np.abs(q.signed_distance(ip.points)))) <= config.d_inlier * scale
+            and _holds_patch(q, ip.points, config)
+        ):
+            continue
+        fits.prims[i] = _canonical(q, ip.points)
+        # distance-only inliers: a few pixels' depth-gradient normals are too poor to judge (as in `_assign_axes`)
+        m = inlier_mask(fits.prims[i], ip.points, ip.normals, config.d_inlier * scale, -1.0)
+        fits.inliers[i] = m if m.any() else np.ones(len(ip.points), bool)
+        fits.want[i] = k
+        fits.weights[i] = float(np.count_nonzero(fits.inliers[i]))
+        fits.scores[i] = float(seg.scores[i]) if i < len(seg.scores) else 0.0
+        axis_idx[i] = k
+
+
 def _joint_terms(
     fits: _Fits,
     ipts: dict[int, InstancePoints],
@@ -254,7 +313,8 @@ def _keep_plausible(
 ) -> list[Primitive]:
     """A joint solve has no bounds: a primitive it drove out of range (cone half angle beyond 90 degrees or a cone
     wider than max_radius at its points, negative radius, a torus outside its data-derived radius bounds
-    `geometry.ransac.torus_limits`, a curvature its points no longer support, `geometry.selection.supported`) goes
+    `geometry.ransac.torus_limits`, a curvature its points no longer support, `geometry.selection.supported`, a
+    cylinder too thin to hold its points, `_holds_patch`) goes
     back to its value before the solve, its axis re-set from the current frame when aligned."""
     out = []
     for p, q, tm in zip(new, old, terms, strict=True):
@@ -264,6 +324,7 @@ def _keep_plausible(
             and torus_ok(p, tm.points, config, 1.2)
             and cone_ok(p, tm.points, scale, config)
             and (supported(p, tm.points, config) or not supported(q, tm.points, config))
+            and (_holds_patch(p, tm.points, config) or not _holds_patch(q, tm.points, config))
         ):
             out.append(p)
         elif tm.axis_index is not None and tm.axis_index >= 0:
@@ -307,6 +368,8 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     counts = np.bincount(inst[valid], minlength=int(inst.max()) + 1)
     ids = np.flatnonzero(counts >= config.min_instance_px)
     ipts = instance_points(pts, valid, inst, ids[ids > 0], config)
+    small = np.flatnonzero((counts >= config.small_instance_px) & (counts < config.min_instance_px))
+    small_pts = instance_points(pts, valid, inst, small[small > 0], config)
     t = perf_counter()
     timings["normals"] = t - t_start
 
@@ -325,6 +388,9 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
                 fits.prims[i] = p
                 fits.inliers[i] = _inliers(p, ipts[i], scale, config)
     _planes_where_unsupported(fits, ipts, axis_idx, frame, use_frame, scale, config)
+    if use_frame:  # the frame gives small instances the axis their points cannot
+        _small_instances(fits, small_pts, seg, axis_idx, frame, scale, config)
+        ipts.update({i: small_pts[i] for i in small_pts if i in fits.prims})
     order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
     prims = [tm.prim for tm in terms]
     if ablation != "fit-only":
