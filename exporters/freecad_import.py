@@ -6,17 +6,19 @@ module reads the STEP text for those names and builds a tidy document:
 
 - ``part``: one Part::Feature holding the whole shape (faces and free edges);
 - one group per edge type (``intersection``, ``visibility``, ``occluded``, ``silhouette``), each holding one
-  Part::Feature per VB-Rep edge with the properties ``EdgeType``, ``Confidence``, ``EdgeId`` and ``StepName``
-  and, in the GUI, the edge's colour (intersection blue, silhouette red, visibility cyan, occluded green).
+  Part::Feature per VB-Rep edge with the properties ``EdgeType``, ``Confidence``, ``EdgeId``, ``StepName`` and
+  ``Sigma`` (the 1-sigma position error, a length in mm; absent for a file written before names carried it) and,
+  in the GUI, the edge's colour (intersection blue, silhouette red, visibility cyan, occluded green).
 
 Edges are matched to the file's names through their end points (VERTEX_POINT of an EDGE_CURVE, trim points of a
 free edge's TRIMMED_CURVE), the curve kind and a circle's radius: millimetres, to ``MATCH_TOL_MM``.
 
 Use, headless: ``V2C_STEP=part.step [V2C_FCSTD=part.FCStd] freecadcmd exporters/freecad_import.py`` prints one
-line ``V2C_FREECAD_IMPORT {json}`` (counts per type, unmatched names) and saves the document when V2C_FCSTD is
-set. In the GUI: Macro > Macros... > this file (asks for the STEP file), or from FreeCAD's Python console
-``exec(open(".../freecad_import.py").read()); open_typed_step("part.step")``. Runs under FreeCAD's own Python
-(3.8+), so it imports nothing from v2c; `parse_typed_edges` is plain Python and also runs outside FreeCAD.
+line ``V2C_FREECAD_IMPORT {json}`` (counts per type, unmatched names, edges and faces with their sigma) and saves
+the document when V2C_FCSTD is set. In the GUI: Macro > Macros... > this file (asks for the STEP file), or from
+FreeCAD's Python console ``exec(open(".../freecad_import.py").read()); open_typed_step("part.step")``. Runs under
+FreeCAD's own Python (3.8+), so it imports nothing from v2c; `parse_typed_edges` and `parse_typed_faces` are plain
+Python and also run outside FreeCAD.
 """
 
 from __future__ import annotations
@@ -49,14 +51,21 @@ EDGE_TYPES = tuple(EDGE_COLORS)
 MARK = "V2C_FREECAD_IMPORT "
 
 _ENTITY = re.compile(r"#(\d+)\s*=\s*(.*?);\s*(?=#\d+\s*=|ENDSEC;)", re.DOTALL)
-_NAME = re.compile(r"^(intersection|visibility|occluded|silhouette):([0-9.]+):e(\d+)(?::tangent)?$")
+#: An edge name of `exporters.step.edge_name`: type, confidence, id, optional 1-sigma position error in mm (files
+#: written before it existed have none), optional ``:tangent``.
+_NAME = re.compile(
+    r"^(intersection|visibility|occluded|silhouette):([0-9.]+):e(\d+)(?::s([0-9]+(?:\.[0-9]*)?))?(?::tangent)?$"
+)
+#: A face name of `exporters.step.face_name`: primitive type, axis, id, optional 1-sigma position error in mm.
+_FACE_NAME = re.compile(r"^([a-z]+):([XYZU-]):f(\d+)(?::s([0-9]+(?:\.[0-9]*)?))?$")
 
 
 class TypedEdgeRecord:
     """One named edge of the file: type, confidence in [0, 1], VB-Rep edge id, end points (mm), curve kind
-    (the STEP entity name, e.g. LINE, CIRCLE, B_SPLINE_CURVE_WITH_KNOTS) and a circle's radius (mm) or None."""
+    (the STEP entity name, e.g. LINE, CIRCLE, B_SPLINE_CURVE_WITH_KNOTS), a circle's radius (mm) or None, and the
+    name's 1-sigma position error (mm) or None when the name has no ``:s`` field."""
 
-    __slots__ = ("confidence", "edge_id", "kind", "name", "p0", "p1", "radius", "type")
+    __slots__ = ("confidence", "edge_id", "kind", "name", "p0", "p1", "radius", "sigma_mm", "type")
 
     def __init__(
         self,
@@ -68,9 +77,10 @@ class TypedEdgeRecord:
         p1: Point | None,
         kind: str,
         radius: float | None,
+        sigma_mm: float | None = None,
     ) -> None:
         self.name, self.type, self.confidence, self.edge_id = name, type_, confidence, edge_id
-        self.p0, self.p1, self.kind, self.radius = p0, p1, kind, radius
+        self.p0, self.p1, self.kind, self.radius, self.sigma_mm = p0, p1, kind, radius, sigma_mm
 
     def as_dict(self) -> dict[str, Any]:
         """The record as a plain dict (slot name -> value), e.g. for JSON."""
@@ -202,13 +212,32 @@ def parse_typed_edges(text: str) -> list[TypedEdgeRecord]:
                     p0 = p1 = None
                 ckind, radius = curve_info(int(r))
                 items.append((p0, p1, ckind, radius))
+        sigma = None if m.group(4) is None else float(m.group(4))
         for p0, p1, ckind, radius in items:
             records.append(
                 TypedEdgeRecord(
-                    _unquote(args[0]), m.group(1), float(m.group(2)), int(m.group(3)), p0, p1, ckind, radius
+                    _unquote(args[0]), m.group(1), float(m.group(2)), int(m.group(3)), p0, p1, ckind, radius, sigma
                 )
             )
     return records
+
+
+def parse_typed_faces(text: str) -> list[dict[str, Any]]:
+    """The named faces of a STEP file's text (``ADVANCED_FACE`` names of `exporters.step.face_name`), one dict per
+    face: name, type, axis (None for ``-``), id and sigma_mm (the 1-sigma position error in mm, None when the name
+    has no ``:s`` field); sorted by id."""
+    out = []
+    for m in _ENTITY.finditer(text):
+        kind, args = _args(" ".join(m.group(2).split()))
+        if kind != "ADVANCED_FACE" or not args:
+            continue
+        name = _unquote(args[0])
+        f = _FACE_NAME.match(name)
+        if f:
+            sigma = None if f.group(4) is None else float(f.group(4))
+            axis = None if f.group(2) == "-" else f.group(2)
+            out.append({"name": name, "type": f.group(1), "axis": axis, "id": int(f.group(3)), "sigma_mm": sigma})
+    return sorted(out, key=lambda d: d["id"])
 
 
 def _close(a: Point | None, b: Point | None, tol: float = MATCH_TOL_MM) -> bool:
@@ -253,13 +282,15 @@ def match_edges(
 
 def open_typed_step(path: str, doc: Any = None) -> dict[str, Any]:
     """Import the STEP file ``path`` into ``doc`` (a new document when None): the part, and one group per edge
-    type of Part::Feature edges with their EdgeType, Confidence, EdgeId and StepName properties. Returns a summary
-    dict: the document name, counts per type, and the names that matched no edge."""
+    type of Part::Feature edges with their EdgeType, Confidence, EdgeId, StepName and (when the name has it) Sigma
+    properties. Returns a summary dict: the document name, counts per type, the names that matched no edge, the
+    edges with their properties (sigma_mm None without the field) and the named faces (`parse_typed_faces`)."""
     import FreeCAD
     import Part
 
     with open(path, encoding="utf-8", errors="replace") as fp:
-        records = parse_typed_edges(fp.read())
+        text = fp.read()
+    records, faces = parse_typed_edges(text), parse_typed_faces(text)
     shape = Part.Shape()
     shape.read(path)
     if doc is None:
@@ -280,6 +311,8 @@ def open_typed_step(path: str, doc: Any = None) -> dict[str, Any]:
         obj.addProperty("App::PropertyFloat", "Confidence", "v2c", "confidence in [0, 1]").Confidence = rec.confidence
         obj.addProperty("App::PropertyInteger", "EdgeId", "v2c", "VB-Rep edge id").EdgeId = rec.edge_id
         obj.addProperty("App::PropertyString", "StepName", "v2c", "name in the STEP file").StepName = rec.name
+        if rec.sigma_mm is not None:  # files written before the sigma field have none
+            obj.addProperty("App::PropertyLength", "Sigma", "v2c", "1-sigma position error (mm)").Sigma = rec.sigma_mm
         grp.addObject(obj)
         counts[rec.type] += 1
         if FreeCAD.GuiUp:
@@ -289,7 +322,14 @@ def open_typed_step(path: str, doc: Any = None) -> dict[str, Any]:
         grp.Label = f"{t} ({counts[t]})"
     doc.recompute()
     edges = [
-        {"object": o.Name, "type": o.EdgeType, "confidence": o.Confidence, "id": o.EdgeId, "length": o.Shape.Length}
+        {
+            "object": o.Name,
+            "type": o.EdgeType,
+            "confidence": o.Confidence,
+            "id": o.EdgeId,
+            "sigma_mm": o.Sigma.Value if hasattr(o, "Sigma") else None,
+            "length": o.Shape.Length,
+        }
         for o in doc.Objects
         if hasattr(o, "EdgeType")
     ]
@@ -301,6 +341,7 @@ def open_typed_step(path: str, doc: Any = None) -> dict[str, Any]:
         "part_faces": len(shape.Faces),
         "part_edges": len(shape.Edges),
         "edges": edges,
+        "faces": faces,
         "groups": sorted(g.Label for g in groups.values()),
     }
 

@@ -23,7 +23,7 @@ from OCP.TopoDS import TopoDS
 from exporters.brep import bounding_box, face_area
 from exporters.brep_outline import mesh_area
 from exporters.frames import FrameMap
-from exporters.step import _parse_edge, faces_by_id, quiet_occt
+from exporters.step import faces_by_id, parse_edge_name, quiet_occt
 from exporters.xcaf import read_xcaf_step
 from v2c.vbrep.model import VBRep, VEdge, VFace
 
@@ -173,12 +173,23 @@ def check_written(
     out.n_edges = len(rs.edges)
     edges = []
     for e in rs.edges:
-        _, etype, conf = _parse_edge(e.name)
+        _, etype, conf, sig, _ = parse_edge_name(e.name)
         if etype is None:
             out.untyped_edges += 1
             continue
         poly = _inverse_points(fmap, _edge_points(TopoDS.Edge_s(e.shape), cfg.edge_samples))
-        edges.append(VEdge(id=len(edges), type=etype, confidence=conf, faces=(), polyline=poly, v0=-1, v1=-1))
+        edges.append(
+            VEdge(
+                id=len(edges),
+                type=etype,
+                confidence=conf,
+                faces=(),
+                polyline=poly,
+                v0=-1,
+                v1=-1,
+                sigma_mm=sig,
+            )
+        )
     faces = []
     for f in vbrep.faces:
         parts = meshes.get(f.id, [])

@@ -5,10 +5,12 @@ What the file carries (../shared/SCAN_FORMAT.md, "Output of v2c to-step"):
 - analytic faces (PLANE, CYLINDRICAL_SURFACE, CONICAL_SURFACE, SPHERICAL_SURFACE, TOROIDAL_SURFACE) trimmed by
   their VB-Rep loops, faces that share edges in one open shell (SHELL_BASED_SURFACE_MODEL); see
   `exporters.brep`;
-- every VB-Rep edge named ``"<type>:<confidence>:e<id>"`` (confidence with two decimals), on layer
-  ``edge_<type>`` and coloured by type (sRGB: intersection blue, silhouette red, visibility cyan, occluded
-  green);
-- every face named ``"<type>:<axis>:f<id>"`` (axis X, Y, Z, U; ``-`` for a sphere);
+- every VB-Rep edge named ``"<type>:<confidence>:e<id>:s<sigma>"`` (confidence with two decimals; sigma the
+  1-sigma position error `VEdge.sigma_mm` in millimetres, two significant digits, the field left out when the
+  VB-Rep has none; ``":tangent"`` last for a tangent edge), on layer ``edge_<type>`` and coloured by type (sRGB:
+  intersection blue, silhouette red, visibility cyan, occluded green);
+- every face named ``"<type>:<axis>:f<id>:s<sigma>"`` (axis X, Y, Z, U; ``-`` for a sphere; sigma
+  `VFace.sigma_mm` as for edges);
 - one product holding one compound: the shells and the free edges (edges on no face) as direct children.
 
 Frames (`exporters.frames`): ``"part"`` (default) puts the recovered axis frame on X/Y/Z with the footprint
@@ -79,16 +81,35 @@ _SURFACE_NAMES = {
     GeomAbs_BSplineSurface: "bspline",
 }
 
-_EDGE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)(?P<tangent>:tangent)?$")
-_FACE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<axis>[XYZU-]):f(?P<id>\d+)$")
+#: Names as written by `edge_name` / `face_name`; the ``:s<sigma>`` field is optional (files written before it
+#: existed, and VB-Reps without a sigma, have none).
+_EDGE_NAME = re.compile(
+    r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)(?::s(?P<sigma>[0-9]+(?:\.[0-9]*)?))?(?P<tangent>:tangent)?$"
+)
+_FACE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<axis>[XYZU-]):f(?P<id>\d+)(?::s(?P<sigma>[0-9]+(?:\.[0-9]*)?))?$")
+
+#: Significant digits of the sigma field of a name.
+SIGMA_DIGITS = 2
 
 
 # ------------------------------------------------------------------------------------------------ naming
+def sigma_field(sigma_mm: float | None) -> str:
+    """``":s<sigma>"``: a 1-sigma position error in millimetres with `SIGMA_DIGITS` significant digits, positional
+    notation (no exponent, trailing zeros dropped: 0.31, 0.02, 1.2, 120); ``""`` when sigma is None, negative or
+    not finite."""
+    if sigma_mm is None or not np.isfinite(sigma_mm) or sigma_mm < 0:
+        return ""
+    text = np.format_float_positional(float(sigma_mm), precision=SIGMA_DIGITS, unique=False, fractional=False, trim="-")
+    return f":s{text}"
+
+
 def edge_name(edge: VEdge) -> str:
-    """``"<type>:<confidence>:e<id>"``, confidence with two decimals; ``":tangent"`` appended for an
-    intersection edge where its faces meet tangentially (G1)."""
+    """``"<type>:<confidence>:e<id>:s<sigma>"``, confidence with two decimals, sigma `VEdge.sigma_mm` (mm, see
+    `sigma_field`; left out when None); ``":tangent"`` appended last for an intersection edge where its faces meet
+    tangentially (G1)."""
     tail = ":tangent" if edge.tangent else ""
-    return f"{EdgeType(edge.type).value}:{float(edge.confidence):.2f}:e{int(edge.id)}{tail}"
+    head = f"{EdgeType(edge.type).value}:{float(edge.confidence):.2f}:e{int(edge.id)}"
+    return f"{head}{sigma_field(edge.sigma_mm)}{tail}"
 
 
 def edge_layer(edge_type: EdgeType | str) -> str:
@@ -97,8 +118,10 @@ def edge_layer(edge_type: EdgeType | str) -> str:
 
 
 def face_name(face: VFace) -> str:
-    """``"<type>:<axis>:f<id>"``; axis X/Y/Z/U, ``-`` when the face has none (sphere)."""
-    return f"{PrimitiveType(face.primitive['type']).value}:{face.axis_label or '-'}:f{int(face.id)}"
+    """``"<type>:<axis>:f<id>:s<sigma>"``; axis X/Y/Z/U, ``-`` when the face has none (sphere); sigma
+    `VFace.sigma_mm` (mm, see `sigma_field`; left out when None)."""
+    head = f"{PrimitiveType(face.primitive['type']).value}:{face.axis_label or '-'}:f{int(face.id)}"
+    return f"{head}{sigma_field(face.sigma_mm)}"
 
 
 # ------------------------------------------------------------------------------------------------ writing
@@ -278,7 +301,7 @@ def faces_by_id(faces: list[ReadSubShape]) -> dict[int, list[TopoDS_Face]]:
     unnamed faces are left out."""
     out: dict[int, list[TopoDS_Face]] = {}
     for f in faces:
-        fid = _parse_face(f.name)[0]
+        fid = parse_face_name(f.name)[0]
         if fid is not None:
             out.setdefault(fid, []).append(TopoDS.Face_s(f.shape))
     return out
@@ -308,13 +331,15 @@ def _type_of_color(rgb: RGB | None, tol: float = 0.02) -> EdgeType | None:
 @dataclass(frozen=True)
 class TypedFace:
     """A face read back. surface: "plane", "cylinder", "cone", "sphere", "torus", "revolution", "bspline" or
-    "other"; name: its STEP name; type, axis, id: parsed from the name (None when it does not parse)."""
+    "other"; name: its STEP name; type, axis, id: parsed from the name (None when it does not parse); sigma_mm:
+    the name's 1-sigma position error in millimetres (None when the name has no ``:s`` field)."""
 
     surface: str
     name: str | None
     type: PrimitiveType | None
     axis: str | None
     id: int | None
+    sigma_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -322,7 +347,8 @@ class TypedEdge:
     """An edge read back with its type three ways: from its name, its layer and its colour (sRGB).
 
     n_faces: how many faces of the file use it (2 for an intersection edge shared by its faces). tangent: the name
-    says its faces meet tangentially (G1).
+    says its faces meet tangentially (G1). sigma_mm: the name's 1-sigma position error in millimetres (None when
+    the name has no ``:s`` field, as in files written before it existed).
     """
 
     name: str | None
@@ -335,6 +361,7 @@ class TypedEdge:
     color_type: EdgeType | None
     n_faces: int
     tangent: bool = False
+    sigma_mm: float | None = None
 
 
 @dataclass
@@ -357,22 +384,30 @@ class TypedStep:
         return [e for e in self.edges if e.id == edge_id]
 
 
-def _parse_edge(name: str | None) -> tuple[int | None, EdgeType | None, float | None]:
+def _sigma(text: str | None) -> float | None:
+    return None if text is None else float(text)
+
+
+def parse_edge_name(name: str | None) -> tuple[int | None, EdgeType | None, float | None, float | None, bool]:
+    """(id, type, confidence, sigma_mm, tangent) of an edge name written by `edge_name`, with or without the
+    ``:s<sigma>`` field (sigma_mm None without it); (None, None, None, None, False) when it does not parse."""
     m = _EDGE_NAME.match(name or "")
     if not m:
-        return None, None, None
-    return int(m["id"]), _edge_type(m["type"]), float(m["conf"])
+        return None, None, None, None, False
+    return int(m["id"]), _edge_type(m["type"]), float(m["conf"]), _sigma(m["sigma"]), m["tangent"] is not None
 
 
-def _parse_face(name: str | None) -> tuple[int | None, PrimitiveType | None, str | None]:
+def parse_face_name(name: str | None) -> tuple[int | None, PrimitiveType | None, str | None, float | None]:
+    """(id, primitive type, axis, sigma_mm) of a face name written by `face_name`, with or without the
+    ``:s<sigma>`` field; axis None for ``-``; all None when it does not parse."""
     m = _FACE_NAME.match(name or "")
     if not m:
-        return None, None, None
+        return None, None, None, None
     try:
         ptype = PrimitiveType(m["type"])
     except ValueError:
         ptype = None
-    return int(m["id"]), ptype, (None if m["axis"] == "-" else m["axis"])
+    return int(m["id"]), ptype, (None if m["axis"] == "-" else m["axis"]), _sigma(m["sigma"])
 
 
 def read_typed(path: str | Path) -> TypedStep:
@@ -386,10 +421,10 @@ def read_typed(path: str | Path) -> TypedStep:
     out = TypedStep(path=path, products=rs.products, shape=rs.shape)
     for f in rs.faces:
         kind = BRepAdaptor_Surface(TopoDS.Face_s(f.shape)).GetType()
-        fid, ptype, axis = _parse_face(f.name)
-        out.faces.append(TypedFace(_SURFACE_NAMES.get(kind, "other"), f.name, ptype, axis, fid))
+        fid, ptype, axis, fsig = parse_face_name(f.name)
+        out.faces.append(TypedFace(_SURFACE_NAMES.get(kind, "other"), f.name, ptype, axis, fid, fsig))
     for e in rs.edges:
-        eid, etype, conf = _parse_edge(e.name)
+        eid, etype, conf, esig, _ = parse_edge_name(e.name)
         n = 0
         if ancestors.Contains(e.shape):
             faces = ancestors.FindFromKey(e.shape)
@@ -412,6 +447,7 @@ def read_typed(path: str | Path) -> TypedStep:
                 _type_of_color(e.color),
                 n,
                 (e.name or "").endswith(":tangent"),
+                esig,
             )
         )
     return out
@@ -430,6 +466,9 @@ __all__ = [
     "edge_layer",
     "edge_name",
     "face_name",
+    "parse_edge_name",
+    "parse_face_name",
     "read_typed",
+    "sigma_field",
     "write",
 ]

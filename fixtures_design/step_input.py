@@ -1,9 +1,11 @@
 """A VB-Rep back from a STEP written by ``v2c to-step`` (`exporters.write`), for designing fixtures from it.
 
-The file's faces come back with their analytic surfaces and a mesh; its edges with the VB-Rep type and
-confidence carried in their names (``"<type>:<confidence>:e<id>"``, SCAN_FORMAT.md), or else their layer
-(``edge_<type>``; confidence then unknown, taken as 0). Faces are oriented towards the camera in such a file, so
-their normals are outward: the VB-Rep is marked ``meta["outward_normals"] = True`` and the reference selection uses
+The file's faces come back with their analytic surfaces and a mesh; its edges with the VB-Rep type,
+confidence and 1-sigma position error (`VEdge.sigma_mm`) carried in their names
+(``"<type>:<confidence>:e<id>:s<sigma>"``, docs/step.md), or else their layer (``edge_<type>``; confidence then
+unknown, taken as 0); faces get `VFace.sigma_mm` from their names' ``:s<sigma>`` field (None without one). Faces
+are oriented towards the camera in such a file, so their normals are outward: the VB-Rep is marked
+``meta["outward_normals"] = True`` and the reference selection uses
 them as they are. The file's frame (millimetres) becomes the VB-Rep's frame (metres) with identity axes: a
 ``--frame part`` STEP keeps its axes (and, up to the footprint origin, its origin); with a ``--frame camera``
 STEP use ``frame="camera"`` when designing.
@@ -11,7 +13,6 @@ STEP use ``frame="camera"`` when designing.
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
@@ -27,20 +28,19 @@ from fixtures_design.occ import M_PER_MM, edge_curve, face_mesh, face_primitive
 from v2c.labels import axis_class
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VertexKind, VFace, VVertex
 
-_EDGE_NAME = re.compile(r"^(?P<type>[a-z]+):(?P<conf>[0-9.]+):e(?P<id>\d+)(?::tangent)?$")
 
+def _edge_type(name: str | None, layers: tuple[str, ...]) -> tuple[EdgeType, float, float | None] | None:
+    """(type, confidence, sigma_mm) from the edge's name (`exporters.parse_edge_name`; sigma None when the name has
+    no ``:s`` field), else from its layer (confidence 0, sigma None)."""
+    from exporters import parse_edge_name
 
-def _edge_type(name: str | None, layers: tuple[str, ...]) -> tuple[EdgeType, float] | None:
-    m = _EDGE_NAME.match(name or "")
-    if m:
-        try:
-            return EdgeType(m["type"]), float(m["conf"])
-        except ValueError:
-            return None
+    _, etype, conf, sigma, _ = parse_edge_name(name)
+    if conf is not None:
+        return (etype, conf, sigma) if etype is not None else None
     for layer in layers:
         if layer.startswith("edge_"):
             try:
-                return EdgeType(layer[len("edge_") :]), 0.0
+                return EdgeType(layer[len("edge_") :]), 0.0, None
             except ValueError:
                 continue
     return None
@@ -52,7 +52,7 @@ def vbrep_from_step(path: str | Path, deflection_mm: float = 0.2) -> VBRep:
     Planar and cylindrical faces keep their primitive; other faces are left out (they take no part in the
     references). Edges without a VB-Rep type in their name or layer are left out.
     """
-    from exporters import read_xcaf_step
+    from exporters import parse_face_name, read_xcaf_step
 
     rs = read_xcaf_step(Path(path))
     shape = rs.shape
@@ -67,7 +67,20 @@ def vbrep_from_step(path: str | Path, deflection_mm: float = 0.2) -> VBRep:
         v, t = face_mesh(f)
         d = np.asarray(prim["params"].get("normal", prim["params"].get("axis")), float)
         face_ids.append((f, len(faces)))
-        faces.append(VFace(len(faces), len(faces) + 1, prim, axis_class(d, np.eye(3)).value, [], v * M_PER_MM, t, 1.0))
+        sigma = parse_face_name(sub.name)[3]  # VFace.sigma_mm from the name's :s field (None without one)
+        faces.append(
+            VFace(
+                len(faces),
+                len(faces) + 1,
+                prim,
+                axis_class(d, np.eye(3)).value,
+                [],
+                v * M_PER_MM,
+                t,
+                1.0,
+                sigma_mm=sigma,
+            )
+        )
     anc = TopTools_IndexedDataMapOfShapeListOfShape()
     TopExp.MapShapesAndAncestors_s(shape, TopAbs_EDGE, TopAbs_FACE, anc)
     edges: list[VEdge] = []
@@ -83,7 +96,7 @@ def vbrep_from_step(path: str | Path, deflection_mm: float = 0.2) -> VBRep:
                 for f, fid in face_ids:
                     if face.IsSame(f) and fid not in owners:
                         owners.append(fid)
-        etype, conf = typed
+        etype, conf, sigma = typed
         if etype is EdgeType.INTERSECTION and len(owners) != 2:
             etype = EdgeType.VISIBILITY if owners else etype  # lost a face: no longer a shared edge
         if not owners:
@@ -104,6 +117,7 @@ def vbrep_from_step(path: str | Path, deflection_mm: float = 0.2) -> VBRep:
                 v0,
                 v0 if closed else v0 + 1,
                 curve if etype is EdgeType.INTERSECTION else None,
+                sigma_mm=sigma,
             )
         )
     pts = np.concatenate([f.mesh_vertices for f in faces]) if faces else np.zeros((1, 3))

@@ -1,7 +1,9 @@
 """The FreeCAD importer of our STEP files (exporters/freecad_import.py, issue 20 deliverable 1): the plain-Python
 name parser against OCCT's own reading (`exporters.step.read_typed`), and, headless in `freecadcmd`, the document
-it builds: one part, one group per edge type, one object per typed edge with its type, confidence and id, counts
-per type equal to the file's. The FreeCAD part is skipped only when `freecadcmd` is not installed."""
+it builds: one part, one group per edge type, one object per typed edge with its type, confidence, id and 1-sigma
+position error (issue 18: the ``:s<sigma>`` field of the name; none in a file written without it), counts per type
+equal to the file's, and the named faces with their sigma. The FreeCAD part is skipped only when `freecadcmd` is
+not installed."""
 
 from __future__ import annotations
 
@@ -32,8 +34,18 @@ def _broken_box():
     return vb
 
 
+def _box_with_sigma():
+    vb = box_corner()
+    for i, f in enumerate(vb.faces):
+        f.sigma_mm = 0.05 * (i + 1)
+    for i, e in enumerate(vb.edges):
+        e.sigma_mm = 0.123 * (i + 1)
+    return vb
+
+
 EXAMPLES = {
     "box_corner": box_corner,
+    "box_sigma": _box_with_sigma,
     "cylinder_upright": cylinder_upright,
     "revolved": revolved_all_types,
     "free_edges": _broken_box,
@@ -74,6 +86,9 @@ def test_parser_finds_every_typed_edge_like_occt(name: str, steps: dict[str, Pat
     assert sorted((r.edge_id, r.confidence) for r in records) == sorted(
         (e.id, round(e.confidence, 2)) for e in back.typed_edges
     )
+    assert sorted((r.edge_id, r.sigma_mm or -1.0) for r in records) == sorted(
+        (e.id, e.sigma_mm or -1.0) for e in back.typed_edges
+    )
     assert all(r.p0 is not None and r.p1 is not None for r in records)
     if name == "free_edges":
         assert sorted(r.edge_id for r in records if r.kind == "LINE" and r.edge_id in (3, 4)) == [3, 4]
@@ -99,9 +114,19 @@ def test_freecad_document_has_typed_edge_groups(name: str, steps: dict[str, Path
     assert {t: n for t, n in res["counts"].items() if n} == dict(expected)
     assert res["groups"] == sorted(f"{t} ({n})" for t, n in expected.items())
     assert res["part_faces"] == len(back.faces)
-    # every object carries the file's type, confidence and id
-    got = sorted((e["id"], e["type"], e["confidence"]) for e in res["edges"])
-    assert got == sorted((e.id, e.type.value, round(e.confidence, 2)) for e in back.typed_edges)
+    # every object carries the file's type, confidence, id and sigma (None: no Sigma property, an old-format name)
+    got = sorted((e["id"], e["type"], e["confidence"], e["sigma_mm"] or -1.0) for e in res["edges"])
+    assert got == sorted((e.id, e.type.value, round(e.confidence, 2), e.sigma_mm or -1.0) for e in back.typed_edges)
+    assert [(f["id"], f["sigma_mm"]) for f in res["faces"]] == sorted((f.id, f.sigma_mm) for f in back.faces)
+    if name in ("box_sigma", "knob_sample"):  # sigma known for every edge and face of the VB-Rep
+        assert res["edges"] and all(e["sigma_mm"] is not None and e["sigma_mm"] > 0 for e in res["edges"])
+        assert res["faces"] and all(f["sigma_mm"] is not None and f["sigma_mm"] > 0 for f in res["faces"])
+    if name == "box_sigma":  # 0.123 * (id + 1) mm, two significant digits
+        assert sorted((e["id"], e["sigma_mm"]) for e in res["edges"]) == [
+            (e.id, float(f"{0.123 * (i + 1):.2g}")) for i, e in enumerate(_box_with_sigma().edges)
+        ]
+    elif name != "knob_sample":  # the hand-built VB-Reps have no sigma: names as before
+        assert all(e["sigma_mm"] is None for e in res["edges"]) and all(f["sigma_mm"] is None for f in res["faces"])
     assert all(e["length"] > 0 for e in res["edges"])
     assert save.is_file() and save.stat().st_size > 0
     if name == "free_edges":  # the two free edges are silhouettes of 80 and 60 mm
