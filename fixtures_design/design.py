@@ -25,6 +25,7 @@ from fixtures_design.references import (
     SelectionConfig,
     select_references,
 )
+from fixtures_design.verify import part_inside_share
 from v2c.vbrep.model import VBRep
 
 Params = CornerParams | PinParams | CradleParams | NestParams
@@ -47,6 +48,12 @@ CLEARANCE_K = 1.0
 #: (no limit) by default: on the training scans the designs that cut had sigma 0.49-0.86 mm, no larger than those
 #: that did not, so no limit removed cuts without removing as many good designs (docs/fixtures.md).
 MAX_SIGMA_MM: float | None = None
+
+#: A design whose solid holds more than this share of points sampled on the VB-Rep's own face meshes
+#: (`fixtures_design.verify.part_inside_share`) would cut into the reconstructed part: with a share given, its
+#: reference is refused and the next one tried. None (off) by default: on the training scans (seed 7100, 12 scans)
+#: it refused nothing, so they cannot choose it; see docs/fixtures.md for what it did on the leave-out families.
+MAX_PART_INSIDE_SHARE: float | None = None
 
 
 def mating_sigma_mm(vbrep: VBRep, ref: Reference) -> float | None:
@@ -89,6 +96,7 @@ def design_fixture(
     ground_height: float | None = None,
     clearance_k: float = CLEARANCE_K,
     max_sigma_mm: float | None = MAX_SIGMA_MM,
+    max_part_inside_share: float | None = MAX_PART_INSIDE_SHARE,
 ) -> Fixture:
     """A fixture of ``kind`` for ``vbrep`` (camera frame, metres), built in ``frame`` (millimetres).
 
@@ -101,7 +109,8 @@ def design_fixture(
     along the VB-Rep frame's Z from the camera centre, see `fixtures_design.run.ground_height`); default: the
     lowest point of the face meshes. max_sigma_mm: references whose mating faces' 1-sigma (`mating_sigma_mm`)
     is larger are refused when the references are chosen here (None: none refused; a given ``reference`` is
-    always tried).
+    always tried). max_part_inside_share: a design built on a reference chosen here whose solid holds more than
+    this share of points sampled on the VB-Rep's face meshes is refused (None: no check).
     """
     kind = FixtureKind(kind)
     auto = params is None  # default params: the clearance follows each reference's positional uncertainty
@@ -124,12 +133,23 @@ def design_fixture(
         p = sigma_clearance(params, sigma, clearance_k) if auto else params
         try:
             if kind is FixtureKind.CORNER:
-                return design_corner(ref, fmap, p)
-            if kind is FixtureKind.PIN:
-                return design_pin(ref, fmap, p)
-            return design_cradle(ref, fmap, up_vector(vbrep, fmap), p)
+                fx = design_corner(ref, fmap, p)
+            elif kind is FixtureKind.PIN:
+                fx = design_pin(ref, fmap, p)
+            else:
+                fx = design_cradle(ref, fmap, up_vector(vbrep, fmap), p)
         except ValueError as exc:
             if reference is not None:
                 raise
             errors.append(str(exc))
+            continue
+        if reference is None and max_part_inside_share is not None:
+            inside = part_inside_share(fx, vbrep)
+            if inside > max_part_inside_share:
+                errors.append(
+                    f"e{ref.edge_id}: the {kind.value} would hold {100 * inside:.1f} % of the reconstructed part's "
+                    f"surface (max_part_inside_share {max_part_inside_share:g})"
+                )
+                continue
+        return fx
     raise NoReferenceError(f"no {REFERENCE_OF[kind].value} qualifies for a {kind.value}: " + "; ".join(errors))

@@ -53,3 +53,25 @@ def test_default_clearance_grows_with_the_depth_noise(designs: dict[str, list], 
         assert clearance == pytest.approx(max(own, CLEARANCE_K * sigma))
     assert clearances[0] > own  # k sigma, not the kind's own clearance, sets it even at the sensor's noise
     assert all(b > 1.5 * a for a, b in zip(clearances, clearances[1:])), clearances  # doubling c: well above 1.5x
+
+
+def test_part_inside_share_sees_a_fixture_pushed_into_the_part() -> None:
+    """The box corner's locator leaves the (reconstructed) box outside; the same block pushed 5 mm into the box
+    along the two faces' inward normals holds part of its surface (what ``max_part_inside_share`` refuses)."""
+    from dataclasses import replace as dc_replace
+
+    from build123d import Location
+
+    from fixtures_design.verify import part_inside_share
+
+    from scenes.vbrep import box_corner
+
+    vb = box_corner()
+    fx = design_fixture(vb, "corner")
+    assert part_inside_share(fx, vb) == 0.0
+    inward = -fx.fmap.vectors(np.sum(fx.reference.normals, axis=0))
+    d = 5.0 * inward / np.linalg.norm(inward)
+    pushed = dc_replace(fx, solid=fx.solid.moved(Location(tuple(float(x) for x in d))))
+    share = part_inside_share(pushed, vb)
+    assert share > 0.01  # ten times a 0.1 % max_part_inside_share
+    assert design_fixture(vb, "corner", max_part_inside_share=0.001).params == fx.params  # nothing inside: kept
