@@ -34,6 +34,9 @@ class NestParams:
     wall: float = 8.0  # mm: rim width around the pocket's bounding box
     pixel: float = 0.05  # mm: raster resolution of the footprint (walls sit up to 3 pixels beyond the clearance)
     min_area_frac: float = 0.01  # of the largest outline's area: smaller separate outlines are ignored
+    outline_px: float = 0.0  # image pixels: the pocket walls move out by this many pixels at the part's depth
+    # beyond the clearance (a depth sensor loses a band of pixels along the part's outline, so the visible
+    # outline lies inside the true one)
 
 
 @dataclass(frozen=True)
@@ -100,15 +103,27 @@ def footprint(
     return Footprint(outlines, zmin if ground_height is None else 1000.0 * ground_height, axes)
 
 
+def pixel_mm(vbrep: VBRep) -> float:
+    """Millimetres one image pixel spans at the part's depth (median depth of the face-mesh vertices over the
+    focal length); 0 without meshes or intrinsics."""
+    z = [np.asarray(f.mesh_vertices, float).reshape(-1, 3)[:, 2] for f in vbrep.faces if len(f.mesh_vertices)]
+    fx = float(np.asarray(vbrep.K)[0, 0])
+    if not z or not fx > 1.0:
+        return 0.0
+    return 1000.0 * float(np.median(np.concatenate(z))) / fx
+
+
 def design_nest(
     vbrep: VBRep, fmap: FrameMap, params: NestParams = NestParams(), ground_height: float | None = None
 ) -> Fixture:
     """A nest plate for the part of ``vbrep``, in the output frame of ``fmap`` (mm).
 
     ground_height: the ground's height (metres along the part's Z, camera origin); default: lowest mesh point.
-    Mating faces: the pocket's side walls (``clearance`` plus up to three pixels off the footprint outline).
+    Mating faces: the pocket's side walls (``clearance`` plus ``outline_px`` image pixels (`pixel_mm`) plus up to
+    three raster pixels off the footprint outline).
     """
-    fp = footprint(vbrep, params.pixel, params.min_area_frac, ground_height, grow=params.clearance)
+    grow = params.clearance + params.outline_px * pixel_mm(vbrep)
+    fp = footprint(vbrep, params.pixel, params.min_area_frac, ground_height, grow=grow)
     c = params.clearance
     z_floor = fp.ground_z - c
     z_top = fp.ground_z + params.depth

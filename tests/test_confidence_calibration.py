@@ -246,9 +246,9 @@ def test_fixture_default_clearance_grows_with_injected_noise() -> None:
     """The box-corner VB-Rep's faces get the sigma of a plane fitted to their own mesh points with injected depth
     noise (face-wide part off, so that the fit's covariance alone carries the noise): with clearance_k = 2 the
     corner's default clearance is max(0.2 mm, 2 sigma) and grows with the noise; an explicit clearance is kept as
-    given; the default k (0) keeps the kind's clearance."""
+    given; the default k is CLEARANCE_K."""
     from fixtures_design import CornerParams
-    from fixtures_design.design import design_fixture
+    from fixtures_design.design import CLEARANCE_K, design_fixture
     from v2c.primitives import from_dict
 
     from scenes.vbrep import box_corner
@@ -270,7 +270,8 @@ def test_fixture_default_clearance_grows_with_injected_noise() -> None:
         assert fx.params.clearance == pytest.approx(max(CornerParams().clearance, 2.0 * sig))
         clearances.append(fx.params.clearance)
         assert design_fixture(vb, "corner", CornerParams(clearance=0.3), clearance_k=2.0).params.clearance == 0.3
-        assert design_fixture(vb, "corner").params.clearance == CornerParams().clearance  # default k = 0: off
+        default = design_fixture(vb, "corner")  # the default k (CLEARANCE_K) on the same reference
+        assert default.params.clearance == pytest.approx(max(CornerParams().clearance, CLEARANCE_K * sig))
     assert clearances[0] == CornerParams().clearance
     assert clearances[0] < clearances[1] < clearances[2]
     # a VB-Rep without sigma (written before it existed) keeps the kind's clearance

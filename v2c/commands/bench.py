@@ -4,7 +4,9 @@ DIR``: `v2c to-step` on real frames with regions of interest. ``--stage`` measur
 scans: ``segmentation`` (the segmenters' instances against the ground-truth faces, `v2c.bench.segmentation`),
 ``fit`` (the geometry stage on oracle segmentation, `v2c.bench.fit`), ``vbrep`` (Chamfer and edge-type accuracy
 per family, `v2c.bench.vbrep`), ``synth`` (the scan generator's speed, `v2c.synth.bench`), ``parts`` (the
-feature-based part builder's valid share and speed, `v2c.synth.features.measure`)."""
+feature-based part builder's valid share and speed, `v2c.synth.features.measure`), ``fixtures`` (fixtures designed
+with the default settings on reconstructions of generated parts, checked against the true part,
+`v2c.bench.fixtures`)."""
 
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ from v2c.cli_support import quiet, verbosity_options
 from v2c.commands import executor_config, executor_options, jobs_given, jobs_option
 
 #: What ``--stage`` measures: the whole pipeline (the Table-1 bench), or one stage alone.
-STAGES = ("pipeline", "segmentation", "fit", "vbrep", "synth", "parts")
+STAGES = ("pipeline", "segmentation", "fit", "vbrep", "synth", "parts", "fixtures")
 
 if TYPE_CHECKING:
     from v2c.bench.run import BenchConfig
@@ -157,7 +159,10 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     "oracle segmentation (alignment, radius / plane-offset / torus errors, single-thread fit time, per "
     "--ablation); vbrep: Chamfer and edge-type accuracy (matched, strict, coverage) per part family. "
     "Without scans: synth: the scan generator's speed (--n timed scans of --size, --noise, --families); "
-    "parts: the feature-based part builder (--n parts of --families: valid share, parts per second).",
+    "parts: the feature-based part builder (--n parts of --families: valid share, parts per second). "
+    "fixtures: --n generated scans of --families, each kind of fixture designed with the default settings on "
+    "the reconstruction and checked against the true part (cut rate, touch rate, pin / cradle "
+    "qualification).",
 )
 @click.option(
     "--segmentation-only",
@@ -169,8 +174,15 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
 @click.option(
     "--families",
     default=None,
-    help="--stage synth / parts: part families or groups, comma-separated, as `v2c synth --families` "
-    "[default: synth: the procedural families; parts: the feature-based ones].",
+    help="--stage synth / parts / fixtures: part families or groups, comma-separated, as `v2c synth "
+    "--families` [default: synth: the procedural families; parts: the feature-based ones; fixtures: train].",
+)
+@click.option(
+    "--clearance-k",
+    "clearance_k",
+    default=None,
+    help="--stage fixtures: k of the default clearance (k x the mating faces' 1-sigma, mm), comma-separated "
+    "to measure several  [default: fixtures_design.design.CLEARANCE_K].",
 )
 @click.option(
     "--suite",
@@ -255,6 +267,7 @@ def command(
     stage: str,
     seg_only: bool,
     families: str | None,
+    clearance_k: str | None,
     suite: str,
     views: int,
     corpus_dir: Path | None,
@@ -284,8 +297,10 @@ def command(
         if given("stage") and stage != "segmentation":
             raise click.UsageError(f"--segmentation-only contradicts --stage {stage}")
         stage = "segmentation"
-    if families is not None and stage not in ("synth", "parts"):
-        raise click.UsageError("--families belongs to --stage synth / parts")
+    if families is not None and stage not in ("synth", "parts", "fixtures"):
+        raise click.UsageError("--families belongs to --stage synth / parts / fixtures")
+    if clearance_k is not None and stage != "fixtures":
+        raise click.UsageError("--clearance-k belongs to --stage fixtures")
     if stage != "pipeline":
         for name, flag in (("real_dir", "--real"), ("suite", "--suite"), ("reliability", "--reliability")):
             if given(name):
@@ -296,6 +311,32 @@ def command(
                 raise click.UsageError(f"{flag} does not apply to --stage {stage}")
     check_json_output(json_out, force)  # before the work, not after
     progress = not quiet()
+    if stage == "fixtures":
+        for name, flag in (
+            ("scans_dir", "--scans"),
+            ("cad_dir", "--cad"),
+            ("figure_dir", "--figures"),
+            ("no_step", "--no-step"),
+            ("ablation", "--ablation"),
+        ):
+            if given(name):
+                raise click.UsageError(f"{flag} does not apply to --stage fixtures (it renders its own scans)")
+        if len(segmentation) != 1:
+            raise click.UsageError("--stage fixtures takes one --segmentation method")
+        _fixtures_stage(
+            n=n,
+            seed=seed,
+            noise=noise,
+            size=size,
+            families=_family_names("fixtures", families or "train"),
+            segmentation=segmentation[0],
+            weights=weights,
+            clearance_k=clearance_k,
+            cache_dir=cache_dir,
+            json_out=json_out,
+            progress=progress,
+        )
+        return
     if stage in ("synth", "parts"):
         for name, flag in (("scans_dir", "--scans"), ("cad_dir", "--cad"), ("segmentation", "--segmentation")):
             if given(name):
@@ -565,20 +606,9 @@ def _generator_stage(
     json_out: Path | None,
 ) -> None:
     """``--stage synth`` (`v2c.synth.bench.generator_speed`) or ``parts`` (`v2c.synth.features.measure`)."""
-    from v2c.synth.families import FAMILY_GROUPS, FEATURE_FAMILIES, PROCEDURAL_FAMILIES
+    from v2c.synth.families import FEATURE_FAMILIES
 
-    known = FEATURE_FAMILIES if stage == "parts" else (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES)
-    names = None
-    if families is not None:
-        given = [f.strip() for f in families.split(",") if f.strip()]
-        names = tuple(dict.fromkeys(f for v in given for f in FAMILY_GROUPS.get(v, (v,))))
-        bad = [f for f in names if f not in known]
-        if bad or not names:
-            raise click.BadParameter(
-                f"{', '.join(bad) or 'nothing'}: --stage {stage} takes {', '.join(known)} or a group "
-                f"{', '.join(FAMILY_GROUPS)}",
-                param_hint="--families",
-            )
+    names = None if families is None else _family_names(stage, families)
     if stage == "synth":
         from v2c.synth.bench import format_speed, generator_speed
         from v2c.synth.dataset import SynthConfig
@@ -592,6 +622,75 @@ def _generator_stage(
         result = measure(n, seed, names or FEATURE_FAMILIES)
         click.echo(format_parts(result))
     _write_json(json_out, result)
+
+
+def _family_names(stage: str, families: str) -> tuple[str, ...]:
+    """``--families``: names or groups (`v2c.synth.families.FAMILY_GROUPS`), comma-separated, expanded; a usage
+    error naming what the stage does not know."""
+    from v2c.synth.families import FAMILY_GROUPS, FEATURE_FAMILIES, PROCEDURAL_FAMILIES
+
+    known = FEATURE_FAMILIES if stage == "parts" else (*PROCEDURAL_FAMILIES, *FEATURE_FAMILIES)
+    given = [f.strip() for f in families.split(",") if f.strip()]
+    names = tuple(dict.fromkeys(f for v in given for f in FAMILY_GROUPS.get(v, (v,))))
+    bad = [f for f in names if f not in known]
+    if bad or not names:
+        raise click.BadParameter(
+            f"{', '.join(bad) or 'nothing'}: --stage {stage} takes {', '.join(known)} or a group "
+            f"{', '.join(FAMILY_GROUPS)}",
+            param_hint="--families",
+        )
+    return names
+
+
+def _fixtures_stage(
+    *,
+    n: int,
+    seed: int,
+    noise: str,
+    size: tuple[int, int],
+    families: tuple[str, ...],
+    segmentation: str,
+    weights: Path | None,
+    clearance_k: str | None,
+    cache_dir: Path | None,
+    json_out: Path | None,
+    progress: bool,
+) -> None:
+    """``--stage fixtures``: `v2c.bench.fixtures.run` on --n scans of --families."""
+    from v2c.bench import fixtures as F
+    from v2c.bench import run
+
+    extra = {}
+    if clearance_k is not None:
+        try:
+            ks = tuple(dict.fromkeys(float(k) for k in clearance_k.split(",") if k.strip()))
+            if not ks or min(ks) < 0:
+                raise ValueError
+        except ValueError:
+            raise click.BadParameter(
+                f"{clearance_k!r}: expected numbers >= 0, comma-separated (e.g. 0,1,2)", param_hint="--clearance-k"
+            ) from None
+        extra["clearance_k"] = ks
+    cfg = F.FixtureBenchConfig(
+        n=n,
+        seed=seed,
+        families=families,
+        noise=noise,
+        size=size,
+        segmentation=segmentation,
+        weights=weights,
+        cache_dir=cache_dir,
+        **extra,
+    )
+    result = F.run(cfg, F.stderr_log if progress else None)
+    sha = result["weights_sha1"]
+    click.echo(
+        f"{result['scans']} scans of {', '.join(families)} ({result['failed_scans']} failed), seed {seed}, {noise} "
+        f"noise, {size[0]}x{size[1]}, segmentation {segmentation}"
+        + (f" (weights sha1 {sha[:10]})" if segmentation == "learned" and sha else "")
+    )
+    click.echo(F.format_table(result))
+    _write_json(json_out, run.jsonable(result))
 
 
 def format_parts(r: dict) -> str:

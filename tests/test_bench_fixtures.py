@@ -1,0 +1,70 @@
+"""`v2c bench --stage fixtures` (`v2c.bench.fixtures`): the ground-truth marks of holes and horizontal cylinders on
+generated scans, and one run of the stage whose JSON agrees with itself and with the designs' own numbers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from v2c.bench.fixtures import FixtureBenchConfig, visible_cylinders
+from v2c.cli import main
+from v2c.scan import load_scan
+
+from scenes.truth import synthetic_scan
+
+
+@pytest.mark.parametrize(
+    ("family", "seed", "hole", "horizontal"),
+    [
+        ("shaft", 0, False, True),  # a lying stepped shaft: bosses with horizontal axes, no bore
+        ("block", 0, False, False),  # no feature (meta "feature": "none"): only 90-degree corner fillets
+        ("bracket", 0, True, False),  # the bracket whose hole takes the pin of tests/test_fixtures_design.py
+    ],
+)
+def test_visible_holes_and_horizontal_cylinders(tmp_path: Path, family: str, seed: int, hole: bool, horizontal: bool):
+    scan = load_scan(synthetic_scan(tmp_path, family, seed))
+    marks = visible_cylinders(scan, FixtureBenchConfig(min_visible_px=50))  # 320 x 240: a quarter of the pixels
+    assert marks == {"hole": hole, "horizontal_cylinder": horizontal}
+
+
+def test_stage_fixtures_on_a_shaft(tmp_path: Path) -> None:
+    """One generated shaft (seed 0, 320 x 240, oracle segmentation) at k = 0 and 1: a cradle qualifies and is
+    designed at both k; at k = 1 its clearance is its faces' sigma and it cuts less; the summary counts the rows."""
+    out = tmp_path / "fx.json"
+    args = ["bench", "--stage", "fixtures", "--n", "1", "--seed", "0", "--families", "shaft", "--size", "320x240"]
+    args += ["--segmentation", "oracle", "--clearance-k", "0,1", "--cache", str(tmp_path / "cache")]
+    res = CliRunner().invoke(main, [*args, "--json", str(out), "-q"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    assert "| 1 | cradle | 1 |" in res.output
+    r = json.loads(out.read_text())
+    (row,) = r["rows"]
+    assert row["family"] == "shaft" and row["horizontal_cylinder"] and not row["hole"]
+    cradles = {d["k"]: d for d in row["designs"] if d["kind"] == "cradle"}
+    assert cradles[0.0]["ok"] and cradles[1.0]["ok"]
+    assert cradles[0.0]["clearance"] == pytest.approx(0.2)
+    assert cradles[1.0]["clearance"] == pytest.approx(max(0.2, cradles[1.0]["sigma_mm"]))
+    assert cradles[1.0]["clearance"] > 0.2
+    assert cradles[1.0]["cut_share"] < cradles[0.0]["cut_share"]
+    for d in row["designs"]:
+        if d["ok"]:
+            assert d["cuts"] == (d["cut_share"] > 0.001)
+            assert d["touches"] == (d["mating_median_mm"] <= 1.0)
+            assert 0 <= d["mating_median_mm"] <= d["mating_max_mm"]
+    for k in ("0", "1"):
+        s = r["summary"][k]
+        assert s["cradle"]["qualifying_scans"] == 1 and s["cradle"]["designed_on"] == 1
+        assert s["pin"]["qualifying_scans"] == 0
+        ok = [d for d in row["designs"] if d["ok"] and d["k"] == float(k)]
+        assert s["all"]["designs"] == len(ok)
+        assert s["all"]["cut_rate"] == pytest.approx(sum(d["cuts"] for d in ok) / len(ok))
+        assert s["all"]["touch_rate"] == pytest.approx(sum(d["touches"] for d in ok) / len(ok))
+
+
+def test_clearance_k_belongs_to_the_fixture_stage() -> None:
+    res = CliRunner().invoke(main, ["bench", "--stage", "fit", "--clearance-k", "1"])
+    assert res.exit_code == 2 and "--clearance-k belongs to --stage fixtures" in res.output
+    res = CliRunner().invoke(main, ["bench", "--stage", "fixtures", "--clearance-k", "-1"])
+    assert res.exit_code == 2 and "expected numbers >= 0" in res.output

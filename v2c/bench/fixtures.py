@@ -1,0 +1,334 @@
+"""`v2c bench --stage fixtures`: fixtures designed with the default settings on reconstructions of generated scans,
+checked against the true part (docs/fixtures.md, "Measured on generated parts").
+
+For every scan of a chosen set (seed, part families), the scan is reconstructed (learned segmentation by default)
+and every fixture kind that finds a reference (corner, pin, cradle, nest) is designed with ``design_fixture``'s
+defaults (for each ``clearance_k`` asked, the default being `fixtures_design.design.CLEARANCE_K`), then checked
+against the scan's true part (``gt/part.step``):
+
+- **cut**: the common volume of fixture and true part exceeds ``cut_share`` (0.1 %) of the fixture's volume;
+- **touch**: the median distance from points on the fixture's mating faces to the true part is at most
+  ``touch_mm`` (1 mm; `fixtures_design.verify.check_mating` against the whole part).
+
+From the ground truth alone (``gt/primitives.json``, ``gt/faces.png``, ``gt/depth_clean.npy``) each scan is marked
+as having a visible **hole** (a cylinder of at least ``min_visible_px`` pixels showing at least ``min_arc_deg`` of
+arc, whose seen wall faces away from the camera: concave) and a visible **horizontal cylinder** (a convex one whose
+axis lies within ``max_tilt_deg`` of horizontal); the pin and cradle qualification rates are the shares of those
+scans on which a pin / cradle was designed. Scans are generated once into a cache folder keyed by generator
+version, noise, size, seed and families.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from v2c.bench.cache import default_cache_dir
+
+KINDS = ("corner", "pin", "cradle", "nest")
+
+
+def _default_k() -> tuple[float, ...]:
+    from fixtures_design.design import CLEARANCE_K
+
+    return (float(CLEARANCE_K),)
+
+
+@dataclass(frozen=True)
+class FixtureBenchConfig:
+    """One run of the fixture bench. Lengths in millimetres, angles in degrees, areas in pixels."""
+
+    n: int = 20  # scans
+    seed: int = 7100  # generator seed (a training seed: never 0, the benchmarks' seed)
+    families: tuple[str, ...] = ("block", "shaft", "flange", "knob", "turned", "bracket")  # drawn uniformly
+    noise: str = "sensor"
+    size: tuple[int, int] = (640, 480)  # (width, height) pixels
+    segmentation: str = "learned"
+    weights: Path | None = None  # learned segmenter weights (None: the shipped v2c/segment/weights/unet.pt)
+    kinds: tuple[str, ...] = KINDS
+    clearance_k: tuple[float, ...] = field(default_factory=_default_k)  # k of the default clearance, each measured
+    min_confidence: float | None = None  # references' calibrated probability floor (None: design_fixture's default)
+    cut_share: float = 0.001  # fraction of the fixture's volume: more common volume with the true part "cuts"
+    touch_mm: float = 1.0  # mm: median distance of the mating faces to the true part at most this "touches"
+    mating_points: int = 240  # points sampled over all mating faces of a design (at least 2 per face)
+    min_visible_px: int = (
+        100  # pixels: a gt cylinder (its faces together) smaller than this in faces.png is not "visible"
+    )
+    min_arc_deg: float = 120.0  # degrees of arc a gt cylinder must show to count (a fillet spans 90)
+    max_tilt_deg: float = 30.0  # degrees: a cylinder axis within this of horizontal is "horizontal" (as the cradle)
+    cache_dir: Path | None = None  # None: v2c.bench.cache.default_cache_dir()
+
+
+def cache_folder(cfg: FixtureBenchConfig) -> Path:
+    """The cache folder of a run's scans: ``fixtures_<noise>_<W>x<H>_s<seed>_<digest>`` (digest: generator version,
+    noise, size, seed, families)."""
+    from v2c.synth.dataset import GENERATOR
+
+    key = {
+        "generator": GENERATOR,
+        "noise": cfg.noise,
+        "size": list(cfg.size),
+        "seed": cfg.seed,
+        "families": list(cfg.families),
+    }
+    digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
+    name = f"fixtures_{cfg.noise}_{cfg.size[0]}x{cfg.size[1]}_s{cfg.seed}_{digest}"
+    return (cfg.cache_dir or default_cache_dir()) / name
+
+
+def prepare_scans(cfg: FixtureBenchConfig, log: Callable[[str], None] | None = None) -> list[Path]:
+    """The ``n`` scan folders of a run, rendering the missing ones (one process; scan i is a function of
+    (seed, i, families))."""
+    from v2c.bench.cache import scan_complete
+    from v2c.synth.dataset import SynthConfig, generate_scan, scan_name
+
+    folder = cache_folder(cfg)
+    synth = SynthConfig(width=cfg.size[0], height=cfg.size[1], noise=cfg.noise, families=tuple(cfg.families))
+    dirs = []
+    for i in range(cfg.n):
+        d = folder / scan_name(i)
+        if not scan_complete(d):
+            if log:
+                log(f"rendering {d}")
+            folder.mkdir(parents=True, exist_ok=True)
+            generate_scan(folder, cfg.seed, i, synth)
+        dirs.append(d)
+    return dirs
+
+
+def _cylinders(primitives: list[dict]) -> list[tuple[np.ndarray, np.ndarray, list[int]]]:
+    """The gt cylinder faces grouped by surface (a generated cylinder is often split into several faces): one
+    (unit axis, origin, pixel values) per distinct (axis line, radius), to 1e-5 m."""
+    groups: list[tuple[np.ndarray, np.ndarray, float, list[int]]] = []
+    for p in primitives:
+        if p["type"] != "cylinder":
+            continue
+        axis = np.asarray(p["params"]["axis"], float)
+        axis /= np.linalg.norm(axis)
+        origin, radius = np.asarray(p["params"]["origin"], float), float(p["params"]["radius"])
+        for a, o, r, vals in groups:
+            off = (origin - o) - ((origin - o) @ a) * a
+            if abs(r - radius) < 1e-6 and abs(abs(a @ axis) - 1) < 1e-6 and np.linalg.norm(off) < 1e-5:
+                vals.append(int(p["pixel_value"]))
+                break
+        else:
+            groups.append((axis, origin, radius, [int(p["pixel_value"])]))
+    return [(a, o, vals) for a, o, _, vals in groups]
+
+
+def _arc_deg(radial: np.ndarray, axis: np.ndarray) -> float:
+    """Degrees of arc around ``axis`` that the unit radial directions (N, 3) cover (360 minus the largest gap)."""
+    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    ang = np.sort(np.degrees(np.arctan2(radial @ v, radial @ u)))
+    gaps = np.diff(np.concatenate([ang, [ang[0] + 360.0]]))
+    return float(360.0 - gaps.max())
+
+
+def visible_cylinders(scan: Any, cfg: FixtureBenchConfig) -> dict[str, bool]:
+    """From a scan's ground truth: ``hole`` (a visible concave cylinder) and ``horizontal_cylinder`` (a visible
+    convex cylinder whose axis is within ``max_tilt_deg`` of horizontal; up = the part's Z, meta axes_cam).
+    Concave or convex: whether the seen wall faces away from the camera or towards it (the median over its pixels of
+    the radial direction dotted with the direction to the camera)."""
+    from v2c.camera import backproject
+
+    gt = scan.gt
+    up = np.asarray(gt.meta["axes_cam"], float)[2]
+    up /= np.linalg.norm(up)
+    pts = backproject(gt.depth_clean, scan.K)
+    out = {"hole": False, "horizontal_cylinder": False}
+    for axis, origin, vals in _cylinders(gt.primitives):
+        pix = np.isin(gt.faces, vals) & (gt.depth_clean > 0)
+        if int(pix.sum()) < cfg.min_visible_px:
+            continue
+        q = pts[pix] - origin
+        radial = q - np.outer(q @ axis, axis)
+        radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
+        to_cam = -pts[pix] / np.maximum(np.linalg.norm(pts[pix], axis=1, keepdims=True), 1e-12)
+        if _arc_deg(radial, axis) < cfg.min_arc_deg:  # a fillet (90 deg), not a hole or a boss
+            continue
+        convex = float(np.median(np.sum(radial * to_cam, axis=1))) > 0  # a boss shows the side facing the camera
+        if not convex:
+            out["hole"] = True
+        elif abs(float(axis @ up)) <= np.sin(np.radians(cfg.max_tilt_deg)):
+            out["horizontal_cylinder"] = True
+    return out
+
+
+def evaluate_scan(
+    scan_dir: Path, cfg: FixtureBenchConfig, log: Callable[[str], None] | None = None, vbrep: Any = None
+) -> dict:
+    """One scan: its reconstruction, every kind at every k designed and checked. Returns ``{"scan", "family",
+    "hole", "horizontal_cylinder", "seconds_reconstruct", "designs": [...]}``; a design row has kind, k, ok
+    (False: no reference, with ``error``), clearance (mm), sigma_mm, probability, cut_mm3, cut_share, cuts,
+    mating_median_mm, mating_max_mm, touches. ``vbrep``: the scan's reconstruction when already made."""
+    from fixtures_design.assembly import true_part
+    from fixtures_design.design import design_fixture, mating_sigma_mm, outline_sigma_mm
+    from fixtures_design.references import NoReferenceError
+    from fixtures_design.run import ground_height
+    from fixtures_design.verify import check_mating, interference
+    from v2c.bench.workers import segment_scan
+    from v2c.pipeline import reconstruct
+    from v2c.scan import load_scan
+
+    scan = load_scan(scan_dir)
+    t0 = time.perf_counter()
+    if vbrep is None:
+        vbrep = reconstruct(scan, segment_scan(scan, cfg.segmentation, cfg.weights))
+    row: dict[str, Any] = {
+        "scan": str(scan_dir),
+        "family": scan.gt.meta.get("family"),
+        **visible_cylinders(scan, cfg),
+        "seconds_reconstruct": time.perf_counter() - t0,
+        "designs": [],
+    }
+    ground = ground_height(scan, vbrep)
+    parts: dict[tuple, Any] = {}
+    extra = {} if cfg.min_confidence is None else {"min_confidence": cfg.min_confidence}
+    for kind in cfg.kinds:
+        for k in cfg.clearance_k:
+            d: dict[str, Any] = {"kind": kind, "k": float(k)}
+            try:
+                fx = design_fixture(vbrep, kind, None, clearance_k=float(k), ground_height=ground, **extra)
+            except (NoReferenceError, ValueError) as exc:
+                d.update(ok=False, error=str(exc).splitlines()[0][:300])
+                row["designs"].append(d)
+                continue
+            key = (tuple(np.round(fx.fmap.rotation, 12).ravel()), tuple(np.round(fx.fmap.origin, 12)))
+            if key not in parts:
+                parts[key] = true_part(scan.gt.step_path, fx.fmap)
+            tp = parts[key]
+            vol, share = interference(fx, tp)
+            per_face = max(2, cfg.mating_points // max(1, len(fx.mating_faces)))
+            m = check_mating(fx, tp, None, max_points_per_face=per_face)
+            ref = fx.reference if kind != "nest" else None  # a nest's reference is its footprint
+            d.update(
+                ok=True,
+                clearance=float(fx.params.clearance),
+                sigma_mm=outline_sigma_mm(vbrep) if ref is None else mating_sigma_mm(vbrep, ref),
+                probability=None if ref is None else float(ref.confidence),
+                edge=None if ref is None else int(ref.edge_id),
+                cut_mm3=float(vol),
+                cut_share=float(share),
+                cuts=bool(share > cfg.cut_share),
+                mating_median_mm=m.median,
+                mating_max_mm=m.max,
+                touches=bool(m.median <= cfg.touch_mm),
+            )
+            row["designs"].append(d)
+            if log:
+                log(
+                    f"{Path(scan_dir).name} {row['family']} {kind} k={k:g}: clearance {d['clearance']:.2f} mm, "
+                    f"sigma {_f(d['sigma_mm'])} mm, cut {100 * share:.2f} %, mating median {m.median:.2f} mm"
+                )
+    return row
+
+
+def _f(v: float | None) -> str:
+    return "-" if v is None else f"{v:.2f}"
+
+
+def summarise(rows: list[dict], cfg: FixtureBenchConfig) -> dict[str, Any]:
+    """Per k, per kind and over all kinds: designs, cut and touch rates (shares of the designs), the median
+    clearance (mm), and for pin / cradle the scans that qualify (visible hole / horizontal cylinder) and the share
+    of them with a design."""
+    out: dict[str, Any] = {}
+    qual = {"pin": "hole", "cradle": "horizontal_cylinder"}
+    for k in cfg.clearance_k:
+        per: dict[str, Any] = {}
+        for kind in (*cfg.kinds, "all"):
+            ds = [
+                d for r in rows for d in r["designs"] if d["k"] == float(k) and d["ok"] and kind in (d["kind"], "all")
+            ]
+            s: dict[str, Any] = {
+                "designs": len(ds),
+                "cut_rate": float(np.mean([d["cuts"] for d in ds])) if ds else None,
+                "touch_rate": float(np.mean([d["touches"] for d in ds])) if ds else None,
+                "median_clearance_mm": float(np.median([d["clearance"] for d in ds])) if ds else None,
+            }
+            if kind in qual:
+                scans = [r for r in rows if r[qual[kind]]]
+                hit = [
+                    r for r in scans if any(d["ok"] and d["kind"] == kind and d["k"] == float(k) for d in r["designs"])
+                ]
+                s.update(qualifying_scans=len(scans), designed_on=len(hit))
+                s["qualification_rate"] = len(hit) / len(scans) if scans else None
+            per[kind] = s
+        out[f"{float(k):g}"] = per
+    return out
+
+
+def run(cfg: FixtureBenchConfig, log: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Prepare the scans, evaluate each, summarise. JSON-able: ``config``, ``weights_sha1``, ``summary`` (per k,
+    per kind), ``rows`` (per scan), ``wall_s``."""
+    t0 = time.perf_counter()
+    dirs = prepare_scans(cfg, log)
+    rows = []
+    for d in dirs:
+        try:
+            rows.append(evaluate_scan(d, cfg, log))
+        except Exception as exc:  # noqa: BLE001 - a failing reconstruction is one row, not the end of the run
+            if log:
+                log(f"{d.name}: {type(exc).__name__}: {exc}")
+            rows.append({"scan": str(d), "error": f"{type(exc).__name__}: {exc}", "designs": []})
+    ok = [r for r in rows if "error" not in r]
+    conf = {k: (str(v) if isinstance(v, Path) else v) for k, v in cfg.__dict__.items()}
+    return {
+        "config": conf,
+        "weights_sha1": weights_sha1(cfg.weights),
+        "scans": len(rows),
+        "failed_scans": len(rows) - len(ok),
+        "summary": summarise(ok, cfg),
+        "rows": rows,
+        "wall_s": time.perf_counter() - t0,
+    }
+
+
+def weights_sha1(weights: Path | None) -> str | None:
+    """SHA-1 of the learned segmenter's weights file (the shipped one when None), None if it cannot be read."""
+    if weights is None:
+        import v2c.segment
+
+        weights = Path(v2c.segment.__file__).parent / "weights" / "unet.pt"
+    try:
+        return hashlib.sha1(Path(weights).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """Markdown table: one row per k and kind (and all kinds): designs, cut rate, touch rate, median clearance,
+    pin / cradle qualification."""
+    lines = [
+        "| k | kind | designs | cut rate | touch rate | median clearance (mm) | qualifying scans | designed on |",
+        "|" + " --- |" * 8,
+    ]
+    for k, per in result["summary"].items():
+        for kind, s in per.items():
+            q = "" if "qualifying_scans" not in s else str(s["qualifying_scans"])
+            on = ""
+            if "qualifying_scans" in s and s["qualification_rate"] is not None:
+                on = f"{s['designed_on']} ({100 * s['qualification_rate']:.0f} %)"
+            lines.append(
+                f"| {k} | {'**all**' if kind == 'all' else kind} | {s['designs']} | {_pct(s['cut_rate'])} | "
+                f"{_pct(s['touch_rate'])} | {_f(s['median_clearance_mm'])} | {q} | {on} |"
+            )
+    return "\n".join(lines)
+
+
+def _pct(v: float | None) -> str:
+    return "-" if v is None else f"{100 * v:.1f} %"
+
+
+def stderr_log(message: str) -> None:
+    """Progress line to stderr."""
+    print(message, file=sys.stderr, flush=True)
