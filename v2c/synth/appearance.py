@@ -134,7 +134,7 @@ def frame_scene(
 
     `pts_rest_mm` (n, 3): points on the part's surface in the rest pose (millimetres), e.g. a coarse mesh's
     vertices. The extent is max(width, height) of their projections' bounding box. Returns the new scene and
-    {target_extent, extent, distance_m}. Depth along the optical axis scales the extent by about 1 / z, the
+    {target_extent, extent, distance_m, version}. Depth along the optical axis scales the extent by about 1 / z, the
     in-plane shift moves it by about f dx / z: a few updates converge to a fraction of a pixel. The shift is limited
     so the camera stays `cfg.min_sight_elevation_deg` above the part's centre (the part then sits lower in the image
     than drawn).
