@@ -170,14 +170,18 @@ def derived_seed(seed: int, key: str) -> int:
 
 def suite_cache_dir(cfg: SuiteConfig) -> Path:
     """The cache root of the suite's scans: named by noise, size and seed, suffixed with a hash of everything
-    that changes a scan besides its part (generator and suite versions, noise, size, seed)."""
+    that changes a scan besides its part (generator and suite versions, noise, size, seed; appearance and framing
+    version unless plain)."""
     from v2c.synth.dataset import GENERATOR
 
     b = cfg.bench
     key = {"generator": GENERATOR, "suite": SUITE_GENERATOR, "noise": b.noise, "size": list(b.size), "seed": b.seed}
     look = ""
     if cfg.appearance != "plain":  # plain keeps the digest (and cache) it had before appearances existed
+        from v2c.synth.appearance import FRAMING_VERSION  # these suites frame by extent (plan_scans)
+
         key["appearance"] = cfg.appearance
+        key["framing"] = FRAMING_VERSION
         look = f"_{cfg.appearance}"
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
     return (b.cache_dir or default_cache_dir()) / f"suite_{b.noise}_{b.size[0]}x{b.size[1]}_s{b.seed}{look}_{digest}"

@@ -28,6 +28,9 @@ APPEARANCES = ("plain", "random")
 FRAMINGS = ("fill", "extent")
 FRAMING_STREAM = 1501  # third word of the framing generator's seed: [seed, index, FRAMING_STREAM]
 APPEARANCE_STREAM = 1502  # and of the appearance generator's
+#: Version of the extent framing (`frame_scene`), in the scans' meta and the bench suite cache key of non-plain
+#: suites: bump when the camera it places changes. 2: the camera stays above the part (min_sight_elevation_deg).
+FRAMING_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,10 @@ class FramingConfig:
     mesh_deflection_rel: float = 0.004  # chord error of the coarse mesh that is projected, / largest side
     iterations: int = 5  # distance and shift updates (each one a projection of the mesh)
     min_distance_m: float = 0.12  # the camera never comes closer to the part's centre than this
+    min_sight_elevation_deg: float = 15.0  # degrees: the camera's height above the part's centre is at least
+    # sin(this) x the part centre's depth along the optical axis (the lowest camera elevation of
+    # SceneConfig.elevation_deg): placing the part high in the image would otherwise move the camera down to the
+    # ground or below it (ground depth readings of a few centimetres)
 
 
 @dataclass(frozen=True)
@@ -127,8 +134,10 @@ def frame_scene(
 
     `pts_rest_mm` (n, 3): points on the part's surface in the rest pose (millimetres), e.g. a coarse mesh's
     vertices. The extent is max(width, height) of their projections' bounding box. Returns the new scene and
-    {target_extent, extent, distance_m}. Depth along the optical axis scales the extent by about 1 / z, the
-    in-plane shift moves it by about f dx / z: a few updates converge to a fraction of a pixel.
+    {target_extent, extent, distance_m, version}. Depth along the optical axis scales the extent by about 1 / z, the
+    in-plane shift moves it by about f dx / z: a few updates converge to a fraction of a pixel. The shift is limited
+    so the camera stays `cfg.min_sight_elevation_deg` above the part's centre (the part then sits lower in the image
+    than drawn).
     """
     pts = pts_rest_mm @ scene.rest_to_world[:, :3].T + scene.rest_to_world[:, 3]
     rot = scene.world_to_cam[:, :3]
@@ -153,12 +162,26 @@ def frame_scene(
         want = 0.5 * np.array([w - 1, h - 1]) + place * room
         du = want - 0.5 * (lo + hi)
         eye = eye - rot[0] * (du[0] * z_new / fx) - rot[1] * (du[1] * z_new / fy)
+        eye = _keep_above(eye, rot, centre, cfg.min_sight_elevation_deg)
         w2c = np.hstack([rot, (-rot @ eye)[:, None]])
     uv, _z = project(scene.K, w2c, pts)
     ext = float(max(np.ptp(uv[:, 0]), np.ptp(uv[:, 1]))) / side
     dist = float(np.linalg.norm(centre - eye))
-    info = {"target_extent": target, "extent": ext, "distance_m": dist}
+    info = {"target_extent": target, "extent": ext, "distance_m": dist, "version": FRAMING_VERSION}
     return replace(scene, world_to_cam=w2c, info={**scene.info, "distance_m": dist}), info
+
+
+def _keep_above(eye: np.ndarray, rot: np.ndarray, centre: np.ndarray, min_elevation_deg: float) -> np.ndarray:
+    """The camera centre `eye` (world, metres; world-to-camera rotation `rot`) moved along the image's vertical
+    (camera -y: the part moves down in the image, its depth along the optical axis unchanged) until its height
+    above `centre` is at least sin(min_elevation_deg) x that depth; `eye` itself when it already is."""
+    zc = float((centre - eye) @ rot[2])
+    need = centre[2] + np.sin(np.deg2rad(min_elevation_deg)) * zc - eye[2]
+    rise = -rot[1, 2]  # height gained per metre moved along camera -y (> 0 for a camera looking down, not rolled
+    # by 90 degrees)
+    if need <= 0.0 or rise <= 1e-9:
+        return eye
+    return eye - rot[1] * (need / rise)
 
 
 # ---------------------------------------------------------------------------------------------- appearance
