@@ -90,3 +90,18 @@ def test_force_adds_to_another_run(used: Path, tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     seeds = [json.loads((out / s / "gt" / "meta.json").read_text())["seed"] for s in ("scan_00000", "scan_00001")]
     assert seeds == [3, 4]
+
+
+def test_random_scans_of_an_older_framing_are_refused(tmp_path: Path) -> None:
+    out = tmp_path / "scans"
+    look = [*BASE, "--appearance", "random"]
+    assert _synth(out, *look).exit_code == 0
+    meta_p = out / "scan_00000" / "gt" / "meta.json"
+    meta = json.loads(meta_p.read_text())
+    assert meta["framing"]["version"] == 2
+    del meta["framing"]["version"]  # as written before the framing fix (version 1)
+    meta_p.write_text(json.dumps(meta))
+    before = _tree(out)
+    res = _synth(out, *look[:1], "2", *look[2:])
+    assert res.exit_code != 0 and "framing version 1, not 2" in res.output
+    assert _tree(out) == before

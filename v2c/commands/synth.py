@@ -51,6 +51,7 @@ def _parse_families(ctx: click.Context, param: click.Parameter, value: str | Non
 def _differences(folder: Path, seed: int, cfg: SynthConfig) -> list[str]:
     """How the complete scan ``folder`` (its gt/meta.json and camera.json) differs from scans of run ``seed``
     with config ``cfg``: "seed 1, not 0", ...; [] when it could be one."""
+    from v2c.synth.appearance import FRAMING_VERSION
     from v2c.synth.dataset import GENERATOR
 
     try:
@@ -63,6 +64,7 @@ def _differences(folder: Path, seed: int, cfg: SynthConfig) -> list[str]:
             "noise": meta["noise"]["profile"],
             "appearance": meta.get("appearance", {}).get("mode", "plain"),
             "framing": meta.get("framing", {}).get("mode", "fill"),
+            "framing version": meta.get("framing", {}).get("version", 1),
         }
         family = meta["family"]
     except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):
@@ -74,6 +76,8 @@ def _differences(folder: Path, seed: int, cfg: SynthConfig) -> list[str]:
         "noise": cfg.noise,
         "appearance": cfg.appearance,
         "framing": cfg.framing,
+        # only between two extent framings (a fill scan has none; a different mode is said above)
+        "framing version": FRAMING_VERSION if cfg.framing == "extent" == have["framing"] else have["framing version"],
     }
     out = [f"{key} {have[key]}, not {want[key]}" for key in want if have[key] != want[key]]
     if family not in cfg.families:
