@@ -156,3 +156,14 @@ def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
     assert summ2["corpus test"]["precision"] == pytest.approx(gear["precision"] / 2)  # a failure counts 0
     assert "| failures (scans that raised) | 1 | 1 | 0 | 0 |" in S.format_suite_tables(res2)
     assert f"{WASHER}/v0 (scan_00000): " in S.format_suite_notes(res2)
+
+
+def test_worst_scan_line_says_n_a_for_figures_a_scan_has_none_of() -> None:
+    row = {"precision": 0.5, "recall": 0.25, "type_accuracy": None, "alignment": None, "chamfer": 0.0064}
+    line = S._worst_line({**row, "runtime": {"to_step": 1.5}})
+    assert line == (
+        "precision 50.0 %, recall 25.0 %, type n/a, alignment n/a, Chamfer 0.0064, "
+        "mesh-outline faces n/a (no STEP), 1.50 s"
+    )
+    line = S._worst_line({**row, "step_faces": 20, "step_fallback_faces": 12, "runtime": {}})
+    assert "mesh-outline faces 12 of 20, n/a s" in line

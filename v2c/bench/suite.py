@@ -510,17 +510,28 @@ def format_suite_notes(result: dict[str, Any], worst: int = 8) -> str:
             for r in worst_scans(result, col, worst):
                 if not r.get("ok"):
                     continue
-                fv = format_value
-                out.append(
-                    f"  {r['label']}"
-                    + (f" [{r['band']}]" if r.get("band") else "")
-                    + f": precision {fv(r.get('precision'), 'pct')}, recall "
-                    f"{fv(r.get('recall'), 'pct')}, type {fv(r.get('type_accuracy'), 'pct')}, "
-                    f"alignment {fv(r.get('alignment'), 'f4')}, Chamfer {fv(r.get('chamfer'), 'f4')}, "
-                    f"mesh-outline faces {r.get('step_fallback_faces', '')} of {r.get('step_faces', '')}, "
-                    f"{fv(r.get('runtime', {}).get('to_step'), 's')} s"
-                )
+                out.append(f"  {r['label']}" + (f" [{r['band']}]" if r.get("band") else "") + ": " + _worst_line(r))
     return "\n".join(out)
+
+
+def _worst_line(r: dict[str, Any]) -> str:
+    """One worst scan's figures; a figure the scan has none of (no matched face, no STEP written) is "n/a"."""
+
+    def fv(key: str, kind: str) -> str:
+        v = r.get(key)
+        return "n/a" if v is None else format_value(v, kind)
+
+    outline = (
+        f"{r['step_fallback_faces']} of {r['step_faces']}"
+        if r.get("step_faces") is not None and r.get("step_fallback_faces") is not None
+        else "n/a (no STEP)"
+    )
+    t = r.get("runtime", {}).get("to_step")
+    return (
+        f"precision {fv('precision', 'pct')}, recall {fv('recall', 'pct')}, type {fv('type_accuracy', 'pct')}, "
+        f"alignment {fv('alignment', 'f4')}, Chamfer {fv('chamfer', 'f4')}, mesh-outline faces {outline}, "
+        + ("n/a s" if t is None else f"{format_value(t, 's')} s")
+    )
 
 
 def run_and_report(cfg: SuiteConfig, progress: bool = True, echo: Callable[[str], None] = print) -> dict[str, Any]:
