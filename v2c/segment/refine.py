@@ -117,6 +117,25 @@ def scan_geometry(
     return pts, estimate_part_size(pts[(np.asarray(depth) > 0) & (np.asarray(inst) > 0)], ransac.scale_trim)
 
 
+def _step_input(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    on: bool,
+    geometry: tuple[np.ndarray, float] | None,
+    ransac: RansacConfig | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+    """What every step works on: (instance ids (H, W) int32, a copy the step may change; the part's valid pixels;
+    the point map; the part size), or None when the step has nothing to do (``on`` is False, no valid pixel).
+    geometry: `scan_geometry` when already computed (else computed here with ``ransac``)."""
+    inst = np.asarray(seg.instances).astype(np.int32)
+    valid = (np.asarray(depth) > 0) & (inst > 0)
+    if not on or not valid.any():
+        return None
+    pts, size = geometry or scan_geometry(depth, K, inst, ransac)
+    return inst, valid, pts, size
+
+
 def refine_instances(
     seg: Segmentation,
     depth: np.ndarray,
@@ -184,11 +203,10 @@ def split_plane_outliers(
     (0 = no reading); probs: the network's (18, H, W) class probabilities, which label the new instances;
     geometry: `scan_geometry` of the scan when already computed; normals: (3, H, W) unit surface normals in any
     one frame (the network's input features), for the normal test (normal_split_deg; None: distance only)."""
-    inst = np.asarray(seg.instances).astype(np.int32).copy()
-    valid = (np.asarray(depth) > 0) & (inst > 0)
-    if not cfg.enabled or not valid.any():
+    prepared = _step_input(seg, depth, K, cfg.enabled, geometry, None)
+    if prepared is None:
         return seg
-    pts, size = geometry or scan_geometry(depth, K, inst)
+    inst, valid, pts, size = prepared
     labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores))
     is_plane = _is_plane(seg.labels)
     rng = np.random.default_rng(cfg.seed)
@@ -278,12 +296,11 @@ def split_coaxial_steps(
     """``seg`` with each cylinder instance split where its radius steps (module docstring); the new instance keeps
     the label and score. depth: (H, W) metres (0 = no reading); geometry: `scan_geometry` when already computed;
     ransac: the instance points and cylinder RANSAC settings (default `RansacConfig()`)."""
-    inst = np.asarray(seg.instances).astype(np.int32).copy()
-    valid = (np.asarray(depth) > 0) & (inst > 0)
-    if not (cfg.enabled and cfg.coax) or not valid.any():
-        return seg
     ransac = ransac or RansacConfig()
-    pts, size = geometry or scan_geometry(depth, K, inst, ransac)
+    prepared = _step_input(seg, depth, K, cfg.enabled and cfg.coax, geometry, ransac)
+    if prepared is None:
+        return seg
+    inst, valid, pts, size = prepared
     labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores))
     rng = np.random.default_rng(cfg.seed)
     todo = [(i, 0) for i in range(1, len(labels)) if TYPE_OF_LABEL[int(labels[i])] == _CYLINDER]
@@ -473,12 +490,11 @@ def merge_coaxial(
     (the smaller median distance of one piece's points to the other's cylinder), each join only when a cylinder
     fitted to both groups lies within merge_tol_part part sizes of every piece (median) with a radius at most
     merge_coax_max_radius times the largest piece's own. The merged instance keeps its largest piece's label."""
-    inst = np.asarray(seg.instances).astype(np.int32)
-    valid = (np.asarray(depth) > 0) & (inst > 0)
-    if not (cfg.enabled and cfg.merge_coax) or not valid.any():
-        return seg
     ransac = ransac or RansacConfig()
-    pts, size = geometry or scan_geometry(depth, K, inst, ransac)
+    prepared = _step_input(seg, depth, K, cfg.enabled and cfg.merge_coax, geometry, ransac)
+    if prepared is None:
+        return seg
+    inst, valid, pts, size = prepared
     tol = cfg.merge_tol_part * size
     types = TYPE_OF_LABEL[np.asarray(seg.labels, np.int64)]
     is_cyl = types == _CYLINDER
@@ -551,12 +567,11 @@ def merge_coplanar(
     pieces of a box side cylinders and cones). The merged instance keeps the
     largest plane-labelled piece's label and score. Only touching instances (4-neighbour pixel pairs). ransac:
     the instance points, RANSAC and type-selection settings of `_flat` (default `RansacConfig()`)."""
-    inst = np.asarray(seg.instances).astype(np.int32)
-    valid = (np.asarray(depth) > 0) & (inst > 0)
-    if not (cfg.enabled and cfg.merge) or not valid.any():
-        return seg
     ransac = ransac or RansacConfig()
-    pts, size = geometry or scan_geometry(depth, K, inst, ransac)
+    prepared = _step_input(seg, depth, K, cfg.enabled and cfg.merge, geometry, ransac)
+    if prepared is None:
+        return seg
+    inst, valid, pts, size = prepared
     tol = cfg.merge_tol_part * size
     labels = np.asarray(seg.labels)
     is_plane = _is_plane(labels)
