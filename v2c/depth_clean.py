@@ -37,6 +37,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from v2c.contexts import scoped
+
 #: The modes of `depth_clean`: ``auto`` = frames without ground truth only.
 MODES = ("auto", "on", "off")
 
@@ -79,11 +81,8 @@ def depth_clean(mode: str = "auto", cfg: DepthCleanConfig | None = None, **chang
     if mode not in MODES:
         raise ValueError(f"depth clean-up mode {mode!r}: expected one of {', '.join(MODES)}")
     new = replace(cfg or DEFAULT_CONFIG, **changes)
-    token = _MODE.set((mode, new))
-    try:
+    with scoped(_MODE, (mode, new)):
         yield new
-    finally:
-        _MODE.reset(token)
 
 
 def flying_pixels(depth: np.ndarray, cfg: DepthCleanConfig) -> np.ndarray:

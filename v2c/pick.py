@@ -24,7 +24,6 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +31,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
 from v2c.camera import backproject
+from v2c.contexts import scoped
 
 __all__ = [
     "PICK_MODES",
@@ -109,14 +109,9 @@ def current_pick() -> PickRequest:
     return _CURRENT.get() or PickRequest()
 
 
-@contextlib.contextmanager
-def pick_request(request: PickRequest) -> Iterator[PickRequest]:
+def pick_request(request: PickRequest) -> contextlib.AbstractContextManager[PickRequest]:
     """Make ``request`` the one `v2c.scan.load_scan` follows inside the block (the commands' --pick / --point)."""
-    token = _CURRENT.set(request)
-    try:
-        yield request
-    finally:
-        _CURRENT.reset(token)
+    return scoped(_CURRENT, request)
 
 
 def parse_point(text: str | tuple | list | None) -> tuple[int, int] | None:

@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from v2c.contexts import scoped
 from v2c.errors import ScanError
 
 __all__ = [
@@ -94,14 +94,9 @@ def current_frame_index() -> int:
     return 0 if v is None else v
 
 
-@contextlib.contextmanager
-def recording_frame(index: int) -> Iterator[int]:
+def recording_frame(index: int) -> contextlib.AbstractContextManager[int]:
     """Make ``index`` the pair `v2c.scan.load_scan` reads from a recording inside the block (``--frame-index``)."""
-    token = _CURRENT.set(index)
-    try:
-        yield index
-    finally:
-        _CURRENT.reset(token)
+    return scoped(_CURRENT, index)
 
 
 def is_recording(path: Path) -> bool:

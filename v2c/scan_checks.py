@@ -36,6 +36,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Strict, ValidationError
 
 from v2c.camera import DEFAULT_DEPTH_SCALE_M, Camera, backproject
+from v2c.contexts import scoped
 from v2c.errors import ScanError
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -106,12 +107,8 @@ def current_limits() -> ScanLimits:
 @contextlib.contextmanager
 def scan_limits(limits: ScanLimits | None = None, **changes: Any) -> Iterator[ScanLimits]:
     """Use ``limits`` (or the current limits with ``changes``, e.g. ``max_pixels=12_000_000``) inside the block."""
-    new = replace(limits or current_limits(), **changes)
-    token = _CURRENT.set(new)
-    try:
+    with scoped(_CURRENT, replace(limits or current_limits(), **changes)) as new:
         yield new
-    finally:
-        _CURRENT.reset(token)
 
 
 # ------------------------------------------------------------------------------------------------ files
