@@ -42,7 +42,7 @@ from v2c.bench.cache import default_cache_dir, scan_complete
 from v2c.bench.config import GT, BenchConfig, columns_of
 from v2c.bench.tables import format_value, jsonable, summarise
 from v2c.bench.workers import error_text, evaluate_dirs, failed_rows, process_start_seconds
-from v2c.synth.corpus import SPLIT_FILE, CorpusPart, default_corpus_dir, read_split
+from v2c.synth.corpus import SPLIT_FILE, CorpusPart, checked_files, default_corpus_dir, read_split
 
 if TYPE_CHECKING:
     from v2c.synth.dataset import SynthConfig
@@ -125,18 +125,8 @@ def corpus_parts(cfg: SuiteConfig) -> list[CorpusPart]:
         if bad:
             raise ValueError(f"{cfg.split_file}: {', '.join(bad)} not in the {split} split")
         rows = [p for p in rows if p.file in cfg.parts]
-    if not rows:  # no corpus part asked for (--parts none): the corpus folder is not needed
-        return []
-    folder = Path(cfg.corpus_dir or default_corpus_dir())
-    if not folder.is_dir():
-        raise ValueError(f"{folder}: CAD corpus not found (expected ../shared/data/cad_corpus; --corpus DIR)")
-    for p in rows:
-        path = folder / p.file
-        if not path.is_file():
-            raise ValueError(f"{path}: listed in {cfg.split_file.name} ({split} split) but missing")
-        got = hashlib.sha1(path.read_bytes()).hexdigest()
-        if got != p.sha1:
-            raise ValueError(f"{path}: SHA-1 {got}, expected {p.sha1} from {cfg.split_file.name} (file changed?)")
+    if rows:  # none asked for (--parts none): the corpus folder is not needed
+        checked_files(rows, cfg.corpus_dir, cfg.split_file)
     return rows
 
 

@@ -47,26 +47,28 @@ def read_split(path: Path = SPLIT_FILE) -> list[CorpusPart]:
     return sorted(out, key=lambda p: p.file)
 
 
-def split_files(
-    split: str, corpus_dir: Path | None = None, path: Path = SPLIT_FILE, check_sha1: bool = True
-) -> list[Path]:
-    """The corpus files of one split, checked against the folder: each must exist and (``check_sha1``) have the
-    SHA-1 the split was made from. Raises ValueError naming the file."""
-    if split not in SPLITS:
-        raise ValueError(f"{path}: unknown split {split!r} (expected one of {', '.join(SPLITS)})")
+def checked_files(rows: list[CorpusPart], corpus_dir: Path | None = None, path: Path = SPLIT_FILE) -> list[Path]:
+    """The files of ``rows`` in the corpus folder (``corpus_dir``, default `default_corpus_dir`), each checked: it
+    exists and has the SHA-1 the split ``path`` was made from. Raises ValueError naming the file or folder."""
     folder = Path(corpus_dir or default_corpus_dir())
     if not folder.is_dir():
-        raise ValueError(f"{folder}: CAD corpus not found (expected ../shared/data/cad_corpus)")
+        raise ValueError(
+            f"{folder}: CAD corpus not found (expected ../shared/data/cad_corpus; v2c bench: --corpus DIR)"
+        )
     out = []
-    for p in read_split(path):
-        if p.split != split:
-            continue
+    for p in rows:
         f = folder / p.file
         if not f.is_file():
-            raise ValueError(f"{f}: listed in {Path(path).name} ({split} split) but missing")
-        if check_sha1:
-            got = hashlib.sha1(f.read_bytes()).hexdigest()
-            if got != p.sha1:
-                raise ValueError(f"{f}: SHA-1 {got}, expected {p.sha1} from {Path(path).name} (file changed?)")
+            raise ValueError(f"{f}: listed in {Path(path).name} ({p.split} split) but missing")
+        got = hashlib.sha1(f.read_bytes()).hexdigest()
+        if got != p.sha1:
+            raise ValueError(f"{f}: SHA-1 {got}, expected {p.sha1} from {Path(path).name} (file changed?)")
         out.append(f)
     return out
+
+
+def split_files(split: str, corpus_dir: Path | None = None, path: Path = SPLIT_FILE) -> list[Path]:
+    """The checked files (`checked_files`) of one split of ``path``."""
+    if split not in SPLITS:
+        raise ValueError(f"{path}: unknown split {split!r} (expected one of {', '.join(SPLITS)})")
+    return checked_files([p for p in read_split(path) if p.split == split], corpus_dir, path)
