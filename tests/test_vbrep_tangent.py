@@ -83,8 +83,11 @@ def test_tangent_edges_on_the_line_of_contact(name: str, tmp_path: Path) -> None
     """Measured 2026-11-25 (median distance of the edge to the true line of contact, part sizes): dome 0.0057
     (3 scans: 0.0057 / 0.0034 / 0.0058; the intersection solve gave 0.0225 / 0.0214 / 0.0068); fillet edges of
     scan 0: 0.0111 / 0.0034 / 0.0082 (intersection solve 0.0097-0.0129, up to 0.045 at its worst sample). The
-    fillet's remaining error is its fitted radius (14.3 and 12.8 mm for 13.96): the blend is not yet constrained
-    tangent in the joint fit, so one fillet edge stays over 1 % of the part size."""
+    fillet's remaining error is its fitted radius (14.3 and 12.8 mm for 13.96). With the tangent refit of the
+    geometry stage (v2c.fit.tangency) the dome's two tangent edges are 0.0036 / 0.0051 and the fillet tangent to
+    both its planes comes out at 14.6 mm (0.0109 / 0.0027 / 0.0081): on this scan the planes themselves sit 0.3-0.6
+    mm off (the noise's correlated part), and a fillet held tangent to them inherits it, so one fillet edge stays
+    over 1 % of the part size (the issue's bound; a second, 1.5 %, bound on the worst edge is kept here)."""
     from exporters import step
     from v2c.pipeline import reconstruct
 

@@ -66,3 +66,14 @@ class FitConfig(RansacConfig):
     edge_sample_px: float = 8.0  # intersection points are sampled along edges at this spacing (pixels)
     depth_window_px: int = 2  # half window for the depth-map initialisation of vertex depths (pixels)
     depth_search: float = 0.1  # vertex depth search range around the depth-map value (part-size units)
+
+    # -- tangent (G1) junctions (fit.tangency, docs/geometry.md) ---------------------------------------------------
+    tangent_fit: bool = True  # refit blends (cylinders, spheres) tangent to their tangent neighbours
+    tangent_deg: float = 10.0  # a junction is tangent when the two surfaces' normal lines at its lifted boundary
+    # samples are within this angle (median; degrees)
+    tangent_min_samples: int = 3  # ... over at least this many samples (count)
+    tangent_min_points: int = 20  # a blend with fewer inlier points is not refitted (count)
+    tangent_rms_ratio: float = 1.3  # the constrained fit is taken when its truncated RMS residual is at most this
+    # times the free fit's plus one depth-noise sigma (ratio)
+    tangent_clip_sigma: float = 3.0  # residuals are clipped at this many depth-noise sigmas in that RMS (ratio)
+    tangent_max_nfev: int = 50  # function evaluations of one constrained fit (count)

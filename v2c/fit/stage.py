@@ -17,6 +17,7 @@ from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis, start_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.result import ABLATIONS, FitResult
+from v2c.fit.tangency import constrain_blends, tangent_junctions
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, torus_ok
 from v2c.geometry.residuals import Term
@@ -424,6 +425,21 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
             frame, prims, lifted.s, n_int = refine_intersections(terms, frame, lifted, scale, config, thr, member)
             prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
     timings["intersect"] = perf_counter() - t
+    t = perf_counter()
+
+    # 3b. tangent (G1) junctions: blends refitted tangent to their neighbours where the evidence says so
+    if ablation == "full" and config.tangent_fit and prims:
+        junctions = tangent_junctions(prims, lifted.rays, lifted.s, lifted.candidates, lifted.vertex, config)
+        if junctions:
+
+            def inlier_points(k: int) -> np.ndarray:
+                ip = ipts[order[k]]
+                return ip.points[_inliers(prims[k], ip, scale, config)]
+
+            prims, taken = constrain_blends(prims, junctions, inlier_points, scale, config)
+            if taken:
+                log.debug("tangent refits: %s", {order[k]: m for k, m in taken.items()})
+    timings["tangent"] = perf_counter() - t
 
     # 4. final inliers and residuals on all points of each instance
     out_prims: dict[int, Primitive] = {}
