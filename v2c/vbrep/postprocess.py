@@ -9,8 +9,13 @@ Rules, in order:
    dropped;
 3. simplification: two edges of the same type and faces meeting at a vertex no other edge uses are merged into one
    when the polyline turns there by less than ``simplify_deg`` degrees;
-4. polylines are thinned with Ramer-Douglas-Peucker in the image (``polyline_px``), keeping both ends;
-5. unused vertices are removed and ids compacted.
+4. collapsed loops: an intersection edge of two planes lies on their line, so one that is closed (a face enclosed
+   by one neighbour in the image, or an edge closed by a contraction or a merge) or that joins the same two
+   vertices as another such edge of one face (a loop of two plane-plane edges) encloses nothing once lifted; each
+   is split into a silhouette edge of the nearer plane and an occluded edge of the farther one over its image
+   samples, each lifted onto its own plane (`split_collapsed`), so both faces keep a loop that bounds them;
+5. polylines are thinned with Ramer-Douglas-Peucker in the image (``polyline_px``), keeping both ends;
+6. unused vertices are removed and ids compacted.
 Camera frame, metres; pixels (u, v).
 """
 
@@ -20,8 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from v2c.camera import project
+from v2c.camera import pixel_rays, project
 from v2c.polyline import rdp_indices
+from v2c.primitives import Plane
+from v2c.primitives.base import Primitive
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.model import EdgeType, VertexKind
 
@@ -179,14 +186,98 @@ def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplif
     return protos
 
 
+def _plane_pair(p: ProtoEdge, prims: dict[int, Primitive]) -> bool:
+    """Whether ``p`` is an intersection edge of two planes (its curve a line)."""
+    return (
+        p.type is EdgeType.INTERSECTION and len(p.faces) == 2 and all(isinstance(prims.get(f), Plane) for f in p.faces)
+    )
+
+
+def collapsed_edges(protos: list[ProtoEdge], prims: dict[int, Primitive]) -> list[int]:
+    """Indices of the plane-plane intersection edges that enclose nothing once lifted onto their line: closed
+    ones, and two or more of one face joining the same two vertices."""
+    out: set[int] = set()
+    by_ends: dict[tuple[int, frozenset[int]], list[int]] = {}
+    for k, p in enumerate(protos):
+        if not _plane_pair(p, prims):
+            continue
+        if p.v0 == p.v1:
+            out.add(k)
+            continue
+        for f in p.faces:
+            by_ends.setdefault((f, frozenset((p.v0, p.v1))), []).append(k)
+    for ks in by_ends.values():
+        if len(ks) > 1:
+            out.update(ks)
+    return sorted(out)
+
+
+def _plane_depth(plane: Plane, rays: np.ndarray) -> np.ndarray:
+    """Depth (metres, z) where each ray (z = 1) meets the plane; NaN where it runs parallel."""
+    n = plane.axis_vector
+    den = rays @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = float(n @ np.asarray(plane.origin, float)) / den
+    return np.where((np.abs(den) > 1e-12) & (z > 0), z, np.nan)
+
+
+def split_collapsed(
+    protos: list[ProtoEdge],
+    verts: list[ProtoVertex],
+    prims: dict[int, Primitive],
+    K: np.ndarray,
+    retype_conf: float,
+) -> tuple[list[ProtoEdge], int]:
+    """Rule 4: every edge of `collapsed_edges` replaced by a silhouette edge of its nearer plane and an occluded
+    edge of the farther one (median depth along the rays of its image samples), each lifted onto its own plane
+    and ending at the edge's vertices; confidences scaled by ``retype_conf``. An edge whose samples do not meet
+    both planes in front of the camera stays. Returns the edges and the number split."""
+    todo = set(collapsed_edges(protos, prims))
+    out: list[ProtoEdge] = []
+    n_split = 0
+    for k, p in enumerate(protos):
+        uv = p.uv if len(p.uv) >= 3 else np.zeros((0, 2))
+        if k not in todo or not len(uv):
+            out.append(p)
+            continue
+        rays = pixel_rays(uv, K)
+        fa, fb = p.faces
+        za, zb = _plane_depth(prims[fa], rays), _plane_depth(prims[fb], rays)
+        ok = np.isfinite(za) & np.isfinite(zb)
+        if ok.sum() < 3:
+            out.append(p)
+            continue
+        rays, za, zb, uv = rays[ok], za[ok], zb[ok], uv[ok]
+        (near, z_near), (far, z_far) = sorted(((fa, za), (fb, zb)), key=lambda t: float(np.median(t[1])))
+        jump = float(np.median(np.abs(za - zb)))
+        for etype, face, z in ((EdgeType.SILHOUETTE, near, z_near), (EdgeType.OCCLUDED, far, z_far)):
+            pts = rays * z[:, None]
+            pts[0], pts[-1] = verts[p.v0].position, verts[p.v1].position
+            stats = dict(p.stats, jump=jump, factor=retype_conf * p.stats.get("factor", 1.0))
+            out.append(ProtoEdge(etype, (face,), pts, uv.copy(), p.key0, p.key1, p.graph_edge, None, stats, p.v0, p.v1))
+        n_split += 1
+    return out, n_split
+
+
 def postprocess(
-    protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, cfg: VBRepConfig, same_m: float
+    protos: list[ProtoEdge],
+    verts: list[ProtoVertex],
+    K: np.ndarray,
+    cfg: VBRepConfig,
+    same_m: float,
+    prims: dict[int, Primitive] | None = None,
+    stats: dict | None = None,
 ) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
     """Apply the rules of the module docstring; returns edges and vertices with compact vertex ids.
-    same_m: vertices of one kind closer than this (metres) are merged first."""
+    same_m: vertices of one kind closer than this (metres) are merged first; prims: instance id -> primitive
+    (rule 4 needs them; without, it is skipped); stats: gets ``collapsed_split`` (edges split by rule 4)."""
     protos = _labelling(protos)
     protos = _contract_short(protos, verts, K, cfg.min_edge_px, cfg.min_loop_edges * cfg.min_edge_px, same_m)
     protos = _merge_degree_two(protos, verts, cfg.simplify_deg)
+    if prims is not None:
+        protos, n_split = split_collapsed(protos, verts, prims, K, cfg.retype_conf)
+        if stats is not None:
+            stats["collapsed_split"] = n_split
     for p in protos:
         if len(p.pts) > 2:
             idx = rdp_indices(project(p.pts, K), cfg.polyline_px)
