@@ -21,9 +21,10 @@ size, seed), so a repeated run renders nothing; the cache lives outside the repo
 Report. Every scan is reconstructed and scored as in the family suite (`v2c.bench.workers.evaluate_dirs`: the same
 metrics, the same to-step timing), then summarised per source (corpus split, every leave-out family, the families
 together) and, for the corpus, per part size band (`BandConfig`: the file's face count under 30, 30-100, over
-100). Two counts join the metrics: faces the STEP build bounded by their mesh outline
-(`exporters.step.StepReport.fallback_faces`) and failures (a scan that raised anywhere, rendering included: counted
-and named, never stopping the run).
+100). Counts join the metrics: faces the STEP build bounded by their mesh outline
+(`exporters.step.StepReport.fallback_faces`), the STEP read back through OCCT (faces within 2 % of their mesh area,
+the file's bounding box over the reconstruction's; `v2c.bench.workers`) and failures (a scan that raised anywhere,
+rendering included: counted and named, never stopping the run).
 """
 
 from __future__ import annotations
