@@ -118,6 +118,7 @@ def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
     # the washer (a ring: two planes, two cylinders) with the oracle segmentation: every seen face found
     assert washer["precision"] == washer["recall"] == washer["type_accuracy"] == 1.0
     # the mesh-outline count is the STEP writer's own, recomputed here outside the bench
+    from exporters.readback import check_written
     from exporters.step import write
     from v2c.pipeline import reconstruct
     from v2c.scan import load_scan
@@ -125,8 +126,18 @@ def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
 
     for row in (washer, gear):
         scan = load_scan(row["path"])
-        rep = write(reconstruct(scan, segmentation=segment(scan, "oracle")), tmp_path / "x.step", frame="camera")
+        vbrep = reconstruct(scan, segmentation=segment(scan, "oracle"))
+        rep = write(vbrep, tmp_path / "x.step", frame="camera")
         assert row["step_fallback_faces"] == len(rep.fallback_faces) and row["step_faces"] == rep.n_faces
+        # the read-back figures too: faces within 2 % of their mesh area, the bounding boxes' largest extents
+        back = check_written(vbrep, tmp_path / "x.step", rep.frame_map)
+        assert row["step_area_faces"] == len(back.faces) == len(vbrep.faces)
+        assert row["step_area_ok_faces"] == len(back.faces) - len(back.off_faces())
+        ext_w = (back.box_written[1] - back.box_written[0]).max()
+        ext_r = (back.box_reconstructed[1] - back.box_reconstructed[0]).max()
+        assert row["step_box_ratio"] == pytest.approx(ext_w / ext_r)
+    assert summ["corpus test"]["area_ok_faces"] == washer["step_area_ok_faces"] + gear["step_area_ok_faces"]
+    assert summ["corpus test"]["box_ratio_max"] == max(washer["step_box_ratio"], gear["step_box_ratio"])
     assert summ["corpus test"]["fallback_faces"] == washer["step_fallback_faces"] + gear["step_fallback_faces"]
     assert summ["corpus test"]["step_faces"] == washer["step_faces"] + gear["step_faces"]
     assert summ["corpus test 30-100"]["fallback_faces"] == gear["step_fallback_faces"]
@@ -137,6 +148,10 @@ def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
         f"| STEP faces bounded by their mesh outline / STEP faces | {summ['corpus test']['fallback_faces']} / "
         f"{summ['corpus test']['step_faces']} | {washer['step_fallback_faces']} / {washer['step_faces']} | "
         f"{gear['step_fallback_faces']} / {gear['step_faces']} | 0 / 0 |"
+    ) in table
+    assert (
+        f"| STEP faces read back within 2 % of their mesh area / faces | {summ['corpus test']['area_ok_faces']} / "
+        f"{summ['corpus test']['area_faces']} | {washer['step_area_ok_faces']} / {washer['step_area_faces']} | "
     ) in table
     assert "| failures (scans that raised) | 0 | 0 | 0 | 0 |" in table
     assert "| scans (parts) | 2 (2) | 1 (1) | 1 (1) | 0 (0) |" in table

@@ -276,3 +276,43 @@ def plate_feature_scene(
     target = np.zeros(3)
     eye = distance * np.array([np.cos(el) * 0.8, np.cos(el) * 0.6, np.sin(el)])
     return Scene(faces, eye, target, float(plate))
+
+
+def inlay_scene(
+    radius: float = 0.03,
+    tilt_deg: float = 1.0,
+    plate: float = 0.12,
+    thickness: float = 0.02,
+    distance: float = 0.3,
+    elevation_deg: float = 60.0,
+) -> Scene:
+    """A square plate (top at z = 0) with a round inlay of ``radius`` at its centre whose top is a plane through
+    the centre tilted by ``tilt_deg`` about the part's y axis (so it stands at most radius * tan(tilt) proud of
+    or below the plate, under the depth-gap threshold), seen obliquely from above. In the image the inlay is a
+    plane face enclosed by one neighbour, the plate's top, along one closed edge; the two planes meet only on a
+    line through the centre."""
+    el = np.deg2rad(elevation_deg)
+    half = plate / 2
+    t = np.deg2rad(tilt_deg)
+
+    def in_plate(p: np.ndarray) -> np.ndarray:
+        return (np.abs(p[:, 0]) <= half + 1e-7) & (np.abs(p[:, 1]) <= half + 1e-7)
+
+    def rho(p: np.ndarray) -> np.ndarray:
+        return np.hypot(p[:, 0], p[:, 1])
+
+    # the two bounds overlap by ``seam`` so that no pixel on the seam sees through both (the nearer face wins)
+    seam = 1e-4
+    faces = [
+        BoundedFace(_plane((0, 0, 0), (0, 0, 1)), lambda p: in_plate(p) & (rho(p) >= radius - seam), 3, "Z"),
+        BoundedFace(
+            _plane((half, 0, 0), (1, 0, 0)), lambda p: in_plate(p) & (p[:, 2] <= 1e-7) & (p[:, 2] >= -thickness), 1, "X"
+        ),
+        BoundedFace(
+            _plane((0, half, 0), (0, 1, 0)), lambda p: in_plate(p) & (p[:, 2] <= 1e-7) & (p[:, 2] >= -thickness), 2, "Y"
+        ),
+        BoundedFace(_plane((0, 0, 0), (-np.sin(t), 0, np.cos(t))), lambda p: rho(p) < radius + seam, 3, None),
+    ]
+    target = np.zeros(3)
+    eye = distance * np.array([np.cos(el) * 0.8, np.cos(el) * 0.6, np.sin(el)])
+    return Scene(faces, eye, target, float(plate))

@@ -21,9 +21,10 @@ size, seed), so a repeated run renders nothing; the cache lives outside the repo
 Report. Every scan is reconstructed and scored as in the family suite (`v2c.bench.workers.evaluate_dirs`: the same
 metrics, the same to-step timing), then summarised per source (corpus split, every leave-out family, the families
 together) and, for the corpus, per part size band (`BandConfig`: the file's face count under 30, 30-100, over
-100). Two counts join the metrics: faces the STEP build bounded by their mesh outline
-(`exporters.step.StepReport.fallback_faces`) and failures (a scan that raised anywhere, rendering included: counted
-and named, never stopping the run).
+100). Counts join the metrics: faces the STEP build bounded by their mesh outline
+(`exporters.step.StepReport.fallback_faces`), the STEP read back through OCCT (faces within 2 % of their mesh area,
+the file's bounding box over the reconstruction's; `v2c.bench.workers`) and failures (a scan that raised anywhere,
+rendering included: counted and named, never stopping the run).
 """
 
 from __future__ import annotations
@@ -401,6 +402,8 @@ def in_group(row: dict[str, Any], group: str, cfg: SuiteConfig) -> bool:
 def summarise_group(rows: list[dict[str, Any]], process_start_s: float = float("nan")) -> dict[str, Any]:
     """`v2c.bench.run.summarise` of a group's rows, plus: ``parts`` (distinct parts or families),
     ``fallback_faces`` / ``step_faces`` (sums over the scans that wrote a STEP), ``fallback_per_scan`` (mean),
+    ``area_ok_faces`` / ``area_faces`` (faces read back within 2 % of their mesh area / faces read back),
+    ``box_ratio_min`` / ``box_ratio_max`` (the STEP's largest bounding-box extent over the reconstruction's),
     ``chamfer_max`` (the worst scan), ``failures`` (every failed scan: label and error)."""
     out = summarise(rows, process_start_s)
     ok = [r for r in rows if r.get("ok")]
@@ -409,6 +412,12 @@ def summarise_group(rows: list[dict[str, Any]], process_start_s: float = float("
     out["fallback_faces"] = int(sum(r.get("step_fallback_faces", 0) for r in stepped))
     out["step_faces"] = int(sum(r["step_faces"] for r in stepped))
     out["fallback_per_scan"] = (out["fallback_faces"] / len(stepped)) if stepped else float("nan")
+    read = [r for r in stepped if r.get("step_area_faces") is not None]
+    out["area_ok_faces"] = int(sum(r["step_area_ok_faces"] for r in read))
+    out["area_faces"] = int(sum(r["step_area_faces"] for r in read))
+    ratios = [r["step_box_ratio"] for r in read if math.isfinite(r.get("step_box_ratio", math.nan))]
+    out["box_ratio_max"] = max(ratios) if ratios else float("nan")
+    out["box_ratio_min"] = min(ratios) if ratios else float("nan")
     ch = [r["chamfer"] for r in ok if r.get("chamfer") is not None and math.isfinite(r["chamfer"])]
     out["chamfer_max"] = max(ch) if ch else float("nan")
     out["failures"] = [{"scan": r["label"], "error": r["error"]} for r in rows if not r.get("ok")]
@@ -457,6 +466,16 @@ def format_suite_tables(result: dict[str, Any]) -> str:
         out.append(
             "| mesh-outline faces per scan (mean) | "
             + " | ".join(_f2(summ[g]["fallback_per_scan"]) for g in groups)
+            + " |"
+        )
+        out.append(
+            "| STEP faces read back within 2 % of their mesh area / faces | "
+            + " | ".join(f"{summ[g]['area_ok_faces']} / {summ[g]['area_faces']}" for g in groups)
+            + " |"
+        )
+        out.append(
+            "| STEP / reconstruction bounding box, largest extent (min - max over scans) | "
+            + " | ".join(f"{_f2(summ[g]['box_ratio_min'])} - {_f2(summ[g]['box_ratio_max'])}" for g in groups)
             + " |"
         )
         out.append("| failures (scans that raised) | " + " | ".join(str(summ[g]["failed"]) for g in groups) + " |")

@@ -12,7 +12,8 @@
 3. vertices.py: edge ends meeting at one image point grouped by shared faces (an occlusion vertex splits into a
    near and a far copy), then optimised in full 3D (corners onto three surfaces, intersection-visibility vertices
    onto two surfaces and the contour), kept if within d_int of the surfaces and ``vertex_px`` of the image point;
-4. postprocess.py: labelling rules, short-edge removal, simplification below ``simplify_deg``; topology.py:
+4. postprocess.py: labelling rules, short-edge removal, simplification below ``simplify_deg``, plane-plane
+   edges that would collapse a loop onto the planes' line split into a silhouette and an occluded edge; topology.py:
    vertices and polylines snapped onto their surfaces, degenerate closed edges dropped;
 5. assemble.py: face meshes (mesh.py), loops, edge and face confidences (confidence.py), positional sigmas.
 
@@ -63,8 +64,10 @@ def extract_vbrep(scan: Scan, seg: Segmentation, fit: FitResult, config: VBRepCo
     # 3. vertices: grouped, typed, optimised
     vertices = make_vertices(ctx, protos, fit.graph)
     # 4. clean-up, then every edge on its surfaces and ending at its vertices
-    protos, vertices = postprocess(protos, vertices, K, cfg, same_m=cfg.vertex_merge_gap_share * gap_thr)
     prims = {i: f.prim for i, f in faces.items()}
+    protos, vertices = postprocess(
+        protos, vertices, K, cfg, same_m=cfg.vertex_merge_gap_share * gap_thr, prims=prims, stats=stats
+    )
     stats.update(snap_to_surfaces(protos, vertices, prims, cfg.d_int * scale, K, cfg))
     protos = drop_degenerate(protos, K, cfg.min_edge_px)
     # 5. the VB-Rep

@@ -9,8 +9,14 @@ Rules, in order:
    dropped;
 3. simplification: two edges of the same type and faces meeting at a vertex no other edge uses are merged into one
    when the polyline turns there by less than ``simplify_deg`` degrees;
-4. polylines are thinned with Ramer-Douglas-Peucker in the image (``polyline_px``), keeping both ends;
-5. unused vertices are removed and ids compacted.
+4. collapsed loops: an intersection edge of two planes lies on their line, so a closed one (a face enclosed in
+   the image by one neighbour, or an edge closed by a contraction or a merge) encloses nothing once lifted onto
+   it; such an edge keeps its type but is lifted from its image samples to midway between its two planes along
+   the rays and left there (`lift_collapsed`), on a vertex of its own when it is alone on its vertex, so both
+   faces keep a loop that bounds them (the STEP exporter fits it on the nearer face, its tolerance covering the
+   gap to the other);
+5. polylines are thinned with Ramer-Douglas-Peucker in the image (``polyline_px``), keeping both ends;
+6. unused vertices are removed and ids compacted.
 Camera frame, metres; pixels (u, v).
 """
 
@@ -20,8 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from v2c.camera import project
+from v2c.camera import pixel_rays, project
 from v2c.polyline import rdp_indices
+from v2c.primitives import Plane
+from v2c.primitives.base import Primitive
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.model import EdgeType, VertexKind
 
@@ -41,6 +49,7 @@ class ProtoEdge:
     stats: dict = field(default_factory=dict)
     v0: int = -1
     v1: int = -1
+    apart: bool = False  # an intersection edge left between its two surfaces, not on a common curve (rule 4)
 
 
 @dataclass
@@ -51,6 +60,7 @@ class ProtoVertex:
     position: np.ndarray
     pixel: np.ndarray
     outline_corner: bool = False  # a corner of an image outline (never merged away)
+    free: bool = False  # stays where it was placed (not moved onto its faces' surfaces; rule 4)
 
 
 _KIND_PRIORITY = {
@@ -179,14 +189,80 @@ def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplif
     return protos
 
 
+def _plane_pair(p: ProtoEdge, prims: dict[int, Primitive]) -> bool:
+    """Whether ``p`` is an intersection edge of two planes (its curve a line)."""
+    return (
+        p.type is EdgeType.INTERSECTION and len(p.faces) == 2 and all(isinstance(prims.get(f), Plane) for f in p.faces)
+    )
+
+
+def collapsed_edges(protos: list[ProtoEdge], prims: dict[int, Primitive]) -> list[int]:
+    """Indices of the closed plane-plane intersection edges: lifted onto their planes' line they enclose
+    nothing. (Two plane-plane edges of one face between the same two vertices collapse too, but are mostly the
+    long sides of a thin face whose short ends were contracted: they are true intersection edges and stay.)"""
+    return [k for k, p in enumerate(protos) if p.v0 == p.v1 and _plane_pair(p, prims)]
+
+
+def _plane_depth(plane: Plane, rays: np.ndarray) -> np.ndarray:
+    """Depth (metres, z) where each ray (z = 1) meets the plane; NaN where it runs parallel or behind."""
+    n = plane.axis_vector
+    den = rays @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = float(n @ np.asarray(plane.origin, float)) / den
+    return np.where((np.abs(den) > 1e-12) & (z > 0), z, np.nan)
+
+
+def lift_collapsed(
+    protos: list[ProtoEdge], verts: list[ProtoVertex], prims: dict[int, Primitive], K: np.ndarray
+) -> int:
+    """Rule 4, in place: every edge of `collapsed_edges` lifted from its image samples to midway between its two
+    planes along the rays and marked ``apart`` (the snap leaves it there); one alone on its vertex gets a vertex
+    of its own at its first sample, marked ``free``. An edge whose samples do not meet both planes in front of
+    the camera stays. Returns the number lifted."""
+    uses: dict[int, int] = {}
+    for p in protos:
+        for v in {p.v0, p.v1}:
+            uses[v] = uses.get(v, 0) + 1
+    n = 0
+    for k in collapsed_edges(protos, prims):
+        p = protos[k]
+        if len(p.uv) < 3:
+            continue
+        rays = pixel_rays(p.uv, K)
+        z = 0.5 * (_plane_depth(prims[p.faces[0]], rays) + _plane_depth(prims[p.faces[1]], rays))
+        ok = np.isfinite(z)
+        if ok.sum() < 3:
+            continue
+        pts = rays[ok] * z[ok, None]
+        if uses[p.v0] == 1:
+            p.v0 = p.v1 = len(verts)
+            verts.append(ProtoVertex(VertexKind.OTHER, pts[0].copy(), p.uv[ok][0].copy(), free=True))
+        pts[0] = pts[-1] = verts[p.v0].position
+        p.pts, p.uv, p.apart = pts, p.uv[ok], True
+        p.curve = {"kind": "intersection"}
+        n += 1
+    return n
+
+
 def postprocess(
-    protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, cfg: VBRepConfig, same_m: float
+    protos: list[ProtoEdge],
+    verts: list[ProtoVertex],
+    K: np.ndarray,
+    cfg: VBRepConfig,
+    same_m: float,
+    prims: dict[int, Primitive] | None = None,
+    stats: dict | None = None,
 ) -> tuple[list[ProtoEdge], list[ProtoVertex]]:
     """Apply the rules of the module docstring; returns edges and vertices with compact vertex ids.
-    same_m: vertices of one kind closer than this (metres) are merged first."""
+    same_m: vertices of one kind closer than this (metres) are merged first; prims: instance id -> primitive
+    (rule 4 needs them; without, it is skipped); stats: gets ``collapsed_lifted`` (edges lifted by rule 4)."""
     protos = _labelling(protos)
     protos = _contract_short(protos, verts, K, cfg.min_edge_px, cfg.min_loop_edges * cfg.min_edge_px, same_m)
     protos = _merge_degree_two(protos, verts, cfg.simplify_deg)
+    if prims is not None:
+        n_lifted = lift_collapsed(protos, verts, prims, K)
+        if stats is not None:
+            stats["collapsed_lifted"] = n_lifted
     for p in protos:
         if len(p.pts) > 2:
             idx = rdp_indices(project(p.pts, K), cfg.polyline_px)

@@ -109,6 +109,8 @@ def snap_to_surfaces(
             if p.type is EdgeType.INTERSECTION:
                 int_at.setdefault(v, []).append(tuple(sorted(p.faces)))
     for vid, v in enumerate(verts):
+        if v.free:  # placed with an edge left between its surfaces (postprocess rule 4)
+            continue
         # on all its faces if they meet there; else on the faces of its intersection edges, else on one
         # intersection edge's two faces (that edge's curve), else on its first face
         ints = int_at.get(vid, [])
@@ -130,7 +132,7 @@ def snap_to_surfaces(
             stats["vertices_on_surfaces"] += 1
     for p in protos:
         inner = p.pts[1:-1]
-        if len(inner):
+        if len(inner) and not p.apart:  # an edge left between its surfaces stays there (postprocess rule 4)
             if p.type is EdgeType.INTERSECTION and len(p.faces) == 2 and (p.curve or {}).get("tangent"):
                 # a tangent junction stays on the surfaces' line of contact (an intersection solve wanders)
                 x = points_on_curve(p.curve, inner)
