@@ -6,10 +6,15 @@ projected length lies within ``tol_px`` (3) pixels of ground-truth boundary reco
 face(s) its faces cover. For an intersection edge: a true edge of the part, where two true surfaces meet, lies
 within 3 px of it (about 1.5 mm at 0.6 m and a 55 degree field of view over 640 px).
 
-The map is one isotonic (monotone non-decreasing) regression of right/wrong on the raw confidence per edge type,
-fitted by pool-adjacent-violators (`isotonic_fit`) on training and validation scans only
-(scripts/calibrate_confidence.py), stored as knots in ``confidence_calibration.json`` beside this module and
-applied by linear interpolation between the knots (`CalibrationMap.apply`), clipped to [0, 1].
+The shipped map (``confidence_calibration.json`` beside this module, format 2) is one logistic regression per edge
+type over features of the edge (`DEFAULT_FEATURES`, computed by `FEATURE_FUNCTIONS` from the quantities the
+extraction records per edge, `v2c.vbrep.assemble`): the raw product's logit, the factors behind it one by one
+(image length, agreement, surface angle, depth gap, fit residual and edge-to-depth error over the sensor noise,
+depth jump, contour share) and the part's mean segmentation score, which is low on parts unlike the learned
+segmenter's training parts. It is fitted (`fit_calibration`: L2-penalised, Newton's method, deterministic) on
+learned and oracle reconstructions of training scans only: in-family, training feature-family and corpus-train
+scans (scripts/calibrate_confidence.py). A map of format 1 (one isotonic map of the raw confidence per type,
+`isotonic_fit` / `fit_map`, applied by linear interpolation between knots) still loads and applies.
 
 Also here: the expected calibration error (`expected_calibration_error`, equal-width bins) and a reliability
 diagram drawn with OpenCV (`reliability_diagram`).
