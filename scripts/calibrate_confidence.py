@@ -1,63 +1,140 @@
-"""Fit the edge-confidence calibration map (v2c/vbrep/confidence_calibration.json) from training scans.
+"""Fit the edge-confidence calibration (v2c/vbrep/confidence_calibration.json) on training scans.
 
-    PYTHONPATH=. python scripts/calibrate_confidence.py --train-seed 7100 --train-n 80 --val-seed 9600 --val-n 20
+    PYTHONPATH=. python scripts/calibrate_confidence.py            # label what is missing, fit, write the map
+    PYTHONPATH=. python scripts/calibrate_confidence.py --label-only   # only label (records), no fit
 
-Training scans: `v2c bench`'s generator cache of seed ``--train-seed`` (scans 0..n-1, generated when missing:
-640x480, sensor noise, the procedural families); validation: the cache of ``--val-seed`` (9600, the tuning seed).
-Never seed 0 (the reported in-family bench) nor the corpus test split. Each scan is reconstructed with
-``--segmentation`` (learned, as in the bench) and every edge labelled right/wrong by
-`v2c.bench.vbrep.edge_correctness`; the per-type isotonic map is fitted on the training edges only and its ECE
-reported on both sets. Labelled edges are cached per scan in ``--records`` (a JSON file), so a re-fit is instant;
-delete it after changing the extraction. Deterministic: same scans, same map.
+Training scans (what the map is fitted on), each reconstructed with the learned AND the oracle segmentation:
+
+- in-family: `v2c bench`'s generator cache of ``--train-seed`` (7100; scans 0..``--train-n``-1, 640x480, sensor
+  noise, the six procedural families);
+- feature families: ``--feat-n`` scans of the training feature families (`v2c.synth.families.FEATURE_FAMILIES`
+  less `LEAVE_OUT_FAMILIES`: feat_prismatic, feat_plate, feat_turned) of seed ``--feat-seed`` (7200), rendered into
+  ``<bench cache>/calib_features_sensor_640x480_s<seed>``;
+- the CAD corpus's **training** split, ``--corpus-train-views`` views a part, rendered as `v2c bench --suite
+  corpus-train` renders them.
+
+Validation (what the method and its features were chosen on, never fitted on): the in-family cache of
+``--val-seed`` (9000, ``--val-n`` scans) and the corpus **validation** split (``--corpus-val-views`` views a part,
+as `v2c bench --suite corpus-val`). Never seed 0 (the reported in-family bench), never the corpus test split or the
+leave-out families (`v2c bench --suite unseen`).
+
+Each edge is labelled right/wrong by `v2c.bench.vbrep.edge_correctness` (the bench's own label) and recorded with
+the quantities the extraction hands the calibration (`v2c.vbrep.calibration.EDGE_RECORD`); records are cached per
+scan and segmentation in ``--records`` (JSON), so a re-fit is instant (delete it after changing the extraction).
+The fit (`v2c.vbrep.calibration.fit_calibration`) weighs the three training sources equally (each source's edges of
+a type sum to the same weight) so that the 80 in-family scans do not outvote the new parts. Deterministic: same
+scans, same map.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from v2c.vbrep.calibration import DEFAULT_MAP, expected_calibration_error, fit_map
+from v2c.vbrep.calibration import DEFAULT_MAP, expected_calibration_error
+
+SEGMENTATIONS = ("learned", "oracle")
+_FACTORS = (
+    "logit_raw",
+    "log_length_px",
+    "agreement",
+    "angle_deg",
+    "gap_rel",
+    "log_residual_noise",
+    "log_depth_err_noise",
+    "log_jump_rel",
+    "vis_share",
+)
+#: The feature sets compared on the validation scans (--candidates); the shipped one is DEFAULT_FEATURES.
+CANDIDATES: dict[str, tuple[str, ...]] = {
+    "raw score only": ("logit_raw",),
+    "factors": _FACTORS,
+    "factors + part score": (*_FACTORS, "part_score_mean"),
+    "factors + part score + sigma": (*_FACTORS, "part_score_mean", "log_sigma_mm"),
+    "factors + segmentation (4) + sigma": (
+        *_FACTORS,
+        "seg_score_min",
+        "part_score_mean",
+        "log_face_px_min",
+        "log_n_faces",
+        "log_sigma_mm",
+    ),
+}
 
 
 def label_scan(args: tuple[str, str]) -> list[dict]:
-    """Labelled edges of one scan: type, raw confidence, right (0/1), length (px), the edge's faces' residual."""
+    """Labelled edges of one scan reconstructed with one segmentation: the quantities the extraction recorded for
+    the calibration, plus ``ok`` (right: 1, wrong: 0). An empty list when the reconstruction fails."""
     from v2c.bench.run import limit_threads
 
     limit_threads()
     from v2c.bench.vbrep import edge_correctness
+    from v2c.contexts import scoped
     from v2c.pipeline import reconstruct
     from v2c.scan import load_scan
+    from v2c.vbrep.calibration import EDGE_RECORD
 
     path, seg = args
     scan = load_scan(path)
-    v = reconstruct(scan, seg)
+    try:
+        with scoped(EDGE_RECORD, []) as rec:
+            v = reconstruct(scan, seg)
+    except Exception as exc:  # noqa: BLE001 - a failing scan is reported and skipped, as the bench does
+        print(f"{path} ({seg}): {type(exc).__name__}: {exc}", file=sys.stderr)
+        return []
     ok = edge_correctness(v, scan)
-    return [
-        {
-            "type": e.type.value,
-            "raw": float(e.confidence_raw if e.confidence_raw is not None else e.confidence),
-            "ok": int(k),
-            "tangent": bool(e.tangent),
-        }
-        for e, k in zip(v.edges, ok)
-    ]
+    q = rec[-1]
+    if len(q) != len(v.edges):
+        raise RuntimeError(f"{path}: {len(q)} recorded edges for {len(v.edges)} in the VB-Rep")
+    return [dict(qi, ok=int(k)) for qi, k in zip(q, ok)]
 
 
-def collect(dirs: list[Path], seg: str, records: dict, jobs: int) -> list[dict]:
-    todo = [d for d in dirs if f"{d}|{seg}" not in records]
-    if todo:
-        print(f"labelling {len(todo)} scans ({seg})", file=sys.stderr)
-        import multiprocessing as mp
+def collect(dirs: Sequence[Path], records: dict, jobs: int, records_path: Path) -> None:
+    """Label every (scan, segmentation) not yet in ``records``, saving the records every 10 scans."""
+    todo = [(str(d), s) for d in dirs for s in SEGMENTATIONS if f"{d}|{s}" not in records]
+    if not todo:
+        return
+    print(f"labelling {len(todo)} reconstructions", file=sys.stderr)
+    import multiprocessing as mp
 
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
-            for d, rows in zip(todo, pool.map(label_scan, [(str(d), seg) for d in todo])):
-                records[f"{d}|{seg}"] = rows
-    return [r for d in dirs for r in records[f"{d}|{seg}"]]
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
+        for i, (key, rows) in enumerate(zip(todo, pool.map(label_scan, todo))):
+            records[f"{key[0]}|{key[1]}"] = rows
+            if i % 10 == 9 or i == len(todo) - 1:
+                save_records(records, records_path)
+                print(f"  {i + 1}/{len(todo)}", file=sys.stderr)
+
+
+def save_records(records: dict, path: Path) -> None:
+    """Write the records (a temporary file renamed into place: a killed run keeps the last complete file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(records))
+    tmp.replace(path)
+
+
+def feature_scans(seed: int, n: int, jobs: int) -> list[Path]:
+    """``n`` scans of the training feature families (640x480, sensor noise), rendering the missing ones."""
+    if not n:
+        return []
+    from v2c.bench.cache import default_cache_dir, scan_complete
+    from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
+    from v2c.synth.families import FAMILY_GROUPS
+
+    folder = default_cache_dir() / f"calib_features_sensor_640x480_s{seed}"
+    dirs = [folder / scan_name(i) for i in range(n)]
+    missing = [i for i, d in enumerate(dirs) if not scan_complete(d)]
+    if missing:
+        cfg = SynthConfig(width=640, height=480, noise="sensor", families=FAMILY_GROUPS["features"])
+        generate_dataset(folder, n - missing[0], seed, cfg, jobs=jobs, progress=True, start=missing[0])
+    return dirs
 
 
 def corpus_scans(suite: str, views: int, jobs: int) -> list[Path]:
@@ -65,6 +142,8 @@ def corpus_scans(suite: str, views: int, jobs: int) -> list[Path]:
     ones; none when ``views`` is 0. Never the test split."""
     if not views:
         return []
+    if suite not in ("corpus-train", "corpus-val"):
+        raise ValueError(f"{suite}: the calibration may only see corpus-train and corpus-val")
     from v2c.bench.config import BenchConfig
     from v2c.bench.suite import SuiteConfig, plan_scans, render_missing
 
@@ -73,77 +152,120 @@ def corpus_scans(suite: str, views: int, jobs: int) -> list[Path]:
     return [s.path for s in scans if s.label not in failed and (s.path / "gt" / "meta.json").is_file()]
 
 
-def arrays(rows: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return (
-        np.array([r["type"] for r in rows], object),
-        np.array([r["raw"] for r in rows], float),
-        np.array([r["ok"] for r in rows], float),
-    )
+def rows_of(dirs: Sequence[Path], records: dict, source: str) -> list[dict]:
+    """The labelled edges of the scans, each tagged with its source."""
+    return [dict(r, source=source) for d in dirs for s in SEGMENTATIONS for r in records.get(f"{d}|{s}", [])]
+
+
+def report(cmap: object, sets: dict[str, list[dict]]) -> dict[str, dict[str, float]]:
+    """Intersection and all-edge ECE (10 bins) of the raw and calibrated confidence per set and segmentation,
+    printed and returned."""
+    out = {}
+    for name, rows in sets.items():
+        for seg in SEGMENTATIONS:
+            r = [x for x in rows if x["method"] == seg]
+            if not r:
+                continue
+            t = np.array([x["type"] for x in r])
+            ok = np.array([x["ok"] for x in r], float)
+            raw = np.array([x["raw"] for x in r], float)
+            cal = np.array([cmap.apply(x["type"], x["raw"], x) for x in r], float)
+            s = t == "intersection"
+            e = {
+                "intersection_edges": int(s.sum()),
+                "intersection_right": float(ok[s].mean()) if s.any() else float("nan"),
+                "intersection_raw": expected_calibration_error(raw[s], ok[s]),
+                "intersection_calibrated": expected_calibration_error(cal[s], ok[s]),
+                "all_raw": expected_calibration_error(raw, ok),
+                "all_calibrated": expected_calibration_error(cal, ok),
+            }
+            out[f"{name}/{seg}"] = e
+            print(
+                f"{name:>14s} {seg:8s} int {e['intersection_edges']:5d} right {e['intersection_right']:.3f} "
+                f"ECE int raw {e['intersection_raw']:.3f} cal {e['intersection_calibrated']:.3f} | "
+                f"all raw {e['all_raw']:.3f} cal {e['all_calibrated']:.3f}"
+            )
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Label the training and validation scans, fit the map on the training edges, report, write the map."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--train-seed", type=int, default=7100)
-    ap.add_argument("--train-n", type=int, default=80)
-    ap.add_argument("--val-seed", type=int, default=9600)
-    ap.add_argument("--val-n", type=int, default=20)
-    ap.add_argument("--corpus-train-views", type=int, default=0, help="also fit on the corpus training split")
-    ap.add_argument("--corpus-val-views", type=int, default=0, help="also report the corpus validation split")
-    ap.add_argument("--segmentation", default="learned")
+    ap.add_argument("--train-n", type=int, default=60)
+    ap.add_argument("--feat-seed", type=int, default=7200)
+    ap.add_argument("--feat-n", type=int, default=40)
+    ap.add_argument("--corpus-train-views", type=int, default=1)
+    ap.add_argument("--corpus-train-n", type=int, default=None, help="only the first N corpus-train scans")
+    ap.add_argument("--val-seed", type=int, default=9000)
+    ap.add_argument("--val-n", type=int, default=40)
+    ap.add_argument("--corpus-val-views", type=int, default=2)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--records", type=Path, default=Path.home() / ".cache" / "v2c" / "calibration_records.json")
+    ap.add_argument("--l2", type=float, default=30.0, help="L2 penalty of the logistic fit (standardised features)")
+    ap.add_argument("--candidates", action="store_true", help="print the validation ECE of each candidate feature set")
+    ap.add_argument("--label-only", action="store_true", help="label the scans, fit nothing")
+    ap.add_argument("--records", type=Path, default=Path.home() / ".cache" / "v2c" / "calibration_records_v2.json")
     ap.add_argument("--out", type=Path, default=DEFAULT_MAP)
     a = ap.parse_args(argv)
-    if a.train_seed == 0 or a.val_seed == 0:
-        print("seed 0 is the reported in-family bench: never fit on it", file=sys.stderr)
+    if 0 in (a.train_seed, a.val_seed, a.feat_seed):
+        print("seed 0 is the reported in-family bench: never fit or choose on it", file=sys.stderr)
         return 1
     from v2c.bench.run import BenchConfig, prepare_scans
 
-    train = prepare_scans(BenchConfig(n=a.train_n, seed=a.train_seed, jobs=a.jobs), progress=False)
-    val = prepare_scans(BenchConfig(n=a.val_n, seed=a.val_seed, jobs=a.jobs), progress=False) if a.val_n else []
     records = json.loads(a.records.read_text()) if a.records.is_file() else {}
-    train += corpus_scans("corpus-train", a.corpus_train_views, a.jobs)
-    val += corpus_scans("corpus-val", a.corpus_val_views, a.jobs)
-    tr = collect(train, a.segmentation, records, a.jobs)
-    va = collect(val, a.segmentation, records, a.jobs) if val else []
-    a.records.parent.mkdir(parents=True, exist_ok=True)
-    a.records.write_text(json.dumps(records))
-    t, raw, ok = arrays(tr)
-    cmap = fit_map(
-        t,
-        raw,
-        ok,
-        meta={
-            "fitted_on": f"v2c bench cache seed {a.train_seed}, scans 0..{a.train_n - 1} (640x480, sensor noise)"
-            + (
-                f" + the corpus training split, {a.corpus_train_views} view(s) a part (v2c bench --suite corpus-train)"
-                if a.corpus_train_views
-                else ""
-            ),
-            "segmentation": a.segmentation,
-            "edges": len(tr),
-            "label": "v2c.bench.vbrep.edge_correctness",
-            "tol_px": 3.0,
-            "method": "isotonic (pool-adjacent-violators) per edge type on the raw confidence",
-        },
+    sources = {
+        "in-family": prepare_scans(BenchConfig(n=a.train_n, seed=a.train_seed, jobs=a.jobs), progress=False),
+        "features": feature_scans(a.feat_seed, a.feat_n, a.jobs),
+        "corpus-train": corpus_scans("corpus-train", a.corpus_train_views, a.jobs)[: a.corpus_train_n],
+    }
+    val = {
+        "in-family-val": prepare_scans(BenchConfig(n=a.val_n, seed=a.val_seed, jobs=a.jobs), progress=False),
+        "corpus-val": corpus_scans("corpus-val", a.corpus_val_views, a.jobs),
+    }
+    # round robin over the sources (new parts first), so that a partial run already holds some of every source
+    lists = (
+        sources["corpus-train"],
+        val["corpus-val"],
+        sources["in-family"],
+        sources["features"],
+        val["in-family-val"],
     )
-    for name, rows in (("train", tr), ("val", va)):
-        if not rows:
-            continue
-        t, raw, ok = arrays(rows)
-        cal = np.array([cmap.apply(ti, ri) for ti, ri in zip(t, raw)])
-        for sel_name, sel in (("intersection", t == "intersection"), ("all", np.ones(len(t), bool))):
-            print(
-                f"{name} {sel_name}: {int(sel.sum())} edges, right {ok[sel].mean():.3f}, "
-                f"ECE raw {expected_calibration_error(raw[sel], ok[sel]):.4f} "
-                f"calibrated {expected_calibration_error(cal[sel], ok[sel]):.4f}"
-            )
-        cmap.meta[f"ece_{name}"] = {
-            "intersection_raw": expected_calibration_error(raw[t == "intersection"], ok[t == "intersection"]),
-            "intersection_calibrated": expected_calibration_error(cal[t == "intersection"], ok[t == "intersection"]),
-            "all_raw": expected_calibration_error(raw, ok),
-            "all_calibrated": expected_calibration_error(cal, ok),
-        }
+    order = [d for group in itertools.zip_longest(*lists) for d in group if d is not None]
+    collect(order, records, a.jobs, a.records)
+    if a.label_only:
+        return 0
+    from v2c.vbrep.calibration import DEFAULT_FEATURES, fit_calibration
+
+    train = {k: rows_of(v, records, k) for k, v in sources.items()}
+    tr = [r for v in train.values() for r in v]
+    valrows = {k: rows_of(v, records, k) for k, v in val.items()}
+    if a.candidates:
+        for name, feats in CANDIDATES.items():
+            print(f"candidate {name}: {', '.join(feats)}")
+            report(fit_calibration(tr, feats, source_key="source", l2=a.l2), valrows)
+    cmap = fit_calibration(tr, DEFAULT_FEATURES, source_key="source", l2=a.l2)
+    cmap.meta = {
+        "fitted_on": {
+            "in-family": f"v2c bench cache seed {a.train_seed}, scans 0..{a.train_n - 1} (procedural families)",
+            "features": f"{a.feat_n} scans of feat_prismatic / feat_plate / feat_turned, seed {a.feat_seed}",
+            "corpus-train": f"the corpus training split, {a.corpus_train_views} view(s) a part "
+            f"(v2c bench --suite corpus-train), {len(sources['corpus-train'])} scans",
+            "segmentations": list(SEGMENTATIONS),
+            "edges": {k: len(v) for k, v in train.items()},
+            "weighting": "each source's edges of a type weigh the same in all",
+        },
+        "chosen_on": f"in-family seed {a.val_seed} (scans 0..{a.val_n - 1}) and the corpus validation split "
+        f"({a.corpus_val_views} views a part), learned and oracle",
+        "label": "v2c.bench.vbrep.edge_correctness",
+        "tol_px": 3.0,
+        "method": "logistic regression per edge type on features of the edge (v2c.vbrep.calibration"
+        f".FEATURE_FUNCTIONS), L2 penalty {a.l2} on the standardised weights, fitted by Newton's method",
+        "features": list(DEFAULT_FEATURES),
+    }
+    print("training:")
+    cmap.meta["ece_train"] = report(cmap, train)
+    print("validation:")
+    cmap.meta["ece_val"] = report(cmap, valrows)
     cmap.save(a.out)
     print(f"wrote {a.out}")
     return 0

@@ -7,13 +7,13 @@ confidences (raw and calibrated, `v2c.vbrep.confidence`, `v2c.vbrep.calibration`
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from v2c.camera import project
 from v2c.primitives import Plane
-from v2c.vbrep.calibration import CalibrationMap, load_map
+from v2c.vbrep.calibration import CalibrationMap, load_map, record_edges
 from v2c.vbrep.classify import FaceGeom
 from v2c.vbrep.confidence import edge_confidence, face_confidence
 from v2c.vbrep.config import VBRepConfig
@@ -64,18 +64,64 @@ def _edge_sigma_m(
     return outline_sigma_m(fc[0], p.pts, focal, ucfg)
 
 
+def _edge_quantities(
+    ctx: ExtractContext,
+    p: ProtoEdge,
+    seg: Segmentation,
+    face_px: np.ndarray,
+    raw: float,
+    length_px: float,
+    sig_mm: float | None,
+) -> dict[str, Any]:
+    """What the calibration may read of one edge (`v2c.vbrep.calibration.FEATURE_FUNCTIONS` turn these into features):
+    its raw confidence and the quantities behind it, made relative where a scale exists (residual and
+    edge-to-depth error over the sensor's depth noise at the edge's depth, gaps over the intersection threshold),
+    and what shows an unfamiliar reconstruction: its faces' segmentation scores and sizes (pixels), the part's
+    mean segmentation score and number of faces, its positional sigma (mm). NaN where a quantity does not apply."""
+    s = p.stats
+    inst = [int(f) for f in p.faces]
+    scores = np.asarray(seg.scores, float)
+    part_px = float(np.sum(face_px[1:]))
+    n = min(len(scores), len(face_px))
+    z = float(np.median(p.pts[:, 2])) if len(p.pts) else float("nan")
+    noise = max(ctx.cfg.sigma_depth_coeff_per_m * z * z, 1e-6)  # metres: the sensor's depth sigma at the edge
+    return {
+        "type": p.type.value,
+        "method": seg.method,
+        "raw": raw,
+        "length_px": length_px,
+        "agreement": float(s.get("agreement", 1.0)),
+        "angle_deg": float(np.rad2deg(s.get("angle", np.nan))),
+        "gap_rel": float(s.get("gap", np.nan)) / ctx.gap_thr,
+        "jump_rel": float(s.get("jump", np.nan)) / ctx.gap_thr,
+        "vis_share": float(s.get("vis_share", np.nan)),
+        "residual_noise": float(s.get("residual", np.nan)) / noise,
+        "depth_err_noise": float(s.get("depth_err", np.nan)) / noise,
+        "seg_score_min": float(min(scores[i] for i in inst)),
+        "face_px_min": float(min(face_px[i] for i in inst)),
+        "part_px": part_px,
+        "part_score_mean": float(np.sum(scores[1:n] * face_px[1:n]) / max(part_px, 1.0)),
+        "n_faces": float(len(ctx.faces)),
+        "sigma_mm": float("nan") if sig_mm is None else float(sig_mm),
+        "depth_m": z,
+    }
+
+
 def _vedges(
     ctx: ExtractContext,
     protos: list[ProtoEdge],
     fid: dict[int, int],
     covs: dict[int, FaceCovariance | None],
     ucfg: UncertaintyConfig,
+    seg: Segmentation,
 ) -> list[VEdge]:
     """The VB-Rep edges with their confidences (raw and calibrated), analytic curves and sigmas (mm)."""
     cfg = ctx.cfg
     cmap = _calibration(cfg)
     focal = float(np.sqrt(ctx.K[0, 0] * ctx.K[1, 1]))
+    face_px = np.bincount(np.asarray(ctx.instances).ravel().clip(0))
     edges = []
+    quantities = []
     for k, p in enumerate(protos):
         s = p.stats
         length_px = float(np.sum(np.linalg.norm(np.diff(project(p.pts, ctx.K), axis=0), axis=1)))
@@ -94,11 +140,13 @@ def _vedges(
             cfg=cfg,
         )
         raw = round(raw * s.get("factor", 1.0), 4)
-        conf = raw if cmap is None else round(float(cmap.apply(p.type, raw)), 4)
         curve = dict(p.curve) if p.type is EdgeType.INTERSECTION and p.curve is not None else None
         tangent = bool(curve.pop("tangent", False)) if curve is not None else False
         sig = _edge_sigma_m(p, covs, focal, ucfg)
         sig_mm = round(1000.0 * sig, 5) if sig is not None and np.isfinite(sig) else None
+        q = _edge_quantities(ctx, p, seg, face_px, raw, length_px, sig_mm)
+        quantities.append(q)
+        conf = raw if cmap is None else round(float(cmap.apply(p.type, raw, q)), 4)
         edges.append(
             VEdge(
                 k,
@@ -114,6 +162,7 @@ def _vedges(
                 sigma_mm=sig_mm,
             )
         )
+    record_edges(quantities)
     return edges
 
 
@@ -209,7 +258,7 @@ def assemble(
     ucfg = uncertainty_config(ctx.cfg)
     face_pts = {i: measured_points(ctx.instances == i, ctx.depth, ctx.K) for i in inst_ids}
     covs = {i: face_covariance(ctx.faces[i].prim, face_pts[i], ctx.faces[i].residual, ucfg) for i in inst_ids}
-    edges = _vedges(ctx, protos, fid, covs, ucfg)
+    edges = _vedges(ctx, protos, fid, covs, ucfg, seg)
     vverts = [VVertex(k, v.kind, v.position, v.pixel) for k, v in enumerate(vertices)]
     loops = build_loops(protos, fid, ctx.K)
     vfaces = _vfaces(ctx, inst_ids, fid, loops, covs, face_pts)

@@ -6,10 +6,15 @@ projected length lies within ``tol_px`` (3) pixels of ground-truth boundary reco
 face(s) its faces cover. For an intersection edge: a true edge of the part, where two true surfaces meet, lies
 within 3 px of it (about 1.5 mm at 0.6 m and a 55 degree field of view over 640 px).
 
-The map is one isotonic (monotone non-decreasing) regression of right/wrong on the raw confidence per edge type,
-fitted by pool-adjacent-violators (`isotonic_fit`) on training and validation scans only
-(scripts/calibrate_confidence.py), stored as knots in ``confidence_calibration.json`` beside this module and
-applied by linear interpolation between the knots (`CalibrationMap.apply`), clipped to [0, 1].
+The shipped map (``confidence_calibration.json`` beside this module, format 2) is one logistic regression per edge
+type over features of the edge (`DEFAULT_FEATURES`, computed by `FEATURE_FUNCTIONS` from the quantities the
+extraction records per edge, `v2c.vbrep.assemble`): the raw product's logit, the factors behind it one by one
+(image length, agreement, surface angle, depth gap, fit residual and edge-to-depth error over the sensor noise,
+depth jump, contour share) and the part's mean segmentation score, which is low on parts unlike the learned
+segmenter's training parts. It is fitted (`fit_calibration`: L2-penalised, Newton's method, deterministic) on
+learned and oracle reconstructions of training scans only: in-family, training feature-family and corpus-train
+scans (scripts/calibrate_confidence.py). A map of format 1 (one isotonic map of the raw confidence per type,
+`isotonic_fit` / `fit_map`, applied by linear interpolation between knots) still loads and applies.
 
 Also here: the expected calibration error (`expected_calibration_error`, equal-width bins) and a reliability
 diagram drawn with OpenCV (`reliability_diagram`).
@@ -17,8 +22,10 @@ diagram drawn with OpenCV (`reliability_diagram`).
 
 from __future__ import annotations
 
+import contextvars
 import itertools
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -31,6 +38,19 @@ from v2c.vbrep.model import EdgeType
 #: The shipped calibration map (written by scripts/calibrate_confidence.py).
 DEFAULT_MAP = Path(__file__).with_name("confidence_calibration.json")
 FORMAT = "v2c.confidence_calibration"
+
+#: When set to a list, `record_edges` appends each extraction's per-edge quantities to it (the calibration
+#: script's way of reading what the map is fitted on, edge for edge in the VB-Rep's order).
+EDGE_RECORD: contextvars.ContextVar[list[list[dict[str, Any]]] | None] = contextvars.ContextVar(
+    "v2c_edge_record", default=None
+)
+
+
+def record_edges(quantities: list[dict[str, Any]]) -> None:
+    """Hand one extraction's per-edge quantities to the recorder in force (`EDGE_RECORD`); nothing without one."""
+    rec = EDGE_RECORD.get()
+    if rec is not None:
+        rec.append(quantities)
 
 
 def isotonic_fit(
@@ -82,17 +102,151 @@ def isotonic_fit(
     return np.asarray(sx) / sw_a, np.asarray(sy) / sw_a, sw_a
 
 
+def _logit(p: np.ndarray) -> np.ndarray:
+    """The log-odds log(p / (1 - p)) of p clipped to [0.005, 0.995] (a raw score of 0 or 1 stays finite)."""
+    p = np.clip(np.asarray(p, float), 0.005, 0.995)
+    return np.log(p / (1.0 - p))
+
+
+def _log_clip(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """The log of x clipped to [lo, hi] (NaN stays NaN)."""
+    return np.log(np.clip(np.asarray(x, float), lo, hi))
+
+
+#: The features a logistic calibration may use: name -> function of the edge quantities (arrays; what
+#: `v2c.vbrep.assemble` records for each edge, see `EDGE_RECORD`). NaN where a quantity does not apply to the
+#: edge's type: the model fills it with its training median.
+FEATURE_FUNCTIONS: dict[str, Callable[[dict[str, np.ndarray]], np.ndarray]] = {
+    # the product of today's factors, on the logit scale
+    "logit_raw": lambda q: _logit(q["raw"]),
+    # its factors, each on its own: length of the edge in the image (pixels) and the share of samples agreeing
+    "log_length_px": lambda q: _log_clip(q["length_px"], 1.0, 1e4),
+    "agreement": lambda q: np.asarray(q["agreement"], float),
+    # intersection: the surfaces' angle (degrees, up to 90) and their depth gap over the intersection threshold
+    "angle_deg": lambda q: np.minimum(np.asarray(q["angle_deg"], float), 90.0),
+    "gap_rel": lambda q: np.clip(np.asarray(q["gap_rel"], float), 0.0, 2.0),
+    # the faces' fit residual and the edge-to-depth error over the sensor's depth noise there (log)
+    "log_residual_noise": lambda q: _log_clip(q["residual_noise"], 0.01, 1e3),
+    "log_depth_err_noise": lambda q: _log_clip(q["depth_err_noise"], 0.01, 1e3),
+    # what reveals an unfamiliar reconstruction: the segmenter's score of the edge's less sure face, the
+    # smaller face's size (pixels, log), the part's pixel-weighted mean score and its number of faces (log)
+    "seg_score_min": lambda q: np.asarray(q["seg_score_min"], float),
+    "log_face_px_min": lambda q: _log_clip(q["face_px_min"], 1.0, 1e7),
+    "part_score_mean": lambda q: np.asarray(q["part_score_mean"], float),
+    "log_n_faces": lambda q: _log_clip(q["n_faces"], 1.0, 1e4),
+    # the edge's 1-sigma position error (mm, log)
+    "log_sigma_mm": lambda q: _log_clip(q["sigma_mm"], 1e-3, 1e2),
+    # outlines: the depth jump over the intersection threshold (log; the background's infinite jump clipped) and a
+    # visibility edge's share of samples with a contour point
+    "log_jump_rel": lambda q: _log_clip(q["jump_rel"], 0.01, 1e3),
+    "vis_share": lambda q: np.asarray(q["vis_share"], float),
+}
+
+
+#: The features of the shipped map (chosen on the validation scans, scripts/calibrate_confidence.py): today's
+#: factors one by one, and the part's mean segmentation score, which is low where the learned segmenter meets a part
+#: unlike its training parts (measured per candidate set in docs/vbrep.md, "Calibration").
+DEFAULT_FEATURES: tuple[str, ...] = (
+    "logit_raw",
+    "log_length_px",
+    "agreement",
+    "angle_deg",
+    "gap_rel",
+    "log_residual_noise",
+    "log_depth_err_noise",
+    "log_jump_rel",
+    "vis_share",
+    "part_score_mean",
+)
+
+
+def feature_matrix(quantities: dict[str, Any] | list[dict[str, Any]], names: tuple[str, ...]) -> np.ndarray:
+    """(n, len(names)) features of n edges from their quantities (one edge's dict or a list of them); NaN where a
+    quantity does not apply."""
+    rows = [quantities] if isinstance(quantities, dict) else list(quantities)
+    keys = [k for k, v in rows[0].items() if not isinstance(v, str)] if rows else []
+    q = {k: np.array([r.get(k, np.nan) for r in rows], float) for k in keys}
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.stack([FEATURE_FUNCTIONS[n](q) for n in names], axis=1) if rows else np.zeros((0, len(names)))
+
+
+@dataclass(frozen=True)
+class LogisticModel:
+    """p = 1 / (1 + exp(-(b + sum_i w_i (x_i - mean_i) / std_i))) over the named features (`FEATURE_FUNCTIONS`),
+    a NaN feature replaced by ``fill`` (its training median)."""
+
+    features: tuple[str, ...]
+    fill: np.ndarray
+    mean: np.ndarray
+    std: np.ndarray
+    coef: np.ndarray
+    intercept: float
+
+    def probability(self, quantities: dict[str, Any] | list[dict[str, Any]]) -> np.ndarray:
+        """The probability right of each edge whose quantities are given (one dict or a list)."""
+        X = feature_matrix(quantities, self.features)
+        X = np.where(np.isfinite(X), X, self.fill)
+        z = self.intercept + ((X - self.mean) / self.std) @ self.coef
+        return 1.0 / (1.0 + np.exp(-np.clip(z, -30.0, 30.0)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (numbers rounded to 6 significant digits)."""
+
+        def r(a: np.ndarray) -> list[float]:
+            return [float(f"{v:.6g}") for v in np.asarray(a, float)]
+
+        return {
+            "features": list(self.features),
+            "fill": r(self.fill),
+            "mean": r(self.mean),
+            "std": r(self.std),
+            "coef": r(self.coef),
+            "intercept": float(f"{self.intercept:.6g}"),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], source: str, etype: str) -> LogisticModel:
+        """Inverse of `to_dict`; ValueError (naming ``source``) for an unknown feature or arrays of other lengths."""
+        names = tuple(d["features"])
+        bad = [n for n in names if n not in FEATURE_FUNCTIONS]
+        if bad:
+            raise ValueError(
+                f"{source}: unknown feature(s) {bad} of {etype!r}, expected some of {list(FEATURE_FUNCTIONS)}"
+            )
+        arrs = [np.asarray(d[k], float) for k in ("fill", "mean", "std", "coef")]
+        if any(len(a) != len(names) for a in arrs) or np.any(arrs[2] <= 0):
+            raise ValueError(f"{source}: {etype!r} needs fill, mean, std (> 0) and coef of {len(names)} values each")
+        return cls(names, *arrs, float(d["intercept"]))
+
+
 @dataclass
 class CalibrationMap:
-    """Per edge type, knots (x: raw confidence, y: probability right) of a monotone map; a type without knots
-    keeps its raw value. ``meta``: how it was fitted (scans, counts, tolerance)."""
+    """Per edge type, the map from an edge to the probability that its type is right: a logistic model over
+    features of the edge (``models``; needs the edge's quantities), else knots (x: raw confidence, y: probability
+    right) of a monotone map; a type with neither keeps its raw value. ``meta``: how it was fitted (scans, counts,
+    tolerance)."""
 
     knots: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+    models: dict[str, LogisticModel] = field(default_factory=dict)
 
-    def apply(self, etype: EdgeType | str, raw: float | np.ndarray) -> float | np.ndarray:
-        """Calibrated probability in [0, 1] for raw confidence(s) of an edge type; constant beyond the end knots."""
-        k = self.knots.get(EdgeType(etype).value)
+    def apply(
+        self,
+        etype: EdgeType | str,
+        raw: float | np.ndarray,
+        quantities: dict[str, Any] | list[dict[str, Any]] | None = None,
+    ) -> float | np.ndarray:
+        """Calibrated probability in [0, 1] of edge(s) of one type: by its logistic model from ``quantities`` (one
+        edge's dict or a list; ValueError without them), else by its knots from ``raw`` (constant beyond the end
+        knots), else ``raw``."""
+        t = EdgeType(etype).value
+        model = self.models.get(t)
+        if model is not None:
+            if quantities is None:
+                raise ValueError(f"the calibration of {t!r} edges needs their quantities, not only the raw score")
+            out = model.probability(quantities)
+            return float(out[0]) if isinstance(quantities, dict) else out
+        k = self.knots.get(t)
         r = np.asarray(raw, float)
         out = r if k is None or len(k[0]) == 0 else np.interp(r, k[0], k[1])
         out = np.clip(out, 0.0, 1.0)
@@ -100,36 +254,36 @@ class CalibrationMap:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form of ``confidence_calibration.json`` (knots rounded to 6 decimals)."""
-        return {
-            "format": FORMAT,
-            "format_version": 1,
-            "meta": self.meta,
-            "types": {
-                t: {"x": [round(float(v), 6) for v in xk], "y": [round(float(v), 6) for v in yk]}
-                for t, (xk, yk) in sorted(self.knots.items())
-            },
+        types: dict[str, Any] = {
+            t: {"x": [round(float(v), 6) for v in xk], "y": [round(float(v), 6) for v in yk]}
+            for t, (xk, yk) in self.knots.items()
         }
+        types.update({t: m.to_dict() for t, m in self.models.items()})
+        return {"format": FORMAT, "format_version": 2, "meta": self.meta, "types": dict(sorted(types.items()))}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "calibration") -> CalibrationMap:
-        """Inverse of `to_dict`; ValueError (naming ``source``) for another format, an unknown edge type or knots
-        that are not monotone."""
+        """Inverse of `to_dict` (format versions 1: knots only, and 2); ValueError (naming ``source``) for another
+        format, an unknown edge type or feature, or knots that are not monotone."""
         if d.get("format") != FORMAT:
             raise ValueError(f"{source}: format {d.get('format')!r}, expected {FORMAT!r}")
-        knots = {}
+        knots, models = {}, {}
         for t, k in d.get("types", {}).items():
             EdgeType(t)  # ValueError naming the bad type
+            if "features" in k:
+                models[t] = LogisticModel.from_dict(k, source, t)
+                continue
             xk, yk = np.asarray(k["x"], float), np.asarray(k["y"], float)
             if len(xk) != len(yk) or np.any(np.diff(xk) <= 0) or np.any(np.diff(yk) < 0):
                 raise ValueError(f"{source}: knots of {t!r} are not increasing in x and non-decreasing in y")
             knots[t] = (xk, yk)
-        return cls(knots, dict(d.get("meta", {})))
+        return cls(knots, dict(d.get("meta", {})), models)
 
     def save(self, path: str | Path) -> Path:
-        """Write the `to_dict` form as JSON to ``path``; returns it."""
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=1) + "\n")
-        return path
+        """Write the `to_dict` form as JSON to ``path`` (atomically, `v2c.io_safe`); returns it."""
+        from v2c.io_safe import write_text_atomic
+
+        return write_text_atomic(path, json.dumps(self.to_dict(), indent=1) + "\n")
 
 
 @lru_cache(maxsize=4)
@@ -165,6 +319,74 @@ def fit_map(
             yk = np.maximum.accumulate((yk * n + 1.0) / (n + 2.0))
             knots[t.value] = (xk, yk)
     return CalibrationMap(knots, dict(meta or {}))
+
+
+def fit_logistic(
+    X: np.ndarray, y: np.ndarray, w: np.ndarray | None = None, l2: float = 1.0
+) -> tuple[float, np.ndarray]:
+    """Weighted logistic regression of y (0/1) on the columns of X (no NaN): (intercept, coefficients) minimising
+    the weighted log loss plus ``l2`` / 2 * |coefficients|^2 (intercept not penalised), by Newton's method from 0.
+    Weights are scaled to mean 1, so ``l2`` reads against the number of examples. Deterministic."""
+    X, y = np.asarray(X, float), np.asarray(y, float)
+    w = np.ones(len(y)) if w is None else np.asarray(w, float)
+    w = w * (len(w) / w.sum())
+    A = np.c_[np.ones(len(y)), X]
+    pen = np.full(A.shape[1], float(l2))
+    pen[0] = 0.0
+    beta = np.zeros(A.shape[1])
+    for _ in range(100):
+        p = 1.0 / (1.0 + np.exp(-np.clip(A @ beta, -30.0, 30.0)))
+        grad = A.T @ (w * (p - y)) + pen * beta
+        H = (A * (w * p * (1.0 - p))[:, None]).T @ A + np.diag(pen + 1e-9)
+        step = np.linalg.solve(H, grad)
+        beta -= step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    return float(beta[0]), beta[1:]
+
+
+def source_weights(sources: np.ndarray) -> np.ndarray:
+    """Per example the weight that gives every source the same total weight (mean weight 1)."""
+    sources = np.asarray(sources)
+    names, inv, counts = np.unique(sources, return_inverse=True, return_counts=True)
+    return len(sources) / (len(names) * counts[inv])
+
+
+def fit_calibration(
+    rows: list[dict[str, Any]],
+    features: tuple[str, ...] = tuple(FEATURE_FUNCTIONS),
+    source_key: str | None = None,
+    l2: float = 1.0,
+    min_edges: int = 20,
+    meta: dict[str, Any] | None = None,
+) -> CalibrationMap:
+    """Logistic model per edge type from labelled edges (rows: the recorded quantities of each edge with its
+    ``type`` and ``ok`` (1: right, 0: wrong)). Per type, the features that apply to it (not NaN on every edge and
+    not constant) are standardised (training mean and standard deviation; NaN filled with the training median).
+    ``source_key``: a row field naming where the edge came from; every source then weighs the same in the fit
+    (`source_weights`). A type with fewer than ``min_edges`` edges gets no model (keeps its raw value)."""
+    models = {}
+    for t in EdgeType:
+        r = [x for x in rows if x["type"] == t.value]
+        if len(r) < min_edges:
+            continue
+        X = feature_matrix(r, features)
+        finite = np.isfinite(X)
+        with np.errstate(invalid="ignore"):
+            fill = np.array(
+                [np.median(X[finite[:, j], j]) if finite[:, j].any() else np.nan for j in range(X.shape[1])]
+            )
+        X = np.where(finite, X, fill)
+        std = X.std(0) if len(X) else np.zeros(X.shape[1])
+        keep = np.isfinite(fill) & (std > 1e-9)
+        X, fill, std = X[:, keep], fill[keep], std[keep]
+        mean = X.mean(0)
+        y = np.array([x["ok"] for x in r], float)
+        w = source_weights(np.array([x[source_key] for x in r])) if source_key else None
+        b, coef = fit_logistic((X - mean) / std, y, w, l2)
+        names = tuple(n for n, k in zip(features, keep) if k)
+        models[t.value] = LogisticModel(names, fill, mean, std, coef, b)
+    return CalibrationMap({}, dict(meta or {}), models)
 
 
 def reliability_bins(conf: np.ndarray, ok: np.ndarray, n_bins: int = 10) -> dict[str, np.ndarray]:
