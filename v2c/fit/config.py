@@ -39,8 +39,8 @@ class FitConfig(RansacConfig):
     # learned segmenter labels at 0.6-0.9; on real frames 0.999 also set the
     # tuna can's radius right (43.1 mm for 42.8; 36.5 mm at 0)
     nested_selection: bool = True  # a cone or torus (labelled or type-searched) must beat its simpler nested
-    # types (a cone: the cylinder, its half angle 0; a torus: the cylinder and the
-    # sphere) by GRIC with the sensor's noise model (`geometry.selection.
+    # type (the cylinder: a cone of half angle 0, a torus of infinite major
+    # radius) by GRIC with the sensor's noise model (`geometry.selection.
     # select_type`), else the simpler type is fitted (`stage._simpler_where_nested`;
     # on real depth the network's cone and torus labels of can sides and box faces)
     seed: int = 0  # seed of all random sampling
