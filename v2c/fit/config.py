@@ -38,6 +38,11 @@ class FitConfig(RansacConfig):
     # (before the rule: 98.8 / 97.6 / 0.0366). It demoted true cylinders the
     # learned segmenter labels at 0.6-0.9; on real frames 0.999 also set the
     # tuna can's radius right (43.1 mm for 42.8; 36.5 mm at 0)
+    nested_selection: bool = True  # a cone or torus (labelled or type-searched) must beat its simpler nested
+    # type (the cylinder: a cone of half angle 0, a torus of infinite major
+    # radius) by GRIC with the sensor's noise model (`geometry.selection.
+    # select_type`), else the simpler type is fitted (`stage._simpler_where_nested`;
+    # on real depth the network's cone and torus labels of can sides and box faces)
     seed: int = 0  # seed of all random sampling
 
     # -- global aligned fit (shared frame R) ----------------------------------------------------------------------

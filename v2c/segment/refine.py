@@ -90,6 +90,20 @@ class RefineConfig:
     # a near-flat union would otherwise pass as a huge cylinder)
     merge_coax_any_label: bool = False  # pieces labelled plane or cone take part too, next to a cylinder-labelled one
     # (the network calls strips of narrow hole walls planes); the group keeps a cylinder label
+    merge_coax_curved: bool = True  # ... only those that are curved: a cylinder fitted to them is supported by the
+    # patch and beats their plane by GRIC with the sensor's noise model (`_curvature_earned`; a can's side the
+    # network calls a plane in part; a true plane beside a cylinder stays out)
+    absorb: bool = True  # fragments join the touching neighbour whose surface their depth fits (absorb_fragments)
+    absorb_max_px: int = 400  # fragments: instances with at most this many valid pixels (pixels) ...
+    absorb_max_share: float = 0.5  # ... and at most this share of the neighbour they join (fraction)
+    absorb_sigma: float = 1.0  # ... whose points lie within this many sensor sigmas of the neighbour's surface
+    # (median of |distance| / sigma(z) over the fragment's points; ratio; 0.674 for points on it with Gaussian noise)
+    absorb_ring_px: int = 8  # a plane neighbour's surface is the plane through its pixels this close to the
+    # fragment (pixels; local, so a warped or slightly bent side is judged where the fragment is)
+    absorb_ring_min_px: int = 30  # fewer such pixels: the plane of the whole neighbour (pixels)
+    absorb_min_px: int = 6  # fragments with fewer valid pixels are left alone (pixels)
+    absorb_min_valid_share: float = 0.5  # ... and those with depth on less of their pixels (fraction; a face seen
+    # edge-on returns little depth, and what it returns lies on its neighbour)
     noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
     # synthetic `sensor` profile's D4xx model
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
@@ -145,7 +159,8 @@ def refine_instances(
     normals: np.ndarray | None = None,
     ransac: RansacConfig | None = None,
 ) -> Segmentation:
-    """`split_plane_outliers`, `merge_coaxial`, `split_coaxial_steps`, then `merge_coplanar`, on one point map
+    """`split_plane_outliers`, `merge_coaxial`, `split_coaxial_steps`, `merge_coplanar`, then `absorb_fragments`,
+    on one point map
     (normals: see `split_plane_outliers`; ransac: the instance points, RANSAC and type-selection settings of the
     cylinder and curvature tests, default `RansacConfig()`; a `v2c.fit.FitConfig` is one)."""
     if not cfg.enabled:
@@ -155,7 +170,8 @@ def refine_instances(
     seg = split_plane_outliers(seg, depth, K, probs, cfg, geometry, normals)
     seg = merge_coaxial(seg, depth, K, cfg, geometry, ransac)
     seg = split_coaxial_steps(seg, depth, K, cfg, geometry, ransac)
-    return merge_coplanar(seg, depth, K, cfg, geometry, ransac)
+    seg = merge_coplanar(seg, depth, K, cfg, geometry, ransac)
+    return absorb_fragments(seg, depth, K, cfg, geometry, ransac)
 
 
 def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.Generator) -> tuple[np.ndarray, float]:
@@ -476,6 +492,30 @@ def _relabel(
     return Segmentation(compact[lut[inst]], labels[roots], np.asarray(seg.scores)[roots], seg.method)
 
 
+def _curvature_earned(
+    ptype: str,
+    x: np.ndarray,
+    n: np.ndarray,
+    size: float,
+    cfg: RefineConfig,
+    ransac: RansacConfig,
+    rng: np.random.Generator,
+) -> bool:
+    """True when a fit of the curved type ``ptype`` to points ``x`` (metres; normals ``n``) is supported by the
+    patch (`geometry.selection.supported`: radius against extent, turn, sagitta against the sensor's noise) and
+    beats the patch's plane by GRIC with the sensor's noise model (`geometry.selection.select_type`,
+    noise_sigma_coeff); False for a plane or where there are too few points."""
+    if ptype not in ("cylinder", "cone", "sphere", "torus") or len(x) < 6:
+        return False
+    fit_cfg = replace(ransac, noise_sigma_coeff=cfg.noise_sigma_coeff)
+    got = ransac_fit(ptype, x, n, size, fit_cfg, rng)
+    if got is None or not supported(got.primitive, x[got.inliers] if got.inliers.sum() >= 3 else x, fit_cfg):
+        return False
+    nrm, off = _plane_ransac(x, 0.5 * cfg.tol_part * size, cfg, rng)
+    plane = RansacFit(Plane(off * nrm, nrm), np.ones(len(x), bool), 1.0)
+    return select_type({"plane": plane, ptype: got}, x, size, fit_cfg) == ptype
+
+
 def merge_coaxial(
     seg: Segmentation,
     depth: np.ndarray,
@@ -498,7 +538,8 @@ def merge_coaxial(
     tol = cfg.merge_tol_part * size
     types = TYPE_OF_LABEL[np.asarray(seg.labels, np.int64)]
     is_cyl = types == _CYLINDER
-    joins = is_cyl | (np.isin(types, [_PLANE, TYPE_NAMES.index("cone")]) if cfg.merge_coax_any_label else is_cyl)
+    other = np.isin(types, [_PLANE, TYPE_NAMES.index("cone")])
+    joins = is_cyl | (other if cfg.merge_coax_any_label or cfg.merge_coax_curved else is_cyl)
     pairs = touching_pairs(inst)
     pairs = pairs[(is_cyl[pairs[:, 0]] | is_cyl[pairs[:, 1]]) & joins[pairs[:, 0]] & joins[pairs[:, 1]]]
     if not len(pairs):
@@ -512,7 +553,10 @@ def merge_coaxial(
         if ip is None or len(ip.points) < cfg.merge_coax_min_px:
             continue
         if not is_cyl[i]:  # a plane or cone piece: measured against its cylinder neighbours' cylinders only
-            own[int(i)] = (ip.points, ip.normals, None)
+            if cfg.merge_coax_any_label or _curvature_earned(
+                "cylinder", ip.points, ip.normals, size, cfg, ransac, np.random.default_rng([cfg.seed, int(i)])
+            ):
+                own[int(i)] = (ip.points, ip.normals, None)
             continue
         fit = ransac_fit("cylinder", ip.points, ip.normals, size, ransac, rng)
         if fit is not None and isinstance(fit.primitive, Cylinder):
@@ -597,3 +641,110 @@ def merge_coplanar(
     # the largest plane-labelled piece's label and score stand (the largest piece's where none is a plane: then a
     # merged group of flat pieces is a plane of no axis class, at that piece's score)
     return _relabel(seg, inst, groups, is_plane, unkept_label=label_of("plane", "U"))
+
+
+def _neighbour_distance(
+    frag: np.ndarray,
+    g: int,
+    inst: np.ndarray,
+    valid: np.ndarray,
+    pts: np.ndarray,
+    size: float,
+    labels: np.ndarray,
+    cfg: RefineConfig,
+    ransac: RansacConfig,
+    rng: np.random.Generator,
+    surfaces: dict[int, object],
+) -> float:
+    """Median over the fragment's points (pixels ``frag``, bool (H, W)) of |distance to instance ``g``'s surface|
+    in sensor sigmas (noise_sigma_coeff z^2), or inf when ``g`` has no surface. A plane-labelled ``g``: the plane
+    through its valid pixels within absorb_ring_px of the fragment (its whole plane below absorb_ring_min_px); a
+    curved one: a fit of its label's type to all its points (`geometry.ransac.ransac_fit`, cached in
+    ``surfaces``)."""
+    x = pts[frag & valid]
+    sigma = cfg.noise_sigma_coeff * x[:, 2] ** 2
+    ptype = TYPE_NAMES[int(TYPE_OF_LABEL[int(labels[g])])]
+    tol = 0.5 * cfg.tol_part * size
+    if ptype == "plane":
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * cfg.absorb_ring_px + 1,) * 2)
+        ring = cv2.dilate(frag.astype(np.uint8), kernel).astype(bool) & (inst == g) & valid
+        if ring.sum() < max(cfg.absorb_ring_min_px, 3):
+            ring = (inst == g) & valid
+        if ring.sum() < 3:
+            return float("inf")
+        nrm, off = _plane_ransac(pts[ring], tol, cfg, rng)
+        d = np.abs(x @ nrm - off)
+    else:
+        if g not in surfaces:
+            ip = instance_points(pts, valid, inst, np.array([g]), ransac).get(g)
+            got = None if ip is None else ransac_fit(ptype, ip.points, ip.normals, size, ransac, rng)
+            surfaces[g] = None if got is None else got.primitive
+        prim = surfaces[g]
+        if prim is None:
+            return float("inf")
+        d = np.abs(prim.signed_distance(x))
+    return float(np.median(d / np.maximum(sigma, 1e-12)))
+
+
+def absorb_fragments(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    cfg: RefineConfig = RefineConfig(),
+    geometry: tuple[np.ndarray, float] | None = None,
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
+    """``seg`` with its fragments (at most absorb_max_px valid pixels, depth on at least absorb_min_valid_share
+    of them) joined to the touching, larger instance whose surface their depth fits best, where it fits within
+    absorb_sigma sensor sigmas (`_neighbour_distance`): islands of printed art, strips along a box edge, pieces
+    of noise that the network gave a label of their own. A fragment off every neighbour's surface (a hole's wall,
+    a chamfer, a step: another surface) stays, and so does one whose curved label earns its curvature
+    (`_curvature_earned`: a fillet strip leaves its plane tangentially, within the noise at first). Smallest
+    fragments first; the merged instance keeps the largest member's label and score. ransac: the settings of the
+    curved neighbours' fits (default `RansacConfig()`)."""
+    ransac = ransac or RansacConfig()
+    prepared = _step_input(seg, depth, K, cfg.enabled and cfg.absorb, geometry, ransac)
+    if prepared is None:
+        return seg
+    inst, valid, pts, size = prepared
+    labels = np.asarray(seg.labels)
+    n_px = np.bincount(inst[valid].ravel(), minlength=len(labels))
+    area = np.bincount(inst.ravel(), minlength=len(labels))
+    pairs = touching_pairs(inst)
+    frags = [
+        i
+        for i in range(1, len(labels))
+        if cfg.absorb_min_px <= n_px[i] <= cfg.absorb_max_px and n_px[i] >= cfg.absorb_min_valid_share * area[i]
+    ]
+    if not frags or not len(pairs):
+        return seg
+    rng = np.random.default_rng(cfg.seed)
+    types = [TYPE_NAMES[int(TYPE_OF_LABEL[int(k)])] for k in labels]
+    curved = {
+        i
+        for i in frags
+        if types[i] != "plane"
+        and (ip := instance_points(pts, valid, inst, np.array([i]), ransac).get(i)) is not None
+        and _curvature_earned(
+            types[i], ip.points, ip.normals, size, cfg, ransac, np.random.default_rng([cfg.seed, int(i)])
+        )
+    }
+    frags = [i for i in frags if i not in curved]
+    surfaces: dict[int, object] = {}
+    sets = UnionFind(range(1, len(labels)))
+    for i in sorted(frags, key=lambda j: (n_px[j], j)):  # loop over fragments, smallest first
+        frag = inst == i
+        nbs = np.unique(np.concatenate([pairs[pairs[:, 0] == i, 1], pairs[pairs[:, 1] == i, 0]]))
+        best, best_d = None, cfg.absorb_sigma
+        for g in nbs.tolist():  # loop over its neighbours
+            if n_px[g] <= n_px[i] or n_px[i] > cfg.absorb_max_share * n_px[g]:
+                continue
+            d = _neighbour_distance(frag, g, inst, valid, pts, size, labels, cfg, ransac, rng, surfaces)
+            if d <= best_d:
+                best, best_d = g, d
+        if best is not None:
+            sets.union(i, best)
+    groups = sets.groups()
+    if not groups:
+        return seg
+    return _relabel(seg, inst, groups, np.ones(len(labels), bool))
