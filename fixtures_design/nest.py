@@ -44,6 +44,8 @@ class NestParams:
     # clearance): the floor does not locate the part (the walls do), and the ground height from the scan carries
     # the depth offset; on the 24 training scans of seed 7100 the true part's bottom lay up to 2.9 mm under a floor
     # at ground - clearance (10 of 24; 7 mm on a shaft whose up axis was recovered wrong)
+    relief: float = 0.5  # mm: the space under the seat (floor_gap deep) reaches this much beyond the pocket's walls,
+    # so those walls end at the seat (the relief's own walls are not mating faces)
     max_area_growth: float | None = None  # pocket area with the shadow over the visible footprint's: a larger
     # growth is refused (the view cannot bound the footprint); None: no limit
 
@@ -187,20 +189,31 @@ def design_nest(
                 f"max_area_growth {params.max_area_growth:g}): one view does not bound this part's footprint"
             )
     c = params.clearance
-    z_floor = fp.ground_z - c - params.floor_gap
+    z_seat = fp.ground_z - c  # where the pocket's walls (its mating faces) start
+    z_floor = z_seat - params.floor_gap  # the floor, under a relief as wide as the pocket plus `relief`
     z_top = fp.ground_z + params.depth
     pocket_faces = []
     hulls = 0
     for poly in fp.outlines:
-        face = Face(Wire.make_polygon([Vector(float(x), float(y), z_floor) for x, y in poly], close=True))
+        face = Face(Wire.make_polygon([Vector(float(x), float(y), z_seat) for x, y in poly], close=True))
         if not face.is_valid or face.area <= 0:  # a self-touching outline: take its convex hull (larger: safe)
             hull = cv2.convexHull(poly.astype(np.float32)).reshape(-1, 2)
-            face = Face(Wire.make_polygon([Vector(float(x), float(y), z_floor) for x, y in hull], close=True))
+            face = Face(Wire.make_polygon([Vector(float(x), float(y), z_seat) for x, y in hull], close=True))
             hulls += 1
         pocket_faces.append(face)
-    pocket = [Solid.extrude(f, Vector(0, 0, z_top - z_floor + 1.0)) for f in pocket_faces]
+    pocket = [Solid.extrude(f, Vector(0, 0, z_top - z_seat + 1.0)) for f in pocket_faces]
+    if params.floor_gap > 0:
+        for f in pocket_faces:
+            try:
+                wider = Face(f.outer_wire().offset_2d(params.relief))
+            except Exception:  # noqa: BLE001 - an outline OCCT cannot offset keeps its own (walls then run down)
+                wider = f
+            pocket.append(
+                Solid.extrude(wider.moved(Location((0, 0, -params.floor_gap))), Vector(0, 0, params.floor_gap + 0.01))
+            )
     bb = np.array([[tuple(f.bounding_box().min), tuple(f.bounding_box().max)] for f in pocket_faces])
     lo, hi = bb[:, 0, :2].min(axis=0), bb[:, 1, :2].max(axis=0)
+    lo, hi = lo - params.relief, hi + params.relief
     w = params.wall
     plate = Solid.make_box(hi[0] - lo[0] + 2 * w, hi[1] - lo[1] + 2 * w, z_top - (z_floor - params.floor))
     plate = plate.moved(Location((lo[0] - w, lo[1] - w, z_floor - params.floor)))
@@ -212,7 +225,8 @@ def design_nest(
     for f in local.faces():
         n = np.array(tuple(f.normal_at(f.center())))
         cx, cy = f.center().X, f.center().Y
-        if abs(n[2]) < 1e-3 and lo[0] - 1e-3 <= cx <= hi[0] + 1e-3 and lo[1] - 1e-3 <= cy <= hi[1] + 1e-3:
+        inside = lo[0] - 1e-3 <= cx <= hi[0] + 1e-3 and lo[1] - 1e-3 <= cy <= hi[1] + 1e-3
+        if abs(n[2]) < 1e-3 and inside and f.center().Z > z_seat:  # the relief's walls under it do not mate
             walls.append(f)
     plane = local_plane(fmap.points(np.zeros(3)), fmap.vectors(fp.axes[0]), fmap.vectors(fp.axes[2]))
     mating = [place(f, plane) for f in walls]
