@@ -1,9 +1,11 @@
-"""A reference the depth contradicts is refused (docs/fixtures.md, "What the scan vouches for").
+"""Causes of fixtures cutting the true part, injected and checked against it (docs/fixtures.md, "What the scan
+vouches for").
 
 The corner of a generated bracket (320 x 240, ground-truth VB-Rep) is moved 3 mm into the part, as a wrong fit
 would put it: designed on that reference the locator cuts into the true part (gt/part.step); given the scan's own
 points of the part, `design_fixture` refuses it, and still designs the corner on the true reference, which does
-not cut.
+not cut. A block's nest on a ground height read 2 mm too high cuts with a floor at the ground, not with the default
+floor gap.
 """
 
 from __future__ import annotations
@@ -54,3 +56,25 @@ def test_the_true_reference_is_kept_and_does_not_cut(bracket: tuple) -> None:
     truth = transformed(truth_cam, camera_mm_matrix(fx.fmap))
     assert observed_inside(fx, points)[0] == 0
     assert interference(fx, truth)[1] < 1e-3
+
+
+#: The ground estimate's injected error (mm): the scan's ground read this much above the true part's bottom.
+GROUND_ERROR_MM = 2.0
+
+
+def test_a_nest_on_a_ground_read_too_high_does_not_cut(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """A generated block's nest (ground-truth VB-Rep) with the ground height read 2 mm too high, as the scan's
+    depth offset can put it: a floor at the ground less the clearance cuts the block's bottom; the default floor
+    (``floor_gap`` further down, under a relief) does not, and the pocket walls still mate."""
+    from fixtures_design import NestParams, check_mating
+    from fixtures_design.nest import footprint
+
+    path = synthetic_scan(tmp_path_factory.mktemp("nest_ground"), "block", 0)
+    vb, truth_cam = vbrep_from_scan(path)
+    ground = (footprint(vb).ground_z + GROUND_ERROR_MM) / 1000.0  # metres along the part's up axis
+    flat = design_fixture(vb, "nest", NestParams(floor_gap=0.0), ground_height=ground)
+    truth = transformed(truth_cam, camera_mm_matrix(flat.fmap))
+    assert interference(flat, truth)[1] > 1e-3
+    fx = design_fixture(vb, "nest", NestParams(), ground_height=ground)
+    assert interference(fx, truth)[1] < 1e-3
+    assert check_mating(fx, truth, max_points_per_face=8).median < 1.0
