@@ -37,11 +37,12 @@ REFERENCE_OF: dict[FixtureKind, ReferenceKind] = {
     FixtureKind.CRADLE: ReferenceKind.BOSS,
 }
 
-#: Default clearance = max(the kind's own clearance, CLEARANCE_K x the largest 1-sigma position error (mm) of the
-#: VB-Rep faces the fixture mates with, `VFace.sigma_mm`; for a nest the median over all faces). Chosen on training
-#: families with `v2c bench --stage fixtures` (docs/fixtures.md, "Clearance from uncertainty"): on 12 scans of seed
-#: 7100, corner / pin / cradle cut 54 / 31 / 15 / 0 % at k = 0 / 0.5 / 1 / 1.5 and touch (median within 1 mm)
-#: 77 / 77 / 46 / 23 %: no k meets both (cut <= 2 %, touch >= 90 %); 1 halves the cuts of 0.5.
+#: Default clearance = max(the kind's own clearance, CLEARANCE_K x hypot(the largest 1-sigma position error (mm) of
+#: the VB-Rep faces the fixture mates with, `VFace.sigma_mm`, and `DEPTH_BIAS_MM`); for a nest the median sigma over
+#: all faces. Chosen on training families with `v2c bench --stage fixtures` (docs/fixtures.md, "What the scan vouches
+#: for"): on 24 scans of seed 7100, corner / pin / cradle cut 25 / 11 / 7 % at k = 0.5 / 1 / 1.5 and touch (median
+#: within 1 mm) 61 / 25 / 7 %: no k meets both (cut <= 2 %, touch >= 90 %); 1 halves the cuts of 0.5, and what still
+#: cuts at 1 is two holes fitted wrong and a block over an unseen feature, not the clearance.
 CLEARANCE_K = 1.0
 
 #: References whose mating faces' 1-sigma position error exceeds this (mm) are refused by `design_fixture`. None

@@ -46,6 +46,8 @@ class NestParams:
     # at ground - clearance (10 of 24; 7 mm on a shaft whose up axis was recovered wrong)
     relief: float = 0.5  # mm: the space under the seat (floor_gap deep) reaches this much beyond the pocket's walls,
     # so those walls end at the seat (the relief's own walls are not mating faces)
+    max_shadow_frac: float = 3.0  # of the part's seen size: a camera shadow reaching further is refused (a view
+    # near the level of the ground, whose rays never meet it near the part); a guard, not tuned
     max_area_growth: float | None = None  # pocket area with the shadow over the visible footprint's: a larger
     # growth is refused (the view cannot bound the footprint); None: no limit
 
@@ -71,6 +73,7 @@ def footprint(
     grow: float = 0.0,
     shadow_height: float | None = None,
     points: np.ndarray | None = None,
+    max_shadow_frac: float = 3.0,
 ) -> Footprint:
     """Project the VB-Rep face meshes onto the part's ground plane and trace the outer outlines (mm).
 
@@ -82,6 +85,7 @@ def footprint(
     between the ground and this height (each seen point's ray continued beyond it down to the ground; the camera
     sits at this frame's origin), where its unseen side may stand. points: observed points of the part (camera
     frame, metres, (N, 3)), projected and shadowed like the face meshes (parts of the part no face was fitted to).
+    max_shadow_frac: a shadow reaching further than this fraction of the part's seen size raises ValueError.
     """
     axes = proper_rotation(vbrep.frame)
     tris = []
@@ -104,6 +108,14 @@ def footprint(
     segs = np.zeros((0, 2, 2))
     if shadow_height is not None and len(pts):
         segs = _shadow_segments(pts, ground_z, ground_z + shadow_height)
+        seen = np.ptp(pts[:, :2], axis=0).max()
+        reach = float(np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1).max()) if len(segs) else 0.0
+        if reach > max_shadow_frac * seen:
+            raise ValueError(
+                f"the part's camera shadow reaches {reach:.0f} mm beyond it (the part is {seen:.0f} mm across; "
+                f"max_shadow_frac {max_shadow_frac:g}): the camera sees it too near the level of the ground to bound "
+                "its footprint"
+            )
     flat = np.concatenate([tri.reshape(-1, 2), pts[:, :2], segs.reshape(-1, 2)])
     # One pixel for outlines tracing boundary pixel centres, one for the polygon simplification (<= 1 pixel).
     r_px = int(np.ceil(grow / pixel)) + 2 if grow > 0 else 0
@@ -179,7 +191,9 @@ def design_nest(
     """
     grow = params.clearance + params.outline_px * pixel_mm(vbrep)
     shadow = params.depth if params.shadow else None
-    fp = footprint(vbrep, params.pixel, params.min_area_frac, ground_height, grow, shadow, points)
+    fp = footprint(
+        vbrep, params.pixel, params.min_area_frac, ground_height, grow, shadow, points, params.max_shadow_frac
+    )
     if params.max_area_growth is not None and shadow is not None:
         seen = footprint(vbrep, params.pixel, params.min_area_frac, ground_height, grow, None, points)
         growth = sum(_area(o) for o in fp.outlines) / max(sum(_area(o) for o in seen.outlines), 1e-9)
