@@ -115,7 +115,10 @@ def fixture_for_scan(
     if from_step:
         frame = Frame.CAMERA  # the VB-Rep is in the file's frame already
     ground = ground_height(scan, vbrep) if scan is not None else None
-    fixture = design_fixture(vbrep, kind, params, frame=frame, min_confidence=min_confidence, ground_height=ground)
+    points = scan.points()[scan.valid] if scan is not None else None  # what the depth shows of the part
+    fixture = design_fixture(
+        vbrep, kind, params, frame=frame, min_confidence=min_confidence, ground_height=ground, points=points
+    )
     if part == "true":
         gt = source / "gt" / "part.step"
         if not gt.exists():

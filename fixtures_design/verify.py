@@ -93,3 +93,51 @@ def part_inside_share(fixture: Fixture, vbrep: VBRep, n_points: int = 3000, seed
         cls.Perform(gp_Pnt(*map(float, p)), 1e-6)
         inside += cls.State() == TopAbs_IN
     return inside / n_points
+
+
+@dataclass(frozen=True)
+class EvidenceConfig:
+    """When the scan's own points say a design would cut into the part (`observed_inside`)."""
+
+    noise_coeff_per_m: float = 0.0015  # the depth noise law sigma = coeff * z^2 (z in metres; the sensor's)
+    n_sigma: float = 3.0  # a point counts when it lies deeper inside the fixture than this many noise sigmas
+    max_points: int = 10  # designs with more such points are refused (flying pixels, speckle tolerated)
+
+
+def observed_inside(
+    fixture: Fixture, points: np.ndarray, config: EvidenceConfig = EvidenceConfig(), limit: int = 400
+) -> tuple[int, float]:
+    """How many of the scan's observed points (camera frame, metres, (N, 3)) lie inside the fixture's solid by more
+    than ``config.n_sigma`` depth-noise sigmas (``noise_coeff_per_m`` z^2), and the deepest such depth (mm).
+
+    The depth map shows material there: a fixture holding it would cut into the part (a hole fitted too wide or off
+    its axis, a pin deeper than a counterbore's step, a block over a feature the segmentation merged away). The
+    depth of at most ``limit`` inside points (a seeded subset) is measured; the count is scaled up to all of them.
+    """
+    from OCP.BRepClass3d import BRepClass3d_SolidClassifier
+    from OCP.gp import gp_Pnt
+    from OCP.TopAbs import TopAbs_IN
+
+    p_cam = np.asarray(points, float).reshape(-1, 3)
+    p_cam = p_cam[p_cam[:, 2] > 0]
+    if not len(p_cam):
+        return 0, 0.0
+    pts = fixture.fmap.points(p_cam)
+    bb = fixture.solid.bounding_box()
+    lo, hi = np.array(tuple(bb.min)), np.array(tuple(bb.max))
+    near = np.all((pts >= lo) & (pts <= hi), axis=1)
+    pts, z = pts[near], p_cam[near, 2]
+    cls = BRepClass3d_SolidClassifier(fixture.solid.wrapped)
+    inside = np.zeros(len(pts), bool)
+    for i, p in enumerate(pts):
+        cls.Perform(gp_Pnt(*map(float, p)), 1e-6)
+        inside[i] = cls.State() == TopAbs_IN
+    idx = np.flatnonzero(inside)
+    if not len(idx):
+        return 0, 0.0
+    sub = np.random.default_rng(0).choice(idx, min(limit, len(idx)), replace=False)
+    shell = Shape.cast(fixture.solid.shells()[0].wrapped) if fixture.solid.shells() else fixture.solid
+    depth = distances_mm(pts[sub], shell)
+    margin = config.n_sigma * config.noise_coeff_per_m * z[sub] ** 2 * fixture.fmap.scale
+    deep = depth > margin
+    return int(round(deep.sum() * len(idx) / len(sub))), float(depth[deep].max()) if deep.any() else 0.0

@@ -6,9 +6,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from fixtures_design.design import DEPTH_BIAS_MM
 from v2c.bench.fixtures import FixtureBenchConfig, visible_cylinders
 from v2c.cli import main
 from v2c.scan import load_scan
@@ -32,7 +34,8 @@ def test_visible_holes_and_horizontal_cylinders(tmp_path: Path, family: str, see
 
 def test_stage_fixtures_on_a_shaft(tmp_path: Path) -> None:
     """One generated shaft (seed 0, 320 x 240, oracle segmentation) at k = 0 and 1: a cradle qualifies and is
-    designed at both k; at k = 1 its clearance is its faces' sigma and it cuts less; the summary counts the rows."""
+    designed at both k; at k = 1 its clearance is hypot(its faces' sigma, DEPTH_BIAS_MM) and it cuts less; the
+    summary counts the rows; the row holds the scan's depth offset (its depth against the clean depth)."""
     out = tmp_path / "fx.json"
     args = ["bench", "--stage", "fixtures", "--n", "1", "--seed", "0", "--families", "shaft", "--size", "320x240"]
     args += ["--segmentation", "oracle", "--clearance-k", "0,1", "--cache", str(tmp_path / "cache")]
@@ -44,8 +47,12 @@ def test_stage_fixtures_on_a_shaft(tmp_path: Path) -> None:
     assert row["family"] == "shaft" and row["horizontal_cylinder"] and not row["hole"]
     cradles = {d["k"]: d for d in row["designs"] if d["kind"] == "cradle"}
     assert cradles[0.0]["ok"] and cradles[1.0]["ok"]
+    assert isinstance(row["depth_bias_mm"], float) and abs(row["depth_bias_mm"]) < 3.0  # the warp is +-2 mm
     assert cradles[0.0]["clearance"] == pytest.approx(0.2)
-    assert cradles[1.0]["clearance"] == pytest.approx(max(0.2, cradles[1.0]["sigma_mm"]))
+    # k x hypot(the faces' sigma, the scan's depth offset 1-sigma DEPTH_BIAS_MM)
+    assert cradles[1.0]["clearance"] == pytest.approx(
+        max(0.2, float(np.hypot(cradles[1.0]["sigma_mm"], DEPTH_BIAS_MM)))
+    )
     assert cradles[1.0]["clearance"] > 0.2
     assert cradles[1.0]["cut_share"] < cradles[0.0]["cut_share"]
     for d in row["designs"]:

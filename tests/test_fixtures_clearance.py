@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fixtures_design import design_fixture
-from fixtures_design.design import CLEARANCE_K, DEFAULT_PARAMS, mating_sigma_mm
+from fixtures_design.design import CLEARANCE_K, DEFAULT_PARAMS, DEPTH_BIAS_MM, mating_sigma_mm
 from fixtures_design.model import FixtureKind
 from v2c.pipeline import PipelineConfig, reconstruct
 from v2c.scan import load_scan
@@ -39,18 +39,21 @@ def designs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list]:
         cfg = PipelineConfig(vbrep=replace(VBRepConfig(), sigma_depth_coeff_per_m=c))
         vb = reconstruct(scan, "oracle", config=cfg)
         for kind in out:
-            fx = design_fixture(vb, kind)
-            out[kind].append((fx.params.clearance, mating_sigma_mm(vb, fx.reference)))
+            # The injected noise has no depth offset over the part (no fBm warp): the design is told so.
+            fx = design_fixture(vb, kind, bias_mm=0.0)
+            with_bias = design_fixture(vb, kind).params.clearance  # the default: the sensor's offset too
+            out[kind].append((fx.params.clearance, mating_sigma_mm(vb, fx.reference), with_bias))
     return out
 
 
 @pytest.mark.parametrize("kind", ["corner", "pin"])
 def test_default_clearance_grows_with_the_depth_noise(designs: dict[str, list], kind: str) -> None:
     own = DEFAULT_PARAMS[FixtureKind(kind)].clearance
-    clearances = [c for c, _ in designs[kind]]
-    for clearance, sigma in designs[kind]:
+    clearances = [c for c, _, _ in designs[kind]]
+    for clearance, sigma, with_bias in designs[kind]:
         assert sigma is not None and sigma > 0
         assert clearance == pytest.approx(max(own, CLEARANCE_K * sigma))
+        assert with_bias == pytest.approx(max(own, CLEARANCE_K * np.hypot(sigma, DEPTH_BIAS_MM)))
     assert clearances[0] > own  # k sigma, not the kind's own clearance, sets it even at the sensor's noise
     assert all(b > 1.5 * a for a, b in zip(clearances, clearances[1:])), clearances  # doubling c: well above 1.5x
 

@@ -192,13 +192,21 @@ def evaluate_scan(
         "designs": [],
     }
     ground = ground_height(scan, vbrep)
+    valid = scan.valid
+    points = scan.points()[valid]  # what the depth shows of the part: designs holding it are refused
+    clean = scan.gt.depth_clean
+    both = valid & (clean > 0)
+    # The scan's depth offset over the part (diagnostic, from the ground truth): median of depth - clean depth.
+    row["depth_bias_mm"] = float(1000.0 * np.median((scan.depth - clean)[both])) if both.any() else None
     parts: dict[tuple, Any] = {}
     extra = {} if cfg.min_confidence is None else {"min_confidence": cfg.min_confidence}
     for kind in cfg.kinds:
         for k in cfg.clearance_k:
             d: dict[str, Any] = {"kind": kind, "k": float(k)}
             try:
-                fx = design_fixture(vbrep, kind, None, clearance_k=float(k), ground_height=ground, **extra)
+                fx = design_fixture(
+                    vbrep, kind, None, clearance_k=float(k), ground_height=ground, points=points, **extra
+                )
             except (NoReferenceError, ValueError) as exc:
                 d.update(ok=False, error=str(exc).splitlines()[0][:300])
                 row["designs"].append(d)

@@ -1,0 +1,80 @@
+"""Causes of fixtures cutting the true part, injected and checked against it (docs/fixtures.md, "What the scan
+vouches for").
+
+The corner of a generated bracket (320 x 240, ground-truth VB-Rep) is moved 3 mm into the part, as a wrong fit
+would put it: designed on that reference the locator cuts into the true part (gt/part.step); given the scan's own
+points of the part, `design_fixture` refuses it, and still designs the corner on the true reference, which does
+not cut. A block's nest on a ground height read 2 mm too high cuts with a floor at the ground, not with the default
+floor gap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from fixtures_design import design_fixture, interference
+from fixtures_design.frames import camera_mm_matrix
+from fixtures_design.model import transformed
+from fixtures_design.verify import observed_inside
+from v2c.scan import load_scan
+
+from scenes.truth import synthetic_scan, vbrep_from_scan
+
+#: The injected error (metres): the edge moved this far into the part along both faces' inward normals.
+OFFSET_M = 0.003
+
+
+@pytest.fixture(scope="module")
+def bracket(tmp_path_factory: pytest.TempPathFactory) -> tuple:
+    path = synthetic_scan(tmp_path_factory.mktemp("evidence_scans"), "bracket", 1)
+    vb, truth_cam = vbrep_from_scan(path)
+    scan = load_scan(path)
+    return vb, truth_cam, scan.points()[scan.valid]
+
+
+def test_a_reference_moved_into_the_part_cuts_and_is_refused(bracket: tuple) -> None:
+    vb, truth_cam, points = bracket
+    fx = design_fixture(vb, "corner", clearance_k=0.0)
+    ref = fx.reference
+    inward = -(ref.normals[0] + ref.normals[1]) / np.sqrt(2.0)  # both faces' inward normals, 45 deg between
+    wrong = replace(ref, start=ref.start + OFFSET_M * inward, end=ref.end + OFFSET_M * inward)
+    bad = design_fixture(vb, "corner", clearance_k=0.0, reference=wrong)
+    truth = transformed(truth_cam, camera_mm_matrix(bad.fmap))
+    assert interference(bad, truth)[1] > 0.01  # the injected error cuts more than 1 % of the fixture into the part
+    n_in, deepest = observed_inside(bad, points)
+    assert n_in > 100 and deepest > 1.0  # the depth shows material inside it
+    with pytest.raises(ValueError, match="scan's points of the part"):
+        design_fixture(vb, "corner", clearance_k=0.0, reference=wrong, points=points)
+
+
+def test_the_true_reference_is_kept_and_does_not_cut(bracket: tuple) -> None:
+    vb, truth_cam, points = bracket
+    fx = design_fixture(vb, "corner", points=points)
+    truth = transformed(truth_cam, camera_mm_matrix(fx.fmap))
+    assert observed_inside(fx, points)[0] == 0
+    assert interference(fx, truth)[1] < 1e-3
+
+
+#: The ground estimate's injected error (mm): the scan's ground read this much above the true part's bottom.
+GROUND_ERROR_MM = 2.0
+
+
+def test_a_nest_on_a_ground_read_too_high_does_not_cut(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """A generated block's nest (ground-truth VB-Rep) with the ground height read 2 mm too high, as the scan's
+    depth offset can put it: a floor at the ground less the clearance cuts the block's bottom; the default floor
+    (``floor_gap`` further down, under a relief) does not, and the pocket walls still mate."""
+    from fixtures_design import NestParams, check_mating
+    from fixtures_design.nest import footprint
+
+    path = synthetic_scan(tmp_path_factory.mktemp("nest_ground"), "block", 0)
+    vb, truth_cam = vbrep_from_scan(path)
+    ground = (footprint(vb).ground_z + GROUND_ERROR_MM) / 1000.0  # metres along the part's up axis
+    flat = design_fixture(vb, "nest", NestParams(floor_gap=0.0), ground_height=ground)
+    truth = transformed(truth_cam, camera_mm_matrix(flat.fmap))
+    assert interference(flat, truth)[1] > 1e-3
+    fx = design_fixture(vb, "nest", NestParams(), ground_height=ground)
+    assert interference(fx, truth)[1] < 1e-3
+    assert check_mating(fx, truth, max_points_per_face=8).median < 1.0
