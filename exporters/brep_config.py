@@ -24,6 +24,14 @@ class BrepConfig:
     min_tolerance: float = 1e-4  # smallest vertex tolerance set
     fix_precision: float = 1e-4  # ShapeFix working precision
     fix_max_tolerance: float = 5.0  # ShapeFix may raise tolerances up to this
+    # A vertex reaches this far (the larger of the two, and of twice the farthest a loop edge lies off the face's
+    # surface): loop edges that cross within it of a vertex meet there (`exporters.brep_faces`) ...
+    vertex_reach_fit_tols: float = 3.0  # ... this many fit tolerances (``fit_tol_*``) ...
+    vertex_reach_rel: float = 1e-3  # ... or this fraction of the part size
+    # Two edges of a boundary wire that BRepCheck finds crossing near their shared vertex (an edge trimmed a
+    # little past the corner) have the vertex's tolerance raised to cover the crossing, when it lies within the
+    # vertex's reach; at most this many such repairs per face
+    max_vertex_repairs: int = 12
     analytic_tol: float = 1e-4  # a VB-Rep line/circle counts as the exact intersection within this
     # The written face must be the reconstruction: a face bounded by its loops is kept only when its area is
     # within this fraction of its VB-Rep mesh area and it lies inside the part's box; otherwise (and when its

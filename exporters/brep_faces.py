@@ -7,12 +7,16 @@ from collections import defaultdict
 from typing import TYPE_CHECKING
 
 import numpy as np
-from OCP.BRepCheck import BRepCheck_Analyzer
+from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+from OCP.BRepCheck import BRepCheck_Analyzer, BRepCheck_NoError, BRepCheck_Wire
+from OCP.Geom2d import Geom2d_TrimmedCurve
+from OCP.Geom2dAPI import Geom2dAPI_InterCurveCurve
 from OCP.ShapeBuild import ShapeBuild_ReShape
 from OCP.ShapeFix import ShapeFix_Face
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_REVERSED
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopExp import TopExp, TopExp_Explorer
-from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Wire
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Vertex, TopoDS_Wire
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from exporters.occ_curves import curve_points
@@ -104,23 +108,82 @@ class FaceBuilder:
                     return None
         return poly, dev
 
-    def _boundaries_cross(self, s: AnalyticSurface, loops: list[Loop]) -> bool:
-        """Whether the loops' edges cross each other away from their vertices (sampled in (u, v)); crossings
-        within a vertex's reach (as BRepCheck tolerates them) and loops that cannot be sampled do not
-        count."""
+    def _vertex_reach(self, sampled: list[tuple[np.ndarray, float]]) -> float:
+        """How far from a vertex (mm) its loop edges may cross and still meet there: ``vertex_reach_fit_tols`` fit
+        tolerances, ``vertex_reach_rel`` of the part size, or twice the farthest a sampled loop edge lies off the
+        face's surface (edges off the surface get that much tolerance once fixed), whichever is largest."""
+        return max(
+            self.cfg.vertex_reach_fit_tols * self.fit_tol,
+            self.cfg.vertex_reach_rel * self.fmap.length(self.vb.scale),
+            2 * max((d for _, d in sampled), default=0.0),
+        )
+
+    def _boundaries_cross(self, s: AnalyticSurface, loops: list[Loop]) -> tuple[bool, float]:
+        """Whether the loops' edges cross each other away from their vertices (sampled in (u, v)), and the
+        vertices' reach (mm, `_vertex_reach`); crossings within a vertex's reach (as BRepCheck tolerates them
+        once `_cover_vertex_crossings` has run) and loops that cannot be sampled do not count."""
         sampled = [self._loop_uv_polygon(s, lp) for lp in loops]
         if any(p is None for p in sampled):
-            return False
+            return False, self._vertex_reach([])
+        reach = self._vertex_reach(sampled)
         pts = polygon_crossings([p for p, _ in sampled])
         if len(pts) == 0:
-            return False
+            return False, reach
         ends = np.array(
             [self.vpos[v] for lp in loops for eid, _ in lp for v in (self.vb.edges[eid].v0, self.vb.edges[eid].v1)]
         )
-        # edges off the surface get that much tolerance once fixed, and BRepCheck looks no closer
-        reach = max(3 * self.fit_tol, 1e-3 * self.fmap.length(self.vb.scale), 2 * max(d for _, d in sampled))
         dist = np.linalg.norm(s.evaluate(pts)[:, None] - ends[None], axis=2).min(1)
-        return bool(np.any(dist > reach))
+        return bool(np.any(dist > reach)), reach
+
+    def _adjacent_crossing(self, face: TopoDS_Face) -> tuple[TopoDS_Vertex, float] | None:
+        """The first pair of edges of one of the face's wires that BRepCheck finds crossing, when they share a
+        vertex: that vertex and the distance (mm) from it to the farthest point where their pcurves cross; None
+        when no wire self-intersects, the crossing edges share no vertex, or their crossings cannot be found."""
+        exp = TopExp_Explorer(face, TopAbs_WIRE)
+        while exp.More():
+            wire = TopoDS.Wire_s(exp.Current())
+            exp.Next()
+            e1, e2 = TopoDS_Edge(), TopoDS_Edge()
+            if BRepCheck_Wire(wire).SelfIntersect(face, e1, e2, False) == BRepCheck_NoError:
+                continue
+            if e1.IsNull() or e2.IsNull() or e1.IsSame(e2):
+                return None
+            ends2 = [TopExp.FirstVertex_s(e2), TopExp.LastVertex_s(e2)]
+            common = [v for v in (TopExp.FirstVertex_s(e1), TopExp.LastVertex_s(e1)) if any(v.IsSame(w) for w in ends2)]
+            if not common:
+                return None
+            curves = []
+            for e in (e1, e2):
+                ad = BRepAdaptor_Curve2d(e, face)
+                c = BRep_Tool.CurveOnSurface_s(e, face, 0.0, 0.0)
+                if c is None:
+                    return None
+                curves.append(Geom2d_TrimmedCurve(c, ad.FirstParameter(), ad.LastParameter()))
+            inter = Geom2dAPI_InterCurveCurve(curves[0], curves[1], self.cfg.fix_precision)
+            if inter.NbPoints() == 0:
+                return None
+            surf = BRep_Tool.Surface_s(face)
+            pts = [surf.Value(inter.Point(k).X(), inter.Point(k).Y()) for k in range(1, inter.NbPoints() + 1)]
+            vx = min(common, key=lambda v: max(BRep_Tool.Pnt_s(v).Distance(p) for p in pts))
+            return vx, max(BRep_Tool.Pnt_s(vx).Distance(p) for p in pts)
+        return None
+
+    def _cover_vertex_crossings(self, face: TopoDS_Face, reach: float) -> bool:
+        """Whether the face is valid once every pair of adjacent wire edges that BRepCheck finds crossing near
+        their shared vertex (within ``reach`` mm: an edge trimmed a little past the corner, its exact curve kept)
+        has that vertex's tolerance raised to cover the crossing; at most ``max_vertex_repairs`` repairs."""
+        for _ in range(self.cfg.max_vertex_repairs):
+            if BRepCheck_Analyzer(face).IsValid():
+                return True
+            found = self._adjacent_crossing(face)
+            if found is None or found[1] > reach:
+                return False
+            vx, dist = found
+            tol = 1.05 * dist + self.cfg.min_tolerance
+            if tol <= BRep_Tool.Tolerance_s(vx):
+                return False  # covered already: BRepCheck objects to something else
+            self.bb.UpdateVertex(vx, tol)
+        return BRepCheck_Analyzer(face).IsValid()
 
     def _loop_area_uv(self, s: AnalyticSurface, loop: Loop) -> float:
         """Signed (u, v) area of a loop from its edges' polylines (positive: counter-clockwise)."""
@@ -190,7 +253,8 @@ class FaceBuilder:
         wires = [self._wire(lp, edges) for lp in loops]
         if not wires or any(w is None for w in wires):
             return None
-        if self._boundaries_cross(s, loops):
+        crossed, reach = self._boundaries_cross(s, loops)
+        if crossed:
             return None  # BRepCheck would say so too, at a hundred times the cost
         face = TopoDS_Face()
         self.bb.MakeFace(face, s.geom, self.cfg.fix_precision)
@@ -204,7 +268,7 @@ class FaceBuilder:
         except Exception as exc:  # noqa: BLE001 - any OCCT failure: try without broken loops, then the mesh
             self.warnings.append(f"face {f.id}: ShapeFix_Face failed ({exc})")
             return None
-        if not BRepCheck_Analyzer(face).IsValid():
+        if not self._cover_vertex_crossings(face, reach):
             return None
         # ShapeFix may drop a wire it finds inconsistent and return a valid face of the rest: the face must
         # still hold every loop edge (or what ShapeFix replaced it with).

@@ -1,0 +1,73 @@
+"""Boundary wires whose adjacent edges cross near their shared vertex (an edge running a little past the
+corner): the face keeps its exact loop edges (`exporters.brep_faces.FaceBuilder._cover_vertex_crossings`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve
+from OCP.BRepCheck import BRepCheck_Analyzer
+from OCP.gp import gp_Pnt
+from OCP.TopExp import TopExp
+
+from exporters import step
+from exporters.brep import BrepConfig, build_brep, check_faces
+from exporters.brep_outline import mesh_area
+from exporters.frames import FrameMap
+from v2c.vbrep.model import VBRep
+
+from scenes.vbrep import box_corner
+
+CAMERA = FrameMap(np.eye(3), np.zeros(3))  # camera frame, millimetres
+
+
+def _hooked_silhouette() -> tuple[VBRep, np.ndarray, np.ndarray]:
+    """Box corner whose silhouette edge 3 (A -> D, face 0) leaves A with a hook that first runs about 1 mm out of
+    face 0 across the intersection edge 0 (V0 -> A) and back about 0.1 mm from A: edges 0 and 3 cross near A. Also
+    returns the points (mm) of A and V0."""
+    vb = box_corner()
+    a, v0, d = (vb.vertices[i].position for i in (1, 0, 4))  # A, V0, D (metres, camera frame)
+    along = (v0 - a) / np.linalg.norm(v0 - a)  # edge 0, from A towards V0
+    to_d = (d - a) / np.linalg.norm(d - a)
+    out = -(to_d - (to_d @ along) * along)  # in face 0's plane, across edge 0 away from the face
+    out /= np.linalg.norm(out)
+    # a quadratic Bezier from A (control point out of the face, towards V0) to 3 mm along A -> D, then straight on
+    ctrl = a + 0.0005 * along + 0.003 * out
+    end = a + 0.001 * to_d
+    t = np.linspace(0.0, 1.0, 25)[:, None]
+    hook = (1 - t) ** 2 * a + 2 * t * (1 - t) * ctrl + t**2 * end
+    rest = end + np.linspace(0.0, 1.0, 24)[1:, None] * (d - end)
+    vb.edges[3].polyline = np.concatenate([hook, rest])
+    return vb, a * 1000.0, v0 * 1000.0
+
+
+def test_adjacent_edges_crossing_near_their_vertex_keep_their_loop(tmp_path: Path) -> None:
+    # Before: BRepCheck found face 0's wire self-intersecting (edges 0 and 3 cross 0.1 mm from vertex A, whose
+    # tolerance is 1e-4 mm) and the face fell back to its mesh outline, losing its exact edges.
+    vb, a_mm, v0_mm = _hooked_silhouette()
+    cfg = BrepConfig()
+    built = build_brep(vb, CAMERA, cfg)
+    assert built.fallback_faces == [] and built.skipped_faces == []
+    assert all(check_faces(built).values()) and BRepCheck_Analyzer(built.shape).IsValid()
+    assert built.face_edges[0] == {0, 1, 3, 4}
+    # edge 0 is still the exact line V0 -> A, ending at A
+    (e0,) = built.edges[0]
+    c = BRepAdaptor_Curve(e0)
+    pts = np.array([c.Value(t).Coord() for t in np.linspace(c.FirstParameter(), c.LastParameter(), 9)])
+    line = (a_mm - v0_mm) / np.linalg.norm(a_mm - v0_mm)
+    rel = pts - v0_mm
+    assert np.linalg.norm(rel - (rel @ line)[:, None] * line, axis=1).max() < 1e-6
+    # vertex A's tolerance was raised to cover the crossing (about 0.1 mm from A), no further than its reach
+    ends = (TopExp.FirstVertex_s(e0), TopExp.LastVertex_s(e0))
+    vx = next(v for v in ends if BRep_Tool.Pnt_s(v).Distance(gp_Pnt(*map(float, a_mm))) < 1e-3)
+    fit_tol = max(cfg.fit_tol_abs, cfg.fit_tol_rel * 100.0)
+    assert 0.05 < BRep_Tool.Tolerance_s(vx) <= cfg.vertex_reach_fit_tols * fit_tol
+    # the written face read back is the box face: within 2 % of its mesh area
+    path = tmp_path / "hooked.step"
+    report = step.write(vb, path, frame="camera")
+    assert report.fallback_faces == []
+    f0 = vb.faces[0]
+    target = mesh_area(CAMERA.points(np.asarray(f0.mesh_vertices, float).reshape(-1, 3)), f0.mesh_triangles)
+    assert abs(step.written_face_areas(path)[0] - target) <= 0.02 * target
