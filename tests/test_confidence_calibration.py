@@ -354,10 +354,10 @@ def test_cylinder_sigma_is_finite_despite_its_free_turn() -> None:
 def test_fixture_default_clearance_grows_with_injected_noise() -> None:
     """The box-corner VB-Rep's faces get the sigma of a plane fitted to their own mesh points with injected depth
     noise (face-wide part off, so that the fit's covariance alone carries the noise): with clearance_k = 2 the
-    corner's default clearance is max(0.2 mm, 2 sigma) and grows with the noise; an explicit clearance is kept as
-    given; the default k is CLEARANCE_K."""
+    corner's default clearance is max(0.2 mm, 2 hypot(sigma, DEPTH_BIAS_MM)) and grows with the noise; an explicit
+    clearance is kept as given; the default k is CLEARANCE_K."""
     from fixtures_design import CornerParams
-    from fixtures_design.design import CLEARANCE_K, design_fixture
+    from fixtures_design.design import CLEARANCE_K, DEPTH_BIAS_MM, design_fixture
     from v2c.primitives import from_dict
 
     from scenes.vbrep import box_corner
@@ -376,12 +376,13 @@ def test_fixture_default_clearance_grows_with_injected_noise() -> None:
             f.sigma_mm = 1000.0 * face_sigma_m(fc, X)
         fx = design_fixture(vb, "corner", clearance_k=2.0)
         sig = max(f.sigma_mm for f in vb.faces if f.id in fx.reference.faces)
-        assert fx.params.clearance == pytest.approx(max(CornerParams().clearance, 2.0 * sig))
+        assert fx.params.clearance == pytest.approx(max(CornerParams().clearance, 2.0 * np.hypot(sig, DEPTH_BIAS_MM)))
         clearances.append(fx.params.clearance)
         assert design_fixture(vb, "corner", CornerParams(clearance=0.3), clearance_k=2.0).params.clearance == 0.3
         default = design_fixture(vb, "corner")  # the default k (CLEARANCE_K) on the same reference
-        assert default.params.clearance == pytest.approx(max(CornerParams().clearance, CLEARANCE_K * sig))
-    assert clearances[0] == CornerParams().clearance
+        want = max(CornerParams().clearance, CLEARANCE_K * np.hypot(sig, DEPTH_BIAS_MM))
+        assert default.params.clearance == pytest.approx(want)
+    assert clearances[0] == pytest.approx(max(CornerParams().clearance, 2.0 * DEPTH_BIAS_MM))  # noise 0: sigma 0
     assert clearances[0] < clearances[1] < clearances[2]
     # a VB-Rep without sigma (written before it existed) keeps the kind's clearance
     vb = box_corner()
