@@ -26,12 +26,15 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from v2c.camera import backproject
-from v2c.scan import Scan, ScanError, load_scan
+
+if TYPE_CHECKING:  # the scan loader (pydantic, picking, recordings) only where a scan folder is read
+    from v2c.scan import Scan
 
 NUM_INPUTS = 9
 MIRROR_SIGN_CHANNEL = 4  # the "left" normal component: the only channel a horizontal mirror negates
@@ -258,6 +261,8 @@ def build_cache(
     refuses (`ScanError`, e.g. a generated clutter object nearer than the depth limit) is left out with a line
     naming it; the index lists the scans kept (``scans``) and the ones asked for (``requested``).
     """
+    from v2c.scan import ScanError, load_scan
+
     cache_dir = Path(cache_dir)
     index_p = cache_dir / "index.json"
     names = [str(p) for p in scans]

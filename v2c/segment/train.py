@@ -159,6 +159,11 @@ def class_weights(data: CachedScans, ids: list[int], power: float) -> np.ndarray
     hist = np.zeros(256, np.int64)
     for i in ids[:: max(1, len(ids) // 300)]:
         hist += np.bincount(np.asarray(data.full(i)[1]).ravel(), minlength=256)
+    return class_weights_from_histogram(hist, power)
+
+
+def class_weights_from_histogram(hist: np.ndarray, power: float) -> np.ndarray:
+    """(18,) float32 weights = frequency^-power of a (256,) label histogram (mean 1 over present classes)."""
     f = hist[:NUM_CLASSES].astype(np.float64)
     with np.errstate(divide="ignore"):
         w = np.where(f > 0, (f / max(f.sum(), 1)) ** -power, 0.0)
@@ -183,13 +188,21 @@ def _batch(
 
 
 def losses(
-    model: UNet, x: torch.Tensor, y: torch.Tensor, b: torch.Tensor, cw: torch.Tensor, cfg: TrainConfig, bf16: bool
+    model: UNet,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    b: torch.Tensor,
+    cw: torch.Tensor,
+    cfg: TrainConfig,
+    bf16: bool,
+    device_type: str = "cpu",
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """(label CE, boundary BCE) of one batch."""
-    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+    """(label CE, boundary BCE) of one batch (bf16 autocast on ``device_type`` when ``bf16``)."""
+    with torch.autocast(device_type, dtype=torch.bfloat16, enabled=bf16):
         lab, bnd = model(x)
     ce = F.cross_entropy(lab.float(), y, weight=cw, ignore_index=IGNORE)
-    bce = F.binary_cross_entropy_with_logits(bnd.float()[:, 0], b, pos_weight=torch.tensor(cfg.boundary_pos_weight))
+    pos = torch.tensor(cfg.boundary_pos_weight, device=b.device)
+    bce = F.binary_cross_entropy_with_logits(bnd.float()[:, 0], b, pos_weight=pos)
     return ce, bce
 
 
