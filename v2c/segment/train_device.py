@@ -205,9 +205,13 @@ def train_on_device(
     cfg: TrainConfig,
     dcfg: DeviceTrainConfig = DeviceTrainConfig(),
     device: str | None = None,
+    lr_scale: dict[str, float] | None = None,
     log: Callable[[str], object] = print,
 ) -> dict:
     """Train every net of ``nets`` (name -> (architecture, init weights or None)) on the same batches.
+
+    lr_scale: per net, a factor on ``cfg.lr`` (e.g. a net trained from scratch takes a larger step than one
+    fine-tuned from weights); 1 for nets not named.
 
     Writes ``out_dir``/<name>.pt (best held-out mIoU), <name>.last.pt and <name>.json (the record). The schedule
     length is ``cfg.steps`` unless ``cfg.minutes`` is set (then fitted to the minutes after the probe steps).
@@ -248,6 +252,7 @@ def train_on_device(
         records[name] = {
             "config": asdict(cfg),
             "device_config": asdict(dcfg),
+            "lr_scale": (lr_scale or {}).get(name, 1.0),
             "net": asdict(model.cfg),
             "device": str(torch.cuda.get_device_name(dev) if dev.type == "cuda" else dev),
             "packed_scans": len(packed),
@@ -291,7 +296,7 @@ def train_on_device(
     while step < steps:
         for name in models:
             for g in opts[name].param_groups:
-                g["lr"] = _lr_at(step, replace(cfg, steps=steps))
+                g["lr"] = _lr_at(step, replace(cfg, steps=steps)) * (lr_scale or {}).get(name, 1.0)
         ids = train_ids[rng.integers(0, len(train_ids), cfg.batch)]
         xb, yb, bb = data.batch(ids, cfg.crop_px, rng, flip=cfg.flip)
         for name, model in models.items():
@@ -349,6 +354,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--crop", type=int, default=192)
     ap.add_argument("--lr", type=float, default=6e-4)
+    ap.add_argument("--wide-lr-scale", type=float, default=1.0, help="factor on --lr for the --wide net")
     ap.add_argument("--warmup", type=int, default=300)
     ap.add_argument("--realisations", type=int, default=2)
     ap.add_argument("--workers", type=int, default=16)
@@ -392,7 +398,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         eval_minutes=a.eval_minutes,
         seed=a.seed,
     )
-    train_on_device(packed, a.out, nets, cfg, dcfg, log=lambda m: print(m, flush=True))
+    scale = {"wide": a.wide_lr_scale}
+    train_on_device(packed, a.out, nets, cfg, dcfg, lr_scale=scale, log=lambda m: print(m, flush=True))
 
 
 if __name__ == "__main__":
