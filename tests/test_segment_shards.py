@@ -157,3 +157,40 @@ def test_train_on_device_learns_and_writes_loadable_checkpoints(scans: tuple[Pat
     after = evaluate_device(model, data, held_out, amp=False)["pixel_acc"]
     assert after == pytest.approx(rec["history"][-1]["pixel_acc"], abs=2e-3)  # the file holds fp16 weights
     assert after > before + 0.2
+
+
+def test_clutter_beside_the_part_is_ignored_and_a_plain_scan_untouched(tmp_path: Path) -> None:
+    """Random appearance stands boxes, cylinders and spheres beside the part, labelled background by the
+    generator. Training targets ignore them (255): every ignored pixel is off the part and its clean depth stands
+    above the ground, and pixels are ignored on at least 2 of 6 scans whose meta lists clutter; a plain scan (no
+    clutter) keeps its labels exactly."""
+    from v2c.camera import backproject
+    from v2c.segment.data import estimate_ground, ignore_clutter
+
+    look = generate_dataset(
+        tmp_path / "look",
+        6,
+        204,
+        SynthConfig(width=320, height=240, noise="sensor", appearance="random", framing="extent"),
+        progress=False,
+    )
+    with_clutter = 0
+    for d in look:
+        scan = load_scan(d)
+        gt = scan.gt
+        out = ignore_clutter(gt.labels, gt.faces, gt.depth_clean, scan.K)
+        ignored = (out == 255) & (gt.labels != 255)
+        assert not np.any(ignored & (gt.faces > 0))
+        n_clutter = len(gt.meta.get("appearance", {}).get("clutter", []))
+        if n_clutter and ignored.any():
+            with_clutter += 1
+            ground = estimate_ground(gt.depth_clean, scan.K, gt.faces > 0)
+            h = backproject(gt.depth_clean, scan.K) @ ground.up + ground.offset
+            assert np.all(h[ignored] > 0.002)
+    assert with_clutter >= 2
+    plain = generate_dataset(tmp_path / "plain", 2, 4, SynthConfig(width=320, height=240), progress=False)
+    for d in plain:
+        scan = load_scan(d)
+        np.testing.assert_array_equal(
+            ignore_clutter(scan.gt.labels, scan.gt.faces, scan.gt.depth_clean, scan.K), scan.gt.labels
+        )

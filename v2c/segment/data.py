@@ -14,7 +14,8 @@ Inputs (``compute_features``), one (C, H, W) float32 stack per scan, all from th
 =====  =========================================================================================
 
 Targets: the 18-class label map (255 = ignored) and a face-boundary map (pixels whose 3x3 neighbourhood
-holds two different face ids, background included: a band 2 px wide).
+holds two different face ids, background included: a band 2 px wide). Clutter (objects beside the part that
+random appearance places, `v2c.synth.appearance`) is ignored, not background: `ignore_clutter`.
 
 Scans are cached once into uint8 memory-mapped arrays (``build_cache``) so training does no image decoding.
 Frames: camera (OpenCV), metres.
@@ -193,6 +194,37 @@ def compute_features(
     return out
 
 
+@dataclass(frozen=True)
+class TargetConfig:
+    """How training targets are made from a generated scan's ground truth (units in the comments)."""
+
+    clutter_height_m: float = 0.002  # non-part pixels of the clean depth this far above the ground are clutter
+
+
+def ignore_clutter(
+    labels: np.ndarray,
+    faces: np.ndarray,
+    depth_clean: np.ndarray,
+    K: np.ndarray,
+    cfg: TargetConfig = TargetConfig(),
+    features: FeatureConfig = FeatureConfig(),
+) -> np.ndarray:
+    """``labels`` with clutter set to ignored (255): pixels off the part whose clean depth stands more than
+    ``clutter_height_m`` above the ground plane (RANSAC on the clean depth without the part).
+
+    The generator's ground truth labels the part only, so boxes, cylinders and spheres standing beside it read as
+    background, and a network trained on that is taught to call part-like surfaces background, which no input
+    feature can tell apart from the part's own (the pipeline takes the part from the scan's mask or ROI). Without a
+    ground plane the labels are returned unchanged.
+    """
+    ground = estimate_ground(depth_clean, K, faces > 0, features)
+    if ground is None:
+        return labels
+    height = backproject(depth_clean, K) @ ground.up + ground.offset
+    clutter = (faces == 0) & (depth_clean > 0) & (height > cfg.clutter_height_m)
+    return np.where(clutter, np.uint8(255), labels).astype(np.uint8)
+
+
 def depth_edges(depth: np.ndarray, gain: float) -> np.ndarray:
     """(H, W) float32 in [0, 1]: largest |depth jump| to a 4-neighbour / depth, times ``gain``, clipped."""
     pad = np.pad(depth, 1, mode="edge")
@@ -289,7 +321,8 @@ def build_cache(
             kept.append(str(p))
             q = quantise(scan_features(scan, cfg))
             fx.write(q.tobytes())
-            fy.write(scan.gt.labels.astype(np.uint8).tobytes())
+            labels = ignore_clutter(scan.gt.labels.astype(np.uint8), scan.gt.faces, scan.gt.depth_clean, scan.K)
+            fy.write(labels.tobytes())
             fb.write(boundary_map(scan.gt.faces).astype(np.uint8).tobytes())
             h, w = scan.height, scan.width
             entries.append({"offset": off, "h": h, "w": w})

@@ -8,9 +8,9 @@ anew with the generator's own noise model (`v2c.synth.noise.apply_depth_noise`, 
 realisation is a fresh draw), adds the colour read noise that the lossy colour smoothed away, computes the
 network inputs exactly as inference does (`v2c.segment.data.compute_features`) and the boundary target.
 
-The one approximation: the generator's grazing-angle dropout uses the renderer's exact ``cos_incidence``; here it
-comes from the clean depth's own normals (central differences inside continuous surfaces, no dropout across a
-depth step, where the noise model's edge band acts instead).
+Clutter beside the part is ignored in the labels (`v2c.segment.data.ignore_clutter`). The one approximation:
+the generator's grazing-angle dropout uses the renderer's exact ``cos_incidence``; here it comes from the clean
+depth's own normals (central differences inside continuous surfaces, one-sided at a depth step).
 
 Frames: camera (OpenCV), metres. Only numpy, OpenCV and the noise model are imported (no scan loader, no OCCT), so
 a bare machine with numpy and OpenCV can unpack.
@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from v2c.camera import backproject
-from v2c.segment.data import FeatureConfig, boundary_map, compute_features, quantise
+from v2c.segment.data import FeatureConfig, boundary_map, compute_features, ignore_clutter, quantise
 
 #: Depth unit of gt/depth_clean.png (metres per unit), as the generator writes it (`v2c.synth.dataset.DEPTH_SCALE`).
 CLEAN_DEPTH_UNIT_M = 1e-4
@@ -235,7 +235,7 @@ def realise(
     color = cv2.cvtColor(_decode(p.color, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
     clean = _decode(p.depth_clean, cv2.IMREAD_UNCHANGED).astype(np.float64) * CLEAN_DEPTH_UNIT_M
     faces = _decode(p.faces, cv2.IMREAD_UNCHANGED)
-    labels = _decode(p.labels, cv2.IMREAD_UNCHANGED).astype(np.uint8)
+    labels = ignore_clutter(_decode(p.labels, cv2.IMREAD_UNCHANGED).astype(np.uint8), faces, clean, p.K)
     cos = cos_incidence_from_depth(clean, p.K, cfg.continuity_rel)
     depth = apply_depth_noise(profile, clean, cos, rng)
     depth = (np.round(depth / CLEAN_DEPTH_UNIT_M) * CLEAN_DEPTH_UNIT_M).astype(np.float32)  # as depth.png stores it
