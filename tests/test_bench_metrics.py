@@ -389,3 +389,29 @@ def test_v2c_bench_segmentation_only(tmp_path):
     assert s["scans"] == 2
     assert s["precision"] == s["recall"] == s["type_acc"] == s["axis_acc"] == 1.0
     assert s["seconds_median"] >= 0
+
+
+def test_far_faces_counts_a_face_moved_off_the_measured_points(generated):
+    """In the ideal VB-Rep of a generated scan, every face whose pixels the scan measured (at least half with
+    depth) lies within 0.05 part sizes of the measured points of the part (median over its mesh vertices; faces
+    seen edge-on, without depth, may not); moving the largest face 0.1 part sizes along the camera's z makes it,
+    and only it, newly far, about 0.1 away."""
+    import copy
+
+    scan = generated
+    vb = M.vbrep_from_gt(scan)
+    m = M.far_faces(vb, scan)
+    faces = np.asarray(scan.gt.faces)
+    for f in vb.faces:
+        px = faces == f.instance
+        if (px & scan.valid).sum() >= 0.5 * px.sum():
+            assert f.id not in m["far_face_ids"]
+    size = float(scan.gt.meta["part_size_m"])
+    moved = copy.deepcopy(vb)
+    big = max(range(len(moved.faces)), key=lambda i: len(moved.faces[i].mesh_vertices))
+    V = np.asarray(moved.faces[big].mesh_vertices, float)
+    moved.faces[big].mesh_vertices = (V + np.array([0.0, 0.0, 0.1 * size])).tolist()
+    m2 = M.far_faces(moved, scan)
+    assert set(m2["far_face_ids"]) - set(m["far_face_ids"]) == {moved.faces[big].id}
+    assert m2["faces_far"] == m["faces_far"] + 1
+    assert 0.07 < m2["face_far_max"] <= 0.1 + 1e-9

@@ -36,6 +36,7 @@ class MetricConfig:
     max_draw_rounds: int = 8  # rounds of drawing R candidates until n_points visible ones are found
     edge_tol_px: float = 3.0  # pixels: reach of an edge-type record (v2c.bench.vbrep.edge_type_accuracy)
     edge_types: bool = True  # compute edge-type accuracy (needs the scan's exact primitives)
+    far_face_rel: float = 0.05  # part sizes: a face with a mesh vertex farther from every measured part point is far
 
 
 @dataclass(frozen=True)

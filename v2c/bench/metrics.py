@@ -172,6 +172,36 @@ def depth_error(rendering: Rendering, scan: Scan) -> tuple[float, float]:
     return float(np.median(np.abs(rendering.depth[both] - clean[both])) / part_size(scan)), cover
 
 
+def far_faces(vbrep: VBRep, scan: Scan, config: MetricConfig | None = None) -> dict[str, Any]:
+    """How far the faces reach from what the scan measured (issue 16: no face beyond 0.05 part sizes).
+
+    Per face, the median over its mesh vertices of the distance to the nearest measured point of the part (the
+    scan's valid pixels back-projected: its noisy depth inside the mask), over the part size: a face placed away
+    from the part is far, one whose margin runs over pixels without depth (the far wall of a hole seen at a
+    grazing angle, an edge-on strip) is not. Returns ``face_far_max`` (the largest over the faces; NaN without
+    faces or points), ``faces_far`` (faces beyond ``far_face_rel``) and ``far_face_ids``.
+    """
+    from scipy.spatial import cKDTree
+
+    config = config or MetricConfig()
+    pts = scan.points()[scan.valid]
+    dists: list[tuple[int, float]] = []
+    if len(pts):
+        tree = cKDTree(pts)
+        for f in vbrep.faces:
+            V = np.asarray(f.mesh_vertices, float).reshape(-1, 3)
+            if len(V):
+                dists.append((f.id, float(np.median(tree.query(V, k=1)[0]))))
+    size = part_size(scan)
+    rel = np.array([d for _, d in dists]) / size
+    far = [fid for (fid, _), r in zip(dists, rel, strict=True) if r > config.far_face_rel]
+    return {
+        "face_far_max": float(rel.max()) if len(rel) else float("nan"),
+        "faces_far": len(far),
+        "far_face_ids": far,
+    }
+
+
 def runtime_split(vbrep: VBRep, extra: dict[str, float] | None = None) -> dict[str, float]:
     """Seconds per stage: the VB-Rep's ``meta["timings"]`` (segment, fit, vbrep, total) updated with ``extra``
     (e.g. load, step); fit sub-stages as ``fit.<name>``."""
@@ -210,6 +240,7 @@ def scan_metrics(
     }
     out.update(face_matching(vbrep, scan, rendering, config))
     out["depth_error"], out["depth_coverage"] = depth_error(rendering, scan)
+    out.update(far_faces(vbrep, scan, config))
     if config.edge_types:
         try:
             et = edge_type_accuracy(vbrep, scan, tol_px=config.edge_tol_px)

@@ -85,6 +85,10 @@ def summarise(rows: list[dict[str, Any]], process_start_s: float = float("nan"))
     out["type_accuracy_pooled"] = sum(r.get("type_ok", 0) for r in ok) / pairs if pairs else float("nan")
     out["axis_accuracy_pooled"] = sum(r.get("axis_ok", 0) for r in ok) / pairs if pairs else float("nan")
     out["pairs"] = pairs
+    far = [r["face_far_max"] for r in ok if r.get("face_far_max") is not None and np.isfinite(r["face_far_max"])]
+    out["face_far_max"] = float(max(far)) if far else float("nan")  # the farthest face of any scan (part sizes)
+    out["faces_far"] = int(sum(r.get("faces_far", 0) for r in ok))  # faces beyond MetricConfig.far_face_rel
+    out["scans_with_far_faces"] = int(sum(1 for r in ok if r.get("faces_far", 0) > 0))
     rt = [r.get("runtime", {}) for r in ok]
     out["runtime"] = _median([x.get("to_step", np.nan) for x in rt])
     out["runtime_mean"] = _mean([x.get("to_step", np.nan) for x in rt])
@@ -205,6 +209,8 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("type accuracy", "type_accuracy", "pct"),
     ("depth error (median, / part size)", "depth_error", "f4"),
     ("edge-type accuracy", "edge_type_accuracy", "pct"),
+    ("farthest face from the measured part points (part sizes, any scan)", "face_far_max", "f4"),
+    ("faces farther than 0.05 part sizes (all scans)", "faces_far", "int"),
     ("intersection-edge confidence ECE (10 bins; raw factors)", "ece_intersection", "ece"),
     ("all-edge confidence ECE (10 bins; raw factors)", "ece_all", "ece"),
     ("runtime per scan, median wall (s)", "runtime", "s"),
@@ -214,7 +220,7 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
 
 def format_value(v: Any, kind: str) -> str:
     """One table cell: ``kind`` "pct" (a fraction as a percentage), "s" (seconds, 2 decimals), "f1" (1 decimal),
-    "ece" (3 decimals) or anything else (4 decimals); empty for None, NaN and inf."""
+    "ece" (3 decimals), "int" or anything else (4 decimals); empty for None, NaN and inf."""
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return ""
     if kind == "pct":
@@ -223,6 +229,8 @@ def format_value(v: Any, kind: str) -> str:
         return f"{v:.2f}"
     if kind == "f1":
         return f"{v:.1f}"
+    if kind == "int":
+        return f"{int(v)}"
     if kind == "ece":
         return f"{v:.3f}"
     return f"{v:.4f}"
