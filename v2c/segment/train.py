@@ -228,6 +228,12 @@ def evaluate(model: UNet, data: CachedScans, ids: list[int], bf16: bool) -> dict
         fp += int((pb & ~gb).sum())
         fn += int((~pb & gb).sum())
     model.train()
+    return pixel_metrics(conf, tp, fp, fn)
+
+
+def pixel_metrics(conf: np.ndarray, tp: int, fp: int, fn: int) -> dict:
+    """Checkpoint metrics from an (18, 18) label confusion matrix (rows true) and boundary pixel counts: mean IoU
+    over the classes present, pixel accuracy, boundary F1 and the IoU per present class."""
     inter = np.diag(conf)
     union = conf.sum(0) + conf.sum(1) - inter
     present = conf.sum(1) > 0

@@ -32,7 +32,7 @@ import torch
 from v2c.labels import IGNORE, NUM_CLASSES
 from v2c.segment.net import NetConfig, UNet, load_weights, save_weights
 from v2c.segment.shards import PackedScan, read_shard, realise
-from v2c.segment.train import _lr_at, class_weights_from_histogram, losses
+from v2c.segment.train import _lr_at, class_weights_from_histogram, losses, pixel_metrics
 from v2c.segment.train_config import TrainConfig
 
 #: Noise profile of realisation r of packed scan i: realisation 0 is the generator's `sensor` profile (the bench's),
@@ -148,17 +148,7 @@ def evaluate_device(model: UNet, data: DeviceScans, ids: Sequence[int], amp: boo
         fp += int((pb & ~gb).sum())
         fn += int((~pb & gb).sum())
     model.train()
-    c = conf.reshape(NUM_CLASSES, NUM_CLASSES).cpu().numpy()
-    inter = np.diag(c)
-    union = c.sum(0) + c.sum(1) - inter
-    present = c.sum(1) > 0
-    iou = np.where(union > 0, inter / np.maximum(union, 1), 0.0)
-    return {
-        "miou": float(iou[present].mean()),
-        "pixel_acc": float(inter.sum() / max(c.sum(), 1)),
-        "boundary_f1": 2 * tp / max(2 * tp + fp + fn, 1),
-        "iou": {int(k): round(float(iou[k]), 4) for k in np.nonzero(present)[0]},
-    }
+    return pixel_metrics(conf.reshape(NUM_CLASSES, NUM_CLASSES).cpu().numpy(), tp, fp, fn)
 
 
 def realise_all(
