@@ -409,7 +409,7 @@ def test_coaxial_split_counts_independent_readings_under_correlated_noise() -> N
         )
         return split_coaxial_steps(seg, np.where(part, depth + noise, 0.0), K, cfg).num_instances
 
-    assert [pieces(seed, RefineConfig()) for seed in range(5)] == [2] * 5
+    assert [pieces(seed, RefineConfig(noise_block_px=5)) for seed in range(5)] == [2] * 5
     assert pieces(1, RefineConfig(noise_block_px=0)) == 3
 
 

@@ -71,10 +71,12 @@ class RefineConfig:
     # (ratio; 0: the median-centred sum)
     coax_fit_points: int = 800  # points of the coaxial two-radius fit (count)
     coax_max_splits: int = 2  # levels of splitting: a split's sides are tested again until this depth (count)
-    noise_block_px: int = 5  # side of the square blocks whose mean residual measures how far the depth noise is
+    noise_block_px: int = 0  # side of the square blocks whose mean residual measures how far the depth noise is
     # correlated between neighbouring pixels (pixels; `design_effect`; 0: white noise, every pixel independent).
     # 5 px: the smallest patch of the sensor model's patch-size profile (docs/synth.md), about the correlation
-    # length of the real frames' noise (the `structured_light` profile's 3-px blur); on the tuning set (40 scans,
+    # length of the real frames' noise (the `structured_light` profile's 3-px blur; off by default: on the real
+    # frames it cut the false coaxial splits but moved the cracker box's angle to 83.7 degrees and the tuna can's
+    # radius to -7.4 % through the fit, docs/segmentation.md); on the tuning set (40 scans,
     # seed 9600) 9-px blocks also took in the misfit of true radius steps and cut their z below coax_z
     noise_detrend_px: int = 21  # ... after taking off the residuals' local mean over this square (pixels): what
     # varies more slowly (a second radius step, a warp) is misfit, not the pixel-scale correlation of the noise.
