@@ -98,3 +98,25 @@ def test_bench_real_one_frame(shared_data: Path, tmp_path: Path) -> None:
     assert row["object_px"] > 1000 and row["depth_rms_mm"] > 0 and row["seconds"] > 0
     assert "lm_occluded_example | can | learned" in res.output
     assert data["summary"]["learned"]["frames"] == 1
+
+
+def test_polygon_mask_rasterises_the_outline() -> None:
+    """A 10 x 20 px rectangle's polygon covers its 11 x 21 pixel centres (outline included), nothing else; a
+    triangle covers about its area."""
+    m = R.polygon_mask([[5, 5], [25, 5], [25, 15], [5, 15]], 40, 50)
+    assert m.sum() == 11 * 21 and m[5:16, 5:26].all()
+    tri = R.polygon_mask([[0, 0], [39, 0], [0, 39]], 40, 40)
+    assert abs(int(tri.sum()) - 40 * 41 / 2) <= 41
+
+
+def test_every_frame_has_a_mask_polygon_inside_its_roi() -> None:
+    """real_rois.json: each frame's mask polygon (drawn on color.png) has at least 3 vertices, lies within its ROI
+    (2 px of slack) and covers a fair share of it (an outline, not a stray shape)."""
+    for name, spec in R.load_frames().items():
+        poly = np.asarray(spec["mask"], float)
+        x0, y0, x1, y1 = spec["roi"]
+        assert len(poly) >= 3, name
+        assert poly[:, 0].min() >= x0 - 2 and poly[:, 0].max() <= x1 + 2, name
+        assert poly[:, 1].min() >= y0 - 2 and poly[:, 1].max() <= y1 + 2, name
+        share = R.polygon_mask(spec["mask"], 480, 640).sum() / ((x1 - x0) * (y1 - y0))
+        assert 0.3 < share < 1.0, name

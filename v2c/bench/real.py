@@ -23,6 +23,10 @@ Per frame and segmentation method (``learned``, ``geometric``):
   faces. Distances: the read-back shape is tessellated (`synth.occ.tessellate`), each point's nearest mesh
   vertex (KD-tree) decides where it is clearly inside (< near) or clearly outside (> near + the longest triangle
   edge), and the exact point-to-triangle distance (trimesh) decides the rest.
+- ``mask`` (``masks=True``, `v2c bench --real --real-masks`): a frame whose entry in real_rois.json has a ``mask``
+  polygon (the object's outline drawn on color.png, occluders left out) is reconstructed with that polygon
+  rasterised (`polygon_mask`) as its mask.png, inside its ROI; its object pixels are then the ROI's object pixels
+  above (as for the ROI) inside the polygon. ``region`` of each row says which ("roi" or "mask").
 - ``seconds``: wall time of load + reconstruction + STEP write (the read-back, figure and metrics are not
   counted), ``cpu_seconds`` the CPU time of this process over the same span (steadier on a shared machine);
   ``process_start_s`` (once per run): a fresh interpreter importing the pipeline and loading the model
@@ -59,6 +63,16 @@ def load_frames(path: Path = DEFAULT_ROIS) -> dict[str, dict[str, Any]]:
     """Frame folder name -> {"roi": [x0, y0, x1, y1] pixels, "object": "box" | "can", "name", "expected",
     "visible_sides"} of ``path``."""
     return json.loads(Path(path).read_text())["frames"]
+
+
+def polygon_mask(vertices: list[list[float]], height: int, width: int) -> np.ndarray:
+    """(height, width) bool: the pixels inside the polygon ``vertices`` ((x, y) pixels, as real_rois.json's
+    ``mask``; pixel centres at integer coordinates), its outline included."""
+    import cv2
+
+    out = np.zeros((height, width), np.uint8)
+    cv2.fillPoly(out, [np.round(np.asarray(vertices, float)).astype(np.int32).reshape(-1, 1, 2)], 1)
+    return out.astype(bool)
 
 
 def face_area(f: VFace) -> float:
@@ -160,19 +174,31 @@ def _surface_distances(points: np.ndarray, inst: np.ndarray, fit: FitResult) -> 
 
 
 def measure_frame(
-    folder: Path, spec: dict[str, Any], segmentation: str, out_dir: Path, near_mm: float = NEAR_MM
+    folder: Path,
+    spec: dict[str, Any],
+    segmentation: str,
+    out_dir: Path,
+    near_mm: float = NEAR_MM,
+    use_mask: bool = False,
 ) -> dict[str, Any]:
-    """Reconstruct one frame with its ROI, write its STEP (camera frame) and figure into ``out_dir``, read the STEP
-    back and measure it (module docstring). Raises whatever the pipeline raises."""
+    """Reconstruct one frame with its ROI (and, with ``use_mask``, the ``mask`` polygon of ``spec`` as its
+    mask.png), write its STEP (camera frame) and figure into ``out_dir``, read the STEP back and measure it (module
+    docstring). Raises whatever the pipeline raises."""
+    from dataclasses import replace
+
     from exporters import result_figure, write
     from v2c import pipeline
     from v2c.scan import backproject, load_scan
     from v2c.segment.geometric import GeometricConfig, part_region
 
-    stem = f"{folder.name}_{segmentation}"
+    use_mask = use_mask and bool(spec.get("mask"))
+    stem = f"{folder.name}_{segmentation}" + ("_mask" if use_mask else "")
     out_dir.mkdir(parents=True, exist_ok=True)
     t0, c0 = time.perf_counter(), time.process_time()
     scan = load_scan(folder, roi=tuple(spec["roi"]))
+    roi_scan = scan
+    if use_mask:
+        scan = replace(scan, mask=polygon_mask(spec["mask"], scan.height, scan.width))
     vbrep, seg, fit = pipeline.reconstruct(scan, segmentation=segmentation, return_stages=True)
     step_path = out_dir / f"{stem}.step"
     report = write(vbrep, step_path, frame="camera", product=stem)
@@ -180,6 +206,7 @@ def measure_frame(
     entry: dict[str, Any] = {
         "ok": True,
         "error": None,
+        "region": "mask" if use_mask else "roi",
         "seconds": seconds,
         "cpu_seconds": cpu,
         "step": str(step_path),
@@ -229,7 +256,10 @@ def measure_frame(
     entry["depth_rms_mm"] = float(1000 * np.sqrt(np.mean(d_fit**2))) if len(d_fit) else float("nan")
     entry["depth_median_mm"] = float(1000 * np.median(d_fit)) if len(d_fit) else float("nan")
 
-    obj = part_region(scan, GeometricConfig())[0]
+    # the depth heuristic of the ROI alone (ground plane estimated without the mask), then inside the mask
+    obj = part_region(roi_scan, GeometricConfig())[0]
+    if use_mask:
+        obj &= scan.mask
     faces_px = (inst > 0) & scan.valid & np.isin(inst, list(fit.primitives))
     verts, tris = step_mesh(step_path)
     sel = obj | faces_px
@@ -249,9 +279,11 @@ def real_bench(
     out_dir: Path | None = None,
     progress: bool = True,
     start: bool = True,
+    masks: bool = False,
 ) -> dict[str, Any]:
     """Every frame of ``rois_path`` found in ``data_dir``, with every segmentation method: `measure_frame`, a
-    frame that fails reported with its error. ``start``: also measure the process start once."""
+    frame that fails reported with its error. ``start``: also measure the process start once; ``masks``: frames
+    with a ``mask`` polygon are reconstructed and measured with it (module docstring)."""
     from tqdm import tqdm
 
     frames_spec = load_frames(rois_path)
@@ -276,7 +308,7 @@ def real_bench(
             continue
         t = time.perf_counter()
         try:
-            row.update(measure_frame(folder, spec, method, out_dir))
+            row.update(measure_frame(folder, spec, method, out_dir, use_mask=masks))
         except Exception as exc:  # noqa: BLE001 - the report says which frame failed and why
             row.update(ok=False, error=error_text(exc), seconds=time.perf_counter() - t)
     summary = {m: _summary([r for r in rows if r["segmentation"] == m]) for m in segmentations}
@@ -285,6 +317,7 @@ def real_bench(
         {
             "data_dir": str(data_dir),
             "segmentations": list(segmentations),
+            "masks": masks,
             "out_dir": str(out_dir),
             "near_mm": NEAR_MM,
             "process_start_s": start_s,
@@ -359,8 +392,9 @@ def format_table(report: dict[str, Any]) -> str:
         )
     for m, s in report["summary"].items():
         lines.append("")
+        where = " (mask polygons)" if report.get("masks") else ""
         lines.append(
-            f"{m}: {s['frames'] - s['failed']} of {s['frames']} frames ok; faces per visible side "
+            f"{m}{where}: {s['frames'] - s['failed']} of {s['frames']} frames ok; faces per visible side "
             f"{_f(s['faces_per_side'], '.2f')}; box angle error {_f(s['box_angle_error_deg'])} deg; can "
             f"radius error {_f(s['can_radius_error_pct'])} % ({s['cans'] - s['cans_without_cylinder']} of {s['cans']} "
             f"cans with a cylindrical face); within {report['near_mm']:g} mm "

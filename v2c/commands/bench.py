@@ -127,6 +127,12 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     help="ROI file for --real (default: v2c/bench/real_rois.json).",
 )
 @click.option(
+    "--real-masks",
+    is_flag=True,
+    help="With --real: reconstruct each frame with the 'mask' polygon of its --rois entry (the object's outline, "
+    "occluders left out) as its mask.png, inside its ROI.",
+)
+@click.option(
     "-o",
     "--output",
     "--out",
@@ -261,6 +267,7 @@ def command(
     no_step: bool,
     real_dir: Path | None,
     rois: Path | None,
+    real_masks: bool,
     out_dir: Path | None,
     figure_dir: Path | None,
     weights: Path | None,
@@ -347,7 +354,9 @@ def command(
     if real_dir is not None:
         from v2c.bench import real
 
-        report = real.real_bench(real_dir, rois or run.DEFAULT_ROIS, segmentation, out_dir, progress=progress)
+        report = real.real_bench(
+            real_dir, rois or run.DEFAULT_ROIS, segmentation, out_dir, progress=progress, masks=real_masks
+        )
         click.echo(real.format_table(report))
         click.echo(f"outputs in {report['out_dir']}")
         _write_json(json_out, report)
