@@ -47,6 +47,8 @@ class Seat:
     move: (3,) the part's translation. move_mm: its length. push_mm: its component along the push. bound_mm: the
     largest move allowed. ok: a seat was found within the bound. reason: why not (empty when ok). min_gap_mm: the
     smallest gap of the sampled points after the move (about 0: touching). contacts: sampled points within 0.05 mm.
+    overlap_mm: when no move clears the mating faces (a pocket narrower than the part), the least overlap any move
+    leaves (mm); 0 otherwise.
     """
 
     move: np.ndarray
@@ -57,6 +59,7 @@ class Seat:
     reason: str
     min_gap_mm: float
     contacts: int
+    overlap_mm: float = 0.0
 
 
 def seat_bound_mm(fixture: Fixture, config: SeatConfig = SeatConfig()) -> float:
@@ -174,6 +177,26 @@ def _solve_move(
     return np.asarray(u, float)
 
 
+def _least_overlap(dirs: np.ndarray, normals: np.ndarray, gaps: np.ndarray, cap: float) -> float:
+    """The smallest s (mm) such that some move u within +-cap keeps every gap >= -s: how much too tight the
+    fixture's faces are for the part (a linear program; ``cap`` when even that fails)."""
+    from scipy.optimize import linprog
+
+    keep = np.isfinite(gaps)
+    a = -(normals[keep] @ dirs.T)
+    k = len(dirs)
+    cost = np.zeros(k + 1)
+    cost[-1] = 1.0
+    res = linprog(
+        cost,
+        A_ub=np.hstack([a, -np.ones((len(a), 1))]),
+        b_ub=gaps[keep],
+        bounds=[(-cap, cap)] * k + [(0, None)],
+        method="highs",
+    )
+    return float(res.x[-1]) if res.status == 0 else cap
+
+
 def seat_part(fixture: Fixture, part: Shape, config: SeatConfig = SeatConfig()) -> Seat:
     """Seat ``part`` (a solid in the fixture's output frame, mm, e.g. `fixtures_design.assembly.true_part`) in
     ``fixture``: the translation that pushes it home (module docstring). A fixture without ``seating`` raises
@@ -187,6 +210,7 @@ def seat_part(fixture: Fixture, part: Shape, config: SeatConfig = SeatConfig()) 
     rays = _Rays(part, config.reach_mm)
     move = np.zeros(3)
     reason = ""
+    overlap = 0.0
     for _ in range(config.max_iter):
         g = rays.gaps(pts - move, nrm)
         # A point deeper in the part than the bound is not held by its face (a pin's tip in a hole's floor, a block
@@ -198,7 +222,11 @@ def seat_part(fixture: Fixture, part: Shape, config: SeatConfig = SeatConfig()) 
             break
         u = _solve_move(dirs, push, nrm, g, config.reach_mm, 1e-3 * config.tol_mm)
         if u is None:
-            reason = f"no move within {config.reach_mm:g} mm keeps the part clear of the mating faces"
+            overlap = _least_overlap(dirs, nrm, g, config.reach_mm)
+            reason = (
+                f"no move keeps the part clear of the mating faces: wherever it goes, it overlaps them by at least "
+                f"{overlap:.2f} mm (the fixture is too tight for it)"
+            )
             break
         step = u @ dirs
         move = move + step
@@ -221,4 +249,5 @@ def seat_part(fixture: Fixture, part: Shape, config: SeatConfig = SeatConfig()) 
         reason=reason,
         min_gap_mm=float(fin.min()) if len(fin) else float("inf"),
         contacts=int((np.abs(fin) <= 0.05).sum()),
+        overlap_mm=overlap,
     )

@@ -131,3 +131,15 @@ def test_a_nest_lets_the_part_down_to_its_floor_and_off_its_walls(designs: dict)
     across = seat.move - (seat.move @ up) * up
     assert 0.2 < -(across @ side) < 0.7
     assert interference(fx, _moved(part, seat.move))[1] < 1e-4
+
+
+def test_a_pin_wider_than_its_hole_cannot_be_seated_and_says_by_how_much(designs: dict) -> None:
+    """A pin 0.5 mm wider in radius than the true hole (a negative clearance): no move clears it, the seat fails
+    and reports the least overlap, 0.5 mm."""
+    from fixtures_design import PinParams, design_pin
+
+    fx, truth = designs["pin"]
+    tight = design_pin(fx.reference, fx.fmap, PinParams(clearance=-0.5))
+    seat = seat_part(tight, truth)
+    assert not seat.ok and "too tight" in seat.reason
+    assert seat.overlap_mm == pytest.approx(0.5, abs=0.05)

@@ -180,7 +180,7 @@ def evaluate_scan(
     "hole", "horizontal_cylinder", "seconds_reconstruct", "designs": [...]}``; a design row has kind, k, ok
     (False: no reference, with ``error``), clearance (mm), sigma_mm, probability, cut_mm3, cut_share, cuts,
     mating_median_mm, mating_max_mm, touches (camera frame), and seated: seat_move_mm (the translation (3,), output
-    frame mm), seat_mm (its length), seat_push_mm, seat_bound_mm, seat_ok, seat_reason, seated_cut_mm3,
+    frame mm), seat_mm (its length), seat_push_mm, seat_bound_mm, seat_ok, seat_reason, seat_overlap_mm, seated_cut_mm3,
     seated_cut_share, seated_mating_median_mm, seated_mating_max_mm, seated_cuts, seated_touches.
     ``vbrep``: the scan's reconstruction when already made."""
     from fixtures_design.assembly import true_part
@@ -260,6 +260,7 @@ def evaluate_scan(
                 seat_bound_mm=seat.bound_mm,
                 seat_ok=seat.ok,
                 seat_reason=seat.reason,
+                seat_overlap_mm=seat.overlap_mm,
                 seated_cut_mm3=float(s_vol),
                 seated_cut_share=float(s_share),
                 seated_mating_median_mm=s_m.median,
