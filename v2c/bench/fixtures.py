@@ -180,8 +180,9 @@ def evaluate_scan(
     "hole", "horizontal_cylinder", "seconds_reconstruct", "designs": [...]}``; a design row has kind, k, ok
     (False: no reference, with ``error``), clearance (mm), sigma_mm, probability, cut_mm3, cut_share, cuts,
     mating_median_mm, mating_max_mm, touches (camera frame), and seated: seat_move_mm (the translation (3,), output
-    frame mm), seat_mm (its length), seat_push_mm, seat_bound_mm, seat_ok, seat_reason, seat_overlap_mm, seated_cut_mm3,
-    seated_cut_share, seated_mating_median_mm, seated_mating_max_mm, seated_cuts, seated_touches.
+    frame mm), seat_mm (its length), seat_push_mm, seat_bound_mm, seat_ok, seat_reason, seat_overlap_mm,
+    seated_cut_mm3, seated_cut_share, seated_mating_median_mm, seated_mating_max_mm (None when the seat failed),
+    seated_cuts, seated_touches.
     ``vbrep``: the scan's reconstruction when already made."""
     from fixtures_design.assembly import true_part
     from fixtures_design.design import design_fixture, mating_sigma_mm, outline_sigma_mm
@@ -248,11 +249,14 @@ def evaluate_scan(
                 touches=bool(m.median <= cfg.touch_mm),
             )
             seat = seat_part(fx, tp, seat_cfg)
-            move = np.eye(4)
-            move[:3, 3] = seat.move
-            seated = transformed(tp, move)
-            s_vol, s_share = interference(fx, seated)
-            s_m = check_mating(fx, seated, None, max_points_per_face=per_face)
+            s_vol = s_share = s_median = s_max = None  # a failed seat is not measured: it cuts and does not touch
+            if seat.ok:
+                move = np.eye(4)
+                move[:3, 3] = seat.move
+                seated = transformed(tp, move)
+                s_vol, s_share = interference(fx, seated)
+                s_m = check_mating(fx, seated, None, max_points_per_face=per_face)
+                s_median, s_max = s_m.median, s_m.max
             d.update(
                 seat_move_mm=[float(x) for x in seat.move],
                 seat_mm=seat.move_mm,
@@ -261,20 +265,23 @@ def evaluate_scan(
                 seat_ok=seat.ok,
                 seat_reason=seat.reason,
                 seat_overlap_mm=seat.overlap_mm,
-                seated_cut_mm3=float(s_vol),
-                seated_cut_share=float(s_share),
-                seated_mating_median_mm=s_m.median,
-                seated_mating_max_mm=s_m.max,
-                seated_cuts=bool(not seat.ok or s_share > cfg.cut_share),
-                seated_touches=bool(seat.ok and s_m.median <= cfg.touch_mm),
+                seated_cut_mm3=s_vol,
+                seated_cut_share=s_share,
+                seated_mating_median_mm=s_median,
+                seated_mating_max_mm=s_max,
+                seated_cuts=bool(s_share is None or s_share > cfg.cut_share),
+                seated_touches=bool(s_median is not None and s_median <= cfg.touch_mm),
             )
             row["designs"].append(d)
             if log:
                 log(
                     f"{Path(scan_dir).name} {row['family']} {kind} k={k:g}: clearance {d['clearance']:.2f} mm, "
                     f"sigma {_f(d['sigma_mm'])} mm, cut {100 * share:.2f} %, mating median {m.median:.2f} mm; "
-                    f"seat {seat.move_mm:.2f} mm{'' if seat.ok else ' FAILED (' + seat.reason + ')'}, "
-                    f"seated cut {100 * s_share:.2f} %, mating median {s_m.median:.2f} mm"
+                    + (
+                        f"seat {seat.move_mm:.2f} mm, seated cut {100 * s_share:.2f} %, mating median {s_median:.2f} mm"
+                        if seat.ok
+                        else f"seat FAILED ({seat.reason})"
+                    )
                 )
     return row
 
