@@ -27,6 +27,7 @@ from fixtures_design.references import (
     select_references,
 )
 from fixtures_design.run import FixtureRun, fixture_for_scan, ground_height
+from fixtures_design.seat import Seat, SeatConfig, seat_part
 from fixtures_design.verify import check_mating, interference
 
 __all__ = [
@@ -42,6 +43,8 @@ __all__ = [
     "NoReferenceError",
     "PinParams",
     "ReferenceKind",
+    "Seat",
+    "SeatConfig",
     "SelectionConfig",
     "assembly",
     "check_mating",
@@ -56,6 +59,7 @@ __all__ = [
     "ground_height",
     "interference",
     "reconstructed_part",
+    "seat_part",
     "select_references",
     "true_part",
     "write_fixture",

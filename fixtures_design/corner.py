@@ -21,7 +21,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from fixtures_design.frames import FrameMap
-from fixtures_design.model import Fixture, FixtureKind, faces_facing, local_plane, place, prism, sample_face
+from fixtures_design.model import (
+    Fixture,
+    FixtureKind,
+    Seating,
+    faces_facing,
+    local_plane,
+    place,
+    prism,
+    sample_face,
+)
 from fixtures_design.references import DihedralReference
 
 
@@ -72,6 +81,7 @@ def design_corner(ref: DihedralReference, fmap: FrameMap, params: CornerParams =
     mating = [place(f, plane) for f in against_a + against_b]
     refs = [ref.faces[0]] * len(against_a) + [ref.faces[1]] * len(against_b)
     pts = np.concatenate([sample_face(f) for f in mating])
-    return Fixture(
-        FixtureKind.CORNER, solid, mating, pts, ref, fmap, params, refs, {"leg_mm": (leg_a, leg_b), "length_mm": length}
-    )
+    # Seated: the part pushed into the corner, along both faces' outward normals (free along the edge).
+    seating = Seating(np.stack([a, b]), (a + b) / np.sqrt(2.0))
+    notes = {"leg_mm": (leg_a, leg_b), "length_mm": length}
+    return Fixture(FixtureKind.CORNER, solid, mating, pts, ref, fmap, params, refs, notes, seating)

@@ -21,7 +21,7 @@ import numpy as np
 from build123d import Plane, Solid
 
 from fixtures_design.frames import FrameMap
-from fixtures_design.model import Fixture, FixtureKind, local_plane, place, prism, sample_face, unit
+from fixtures_design.model import Fixture, FixtureKind, Seating, local_plane, place, prism, sample_face, unit
 from fixtures_design.references import CircleReference, ReferenceKind
 
 _S45 = np.sqrt(0.5)
@@ -113,4 +113,5 @@ def design_cradle(
         params,
         [ref.cylinder_face] * len(groove),
         {"length_mm": length, "groove_radius_mm": radius, "tilt_deg": tilt},
+        Seating(np.stack([x, y]), -y),  # seated: the cylinder let down into the groove (free along its axis)
     )

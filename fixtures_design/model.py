@@ -27,6 +27,25 @@ class FixtureKind(str, Enum):  # noqa: UP042 - StrEnum would change str() and fo
     NEST = "nest"
 
 
+@dataclass(frozen=True)
+class Seating:
+    """How a part is put into its fixture, output frame: the translations the fixture constrains and the way the
+    part is pushed home (`fixtures_design.seat.seat_part`).
+
+    directions: (k, 3) orthonormal rows: the part moves in their span only (a corner: its two faces' normals, not
+    along the edge; a pin or a nest: any way; a cradle: across its axis). push: (3,) unit vector in that span, the
+    way the part is pushed (a corner: into the corner; a pin: onto the flange; a cradle or a nest: down); across it
+    the part moves as little as keeps it clear of the mating faces. stops: faces besides the mating faces that end
+    the push (a nest's floor, which is not a mating face). standoff_mm: how far the push goes by design beyond the
+    clearance (a nest: its ``floor_gap``; 0 for the others), so the seat's bound allows it.
+    """
+
+    directions: np.ndarray
+    push: np.ndarray
+    stops: list[Face] = field(default_factory=list)
+    standoff_mm: float = 0.0
+
+
 @dataclass
 class Fixture:
     """A designed fixture, output frame, millimetres.
@@ -36,7 +55,8 @@ class Fixture:
     part as a whole, e.g. a nest's pocket walls). contact_points: (N, 3) points on the fixture where it should
     touch the part (on the mating faces; for a V cradle on its contact lines). reference: what it was built from
     (a `fixtures_design.references` reference, or a `Footprint` for a nest). fmap: the camera -> output map used.
-    params: the generator's parameters. notes: sizes as built (clamped lengths, radii; mm).
+    params: the generator's parameters. notes: sizes as built (clamped lengths, radii; mm). seating: how the part
+    is pushed home into it (`Seating`; None: not stated, `fixtures_design.seat` cannot seat it).
     """
 
     kind: FixtureKind
@@ -48,6 +68,7 @@ class Fixture:
     params: Any
     mating_refs: list[int] = field(default_factory=list)
     notes: dict = field(default_factory=dict)
+    seating: Seating | None = None
 
     @property
     def volume_mm3(self) -> float:

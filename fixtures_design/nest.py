@@ -21,7 +21,7 @@ from build123d import Face, Location, Solid, Vector, Wire
 
 from exporters import proper_rotation
 from fixtures_design.frames import FrameMap
-from fixtures_design.model import Fixture, FixtureKind, local_plane, place, sample_face
+from fixtures_design.model import Fixture, FixtureKind, Seating, faces_facing, local_plane, place, sample_face, unit
 from v2c.vbrep.model import VBRep
 
 
@@ -246,6 +246,11 @@ def design_nest(
     mating = [place(f, plane) for f in walls]
     pts = np.concatenate([sample_face(f, grid=2 if len(mating) > 50 else 8) for f in mating])
     solid = place(local, plane)
+    up = unit(fmap.vectors(fp.axes[2]))
+    # Seated: the part let down until the fixture stops it (the floor under the relief, or the plate's top under an
+    # overhang), moved sideways only as far as the pocket walls make it.
+    stops = faces_facing(solid, up)
+    seating = Seating(np.eye(3), -up, stops, params.floor_gap)
     return Fixture(
         FixtureKind.NEST,
         solid,
@@ -256,4 +261,5 @@ def design_nest(
         params,
         [-1] * len(mating),
         {"pocket_depth_mm": params.depth, "outlines": len(fp.outlines), "convex_hull_fallbacks": hulls},
+        seating,
     )

@@ -14,7 +14,7 @@ import numpy as np
 from build123d import Face, Plane, Solid
 
 from fixtures_design.frames import FrameMap
-from fixtures_design.model import Fixture, FixtureKind, faces_facing, local_plane, place, sample_face, unit
+from fixtures_design.model import Fixture, FixtureKind, Seating, faces_facing, local_plane, place, sample_face, unit
 from fixtures_design.references import CircleReference, ReferenceKind
 
 
@@ -72,4 +72,5 @@ def design_pin(ref: CircleReference, fmap: FrameMap, params: PinParams = PinPara
         params,
         refs,
         {"pin_radius_mm": r, "depth_mm": depth, "flange_radius_mm": flange_r},
+        Seating(np.eye(3), -z),  # seated: the part lowered onto the flange, moved across the axis only to clear the pin
     )

@@ -35,7 +35,8 @@ def test_visible_holes_and_horizontal_cylinders(tmp_path: Path, family: str, see
 def test_stage_fixtures_on_a_shaft(tmp_path: Path) -> None:
     """One generated shaft (seed 0, 320 x 240, oracle segmentation) at k = 0 and 1: a cradle qualifies and is
     designed at both k; at k = 1 its clearance is hypot(its faces' sigma, DEPTH_BIAS_MM) and it cuts less; the
-    summary counts the rows; the row holds the scan's depth offset (its depth against the clean depth)."""
+    summary counts the rows; the row holds the scan's depth offset (its depth against the clean depth); every design
+    is also seated (the true part pushed home) and the cradle, seated, touches the shaft."""
     out = tmp_path / "fx.json"
     args = ["bench", "--stage", "fixtures", "--n", "1", "--seed", "0", "--families", "shaft", "--size", "320x240"]
     args += ["--segmentation", "oracle", "--clearance-k", "0,1", "--cache", str(tmp_path / "cache")]
@@ -60,6 +61,20 @@ def test_stage_fixtures_on_a_shaft(tmp_path: Path) -> None:
             assert d["cuts"] == (d["cut_share"] > 0.001)
             assert d["touches"] == (d["mating_median_mm"] <= 1.0)
             assert 0 <= d["mating_median_mm"] <= d["mating_max_mm"]
+            # Seated: a failed seat (over 3 x the clearance + 2 mm, + a nest's floor gap) cuts and does not touch.
+            assert d["seat_mm"] == pytest.approx(float(np.linalg.norm(d["seat_move_mm"])))
+            assert d["seat_ok"] == (d["seat_reason"] == "")
+            if d["kind"] != "nest":
+                assert d["seat_bound_mm"] == pytest.approx(3 * d["clearance"] + 2.0)
+            assert d["seat_ok"] == (d["seat_mm"] <= d["seat_bound_mm"]) or d["seat_reason"]
+            if d["seat_ok"]:
+                assert d["seated_cuts"] == (d["seated_cut_share"] > 0.001)
+                assert d["seated_touches"] == (d["seated_mating_median_mm"] <= 1.0)
+            else:
+                assert d["seated_cuts"] and not d["seated_touches"] and d["seated_cut_share"] is None
+    # The cradle pushed down into its groove: seated, it touches the true shaft and does not cut it.
+    assert cradles[1.0]["seat_ok"] and cradles[1.0]["seated_touches"] and not cradles[1.0]["seated_cuts"]
+    assert cradles[1.0]["seated_mating_median_mm"] < cradles[1.0]["mating_median_mm"]
     for k in ("0", "1"):
         s = r["summary"][k]
         assert s["cradle"]["qualifying_scans"] == 1 and s["cradle"]["designed_on"] == 1
@@ -68,6 +83,9 @@ def test_stage_fixtures_on_a_shaft(tmp_path: Path) -> None:
         assert s["all"]["designs"] == len(ok)
         assert s["all"]["cut_rate"] == pytest.approx(sum(d["cuts"] for d in ok) / len(ok))
         assert s["all"]["touch_rate"] == pytest.approx(sum(d["touches"] for d in ok) / len(ok))
+        assert s["all"]["seated_cut_rate"] == pytest.approx(sum(d["seated_cuts"] for d in ok) / len(ok))
+        assert s["all"]["seated_touch_rate"] == pytest.approx(sum(d["seated_touches"] for d in ok) / len(ok))
+        assert s["all"]["seat_failures"] == sum(not d["seat_ok"] for d in ok)
 
 
 def test_clearance_k_belongs_to_the_fixture_stage() -> None:

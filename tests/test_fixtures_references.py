@@ -124,3 +124,43 @@ def test_reference_dataclasses_are_frozen():
     ref = select_references(box_corner())[0]
     with pytest.raises(dataclasses.FrozenInstanceError):
         ref.confidence = 0.0
+
+
+def test_a_hole_whose_plane_mesh_stops_short_of_the_rim_keeps_its_land_and_the_pin_its_flange():
+    """A reconstruction's plane mesh stops short of a hole's rim (the depth loses its edge pixels): with the plane
+    cut back to 1.15 x the radius around the hole of a 60 x 40 x 20 mm block (hole 10 mm, 15 mm from the block's
+    end), the land still reaches out to about 3 x the radius (`SelectionConfig.land_closure`: the first ring found
+    on the plane on 90 % of its directions, out to the block's end), so the pin's flange is the full 4 mm wider
+    than the pin and, seated on the true block, rests on its top."""
+    from fixtures_design import PinParams, design_pin
+    from fixtures_design.frames import camera_mm_matrix, output_frame
+    from fixtures_design.model import transformed
+    from fixtures_design.seat import seat_part
+    from fixtures_design.verify import interference
+
+    block, axes = posed_part(holed_block())
+    vb = vbrep_from_shape(block, axes)
+    (full,) = select_references(vb, ["hole"])
+    assert full.land / full.radius == pytest.approx(3.0, abs=0.2)
+    plane = next(f for f in vb.faces if f.id == full.plane_face)
+    tri = np.asarray(plane.mesh_vertices, float)[np.asarray(plane.mesh_triangles, int)]  # (T, 3 corners, 3)
+    for _ in range(5):  # split each triangle in four at its edge midpoints: 1024 x finer
+        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
+        tri = np.concatenate([np.stack(t, axis=1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    rel = tri - full.center
+    rho = np.linalg.norm(rel - (rel @ full.plane_normal)[..., None] * full.plane_normal, axis=2)
+    tri = tri[(rho > 1.15 * full.radius).all(axis=1)]
+    plane.mesh_vertices = tri.reshape(-1, 3)
+    plane.mesh_triangles = np.arange(len(tri) * 3).reshape(-1, 3)
+    (hole,) = select_references(vb, ["hole"])
+    assert hole.land / hole.radius == pytest.approx(full.land / full.radius, abs=0.15)
+    fmap = output_frame(vb, "camera")
+    fx = design_pin(hole, fmap, PinParams(clearance=0.2))
+    assert fx.notes["flange_radius_mm"] == pytest.approx(fx.notes["pin_radius_mm"] + 4.0)
+    truth = transformed(block, camera_mm_matrix(fmap))
+    seat = seat_part(fx, truth)
+    assert seat.ok and seat.push_mm == pytest.approx(0.2, abs=0.02)  # down by the flange's clearance onto the top
+    m = np.eye(4)
+    m[:3, 3] = seat.move
+    assert interference(fx, transformed(truth, m))[1] < 1e-4

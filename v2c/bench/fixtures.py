@@ -10,6 +10,13 @@ against the scan's true part (``gt/part.step``):
 - **touch**: the median distance from points on the fixture's mating faces to the true part is at most
   ``touch_mm`` (1 mm; `fixtures_design.verify.check_mating` against the whole part).
 
+Both are measured twice: **camera frame**, the true part where the scan puts it (the fixture judged where the
+reconstruction placed it, the scan's depth offset included), and **seated**, the true part first pushed home into
+the fixture as a user puts it in (`fixtures_design.seat.seat_part`: a translation along the directions the fixture
+constrains until its mating faces hold the part). A seat that moves the part more than ``seat_clearance_factor`` x
+the clearance + ``seat_bound_mm`` (+ the design's standoff, a nest's floor gap) is a failed design: it counts as
+cutting and not touching.
+
 From the ground truth alone (``gt/primitives.json``, ``gt/faces.png``, ``gt/depth_clean.npy``) each scan is marked
 as having a visible **hole** (a cylinder of at least ``min_visible_px`` pixels showing at least ``min_arc_deg`` of
 arc, whose seen wall faces away from the camera: concave) and a visible **horizontal cylinder** (a convex one whose
@@ -65,6 +72,8 @@ class FixtureBenchConfig:
     min_arc_deg: float = 120.0  # degrees of arc a gt cylinder must show to count (a fillet spans 90)
     max_tilt_deg: float = 30.0  # degrees: a cylinder axis within this of horizontal is "horizontal" (as the cradle)
     cache_dir: Path | None = None  # None: v2c.bench.cache.default_cache_dir()
+    seat_clearance_factor: float = 3.0  # a seat moving the true part more than this x the clearance + seat_bound_mm
+    seat_bound_mm: float = 2.0  # (mm; + a nest's floor gap) fails the design: the lead's rule for issue 18, not tuned
 
 
 def cache_folder(cfg: FixtureBenchConfig) -> Path:
@@ -170,11 +179,17 @@ def evaluate_scan(
     """One scan: its reconstruction, every kind at every k designed and checked. Returns ``{"scan", "family",
     "hole", "horizontal_cylinder", "seconds_reconstruct", "designs": [...]}``; a design row has kind, k, ok
     (False: no reference, with ``error``), clearance (mm), sigma_mm, probability, cut_mm3, cut_share, cuts,
-    mating_median_mm, mating_max_mm, touches. ``vbrep``: the scan's reconstruction when already made."""
+    mating_median_mm, mating_max_mm, touches (camera frame), and seated: seat_move_mm (the translation (3,), output
+    frame mm), seat_mm (its length), seat_push_mm, seat_bound_mm, seat_ok, seat_reason, seat_overlap_mm,
+    seated_cut_mm3, seated_cut_share, seated_mating_median_mm, seated_mating_max_mm (None when the seat failed),
+    seated_cuts, seated_touches.
+    ``vbrep``: the scan's reconstruction when already made."""
     from fixtures_design.assembly import true_part
     from fixtures_design.design import design_fixture, mating_sigma_mm, outline_sigma_mm
+    from fixtures_design.model import transformed
     from fixtures_design.references import NoReferenceError
     from fixtures_design.run import ground_height
+    from fixtures_design.seat import SeatConfig, seat_part
     from fixtures_design.verify import check_mating, interference
     from v2c.bench.workers import segment_scan
     from v2c.pipeline import reconstruct
@@ -199,6 +214,7 @@ def evaluate_scan(
     # The scan's depth offset over the part (diagnostic, from the ground truth): median of depth - clean depth.
     row["depth_bias_mm"] = float(1000.0 * np.median((scan.depth - clean)[both])) if both.any() else None
     parts: dict[tuple, Any] = {}
+    seat_cfg = SeatConfig(bound_clearance_factor=cfg.seat_clearance_factor, bound_mm=cfg.seat_bound_mm)
     extra = {} if cfg.min_confidence is None else {"min_confidence": cfg.min_confidence}
     for kind in cfg.kinds:
         for k in cfg.clearance_k:
@@ -232,11 +248,40 @@ def evaluate_scan(
                 mating_max_mm=m.max,
                 touches=bool(m.median <= cfg.touch_mm),
             )
+            seat = seat_part(fx, tp, seat_cfg)
+            s_vol = s_share = s_median = s_max = None  # a failed seat is not measured: it cuts and does not touch
+            if seat.ok:
+                move = np.eye(4)
+                move[:3, 3] = seat.move
+                seated = transformed(tp, move)
+                s_vol, s_share = interference(fx, seated)
+                s_m = check_mating(fx, seated, None, max_points_per_face=per_face)
+                s_median, s_max = s_m.median, s_m.max
+            d.update(
+                seat_move_mm=[float(x) for x in seat.move],
+                seat_mm=seat.move_mm,
+                seat_push_mm=seat.push_mm,
+                seat_bound_mm=seat.bound_mm,
+                seat_ok=seat.ok,
+                seat_reason=seat.reason,
+                seat_overlap_mm=seat.overlap_mm,
+                seated_cut_mm3=s_vol,
+                seated_cut_share=s_share,
+                seated_mating_median_mm=s_median,
+                seated_mating_max_mm=s_max,
+                seated_cuts=bool(s_share is None or s_share > cfg.cut_share),
+                seated_touches=bool(s_median is not None and s_median <= cfg.touch_mm),
+            )
             row["designs"].append(d)
             if log:
                 log(
                     f"{Path(scan_dir).name} {row['family']} {kind} k={k:g}: clearance {d['clearance']:.2f} mm, "
-                    f"sigma {_f(d['sigma_mm'])} mm, cut {100 * share:.2f} %, mating median {m.median:.2f} mm"
+                    f"sigma {_f(d['sigma_mm'])} mm, cut {100 * share:.2f} %, mating median {m.median:.2f} mm; "
+                    + (
+                        f"seat {seat.move_mm:.2f} mm, seated cut {100 * s_share:.2f} %, mating median {s_median:.2f} mm"
+                        if seat.ok
+                        else f"seat FAILED ({seat.reason})"
+                    )
                 )
     return row
 
@@ -246,8 +291,9 @@ def _f(v: float | None) -> str:
 
 
 def summarise(rows: list[dict], cfg: FixtureBenchConfig) -> dict[str, Any]:
-    """Per k, per kind and over all kinds: designs, cut and touch rates (shares of the designs), the median
-    clearance (mm), and for pin / cradle the scans that qualify (visible hole / horizontal cylinder) and the share
+    """Per k, per kind and over all kinds: designs, cut and touch rates (shares of the designs) in the camera frame
+    and seated (a failed seat counts as cutting and not touching), failed seats, the median seat and clearance
+    (mm), and for pin / cradle the scans that qualify (visible hole / horizontal cylinder) and the share
     of them with a design."""
     out: dict[str, Any] = {}
     qual = {"pin": "hole", "cradle": "horizontal_cylinder"}
@@ -262,6 +308,10 @@ def summarise(rows: list[dict], cfg: FixtureBenchConfig) -> dict[str, Any]:
                 "cut_rate": float(np.mean([d["cuts"] for d in ds])) if ds else None,
                 "touch_rate": float(np.mean([d["touches"] for d in ds])) if ds else None,
                 "median_clearance_mm": float(np.median([d["clearance"] for d in ds])) if ds else None,
+                "seated_cut_rate": float(np.mean([d["seated_cuts"] for d in ds])) if ds else None,
+                "seated_touch_rate": float(np.mean([d["seated_touches"] for d in ds])) if ds else None,
+                "seat_failures": sum(not d["seat_ok"] for d in ds),
+                "median_seat_mm": float(np.median([d["seat_mm"] for d in ds])) if ds else None,
             }
             if kind in qual:
                 scans = [r for r in rows if r[qual[kind]]]
@@ -314,11 +364,12 @@ def weights_sha1(weights: Path | None) -> str | None:
 
 
 def format_table(result: dict[str, Any]) -> str:
-    """Markdown table: one row per k and kind (and all kinds): designs, cut rate, touch rate, median clearance,
-    pin / cradle qualification."""
+    """Markdown table: one row per k and kind (and all kinds): designs, cut and touch rates in the camera frame and
+    seated, failed seats, median seat and clearance, pin / cradle qualification."""
     lines = [
-        "| k | kind | designs | cut rate | touch rate | median clearance (mm) | qualifying scans | designed on |",
-        "|" + " --- |" * 8,
+        "| k | kind | designs | cut rate | touch rate | seated cut rate | seated touch rate | failed seats | "
+        "median seat (mm) | median clearance (mm) | qualifying scans | designed on |",
+        "|" + " --- |" * 12,
     ]
     for k, per in result["summary"].items():
         for kind, s in per.items():
@@ -328,7 +379,8 @@ def format_table(result: dict[str, Any]) -> str:
                 on = f"{s['designed_on']} ({100 * s['qualification_rate']:.0f} %)"
             lines.append(
                 f"| {k} | {'**all**' if kind == 'all' else kind} | {s['designs']} | {_pct(s['cut_rate'])} | "
-                f"{_pct(s['touch_rate'])} | {_f(s['median_clearance_mm'])} | {q} | {on} |"
+                f"{_pct(s['touch_rate'])} | {_pct(s['seated_cut_rate'])} | {_pct(s['seated_touch_rate'])} | "
+                f"{s['seat_failures']} | {_f(s['median_seat_mm'])} | {_f(s['median_clearance_mm'])} | {q} | {on} |"
             )
     return "\n".join(lines)
 
