@@ -97,6 +97,11 @@ class VBRepConfig:
     # --- faces the geometry stage left without a primitive
     fallback_min_px: int = 10  # pixels: such an instance this large gets a least-squares plane through its depth
     #                            points and its boundaries lifted onto its fitted neighbours (else: background)
+    speck_reach_px: float = 3.0  # pixels: a smaller instance without a face (a speck) is merged into the faced
+    #                              instances nearest its pixels, within this (a speck of up to 9 px lies within
+    #                              2 px of its outline), and the edge graph rebuilt (`faces.absorb_specks`)
+    graph_simplify_px: float = 1.0  # pixels: Douglas-Peucker tolerance of that rebuilt graph (the fit's own,
+    #                                 FitConfig.simplify_px)
     fallback_rms: float = 0.01  # scale units: ... if the plane fits that evidence this well
     fallback_flatness: float = 0.05  # ratio of singular values: ... and the evidence is not all on one line
     fallback_min_angle_deg: float = 5.0  # degrees: ... and the plane does not coincide with a fitted plane (within
