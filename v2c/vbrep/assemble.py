@@ -121,7 +121,7 @@ def _vedges(
     cfg = ctx.cfg
     cmap = _calibration(cfg)
     focal = float(np.sqrt(ctx.K[0, 0] * ctx.K[1, 1]))
-    face_px = np.bincount(np.asarray(ctx.instances).ravel().clip(0))
+    face_px = np.bincount(np.asarray(ctx.face_map).ravel().clip(0))
     edges = []
     quantities = []
     for k, p in enumerate(protos):
@@ -174,7 +174,7 @@ def _part_box(ctx: ExtractContext) -> tuple[np.ndarray, np.ndarray] | None:
     cfg = ctx.cfg
     if cfg.mesh_bound_pad < 0:
         return None
-    q = measured_points(ctx.instances > 0, ctx.depth, ctx.K)
+    q = measured_points(ctx.face_map > 0, ctx.depth, ctx.K)
     if not len(q):
         return None
     return (
@@ -215,7 +215,7 @@ def _vfaces(
     from_loops = []
     for inst in inst_ids:
         fg = ctx.faces[inst]
-        region = ctx.instances == inst
+        region = ctx.face_map == inst
         ch = ctx.sheets[inst]
         conf = face_confidence(fg.residual, ch.errors, ch.sheet, scale, cfg)
         box = None if bounds is None else _face_box(ctx, fg, region, conf, bounds)
@@ -231,7 +231,7 @@ def _vfaces(
         )
         mv = mt = None
         poly = loop_polygon(loops.get(fid[inst], []), protos, ctx.K) if cfg.mesh_from_loops else None
-        if poly is not None and _loops_cover_region(poly, inst, ctx.instances, set(inst_ids), cfg):
+        if poly is not None and _loops_cover_region(poly, inst, ctx.face_map, set(inst_ids), cfg):
             mv, mt = loop_mesh(fg.prim, fg.sheet, poly, *args)
             if len(mt):
                 from_loops.append(fid[inst])
@@ -297,7 +297,7 @@ def assemble(
     fid = {inst: k for k, inst in enumerate(inst_ids)}
     # positional uncertainty: each face's fit covariance from its observed points (v2c.vbrep.uncertainty)
     ucfg = uncertainty_config(ctx.cfg)
-    face_pts = {i: measured_points(ctx.instances == i, ctx.depth, ctx.K) for i in inst_ids}
+    face_pts = {i: measured_points(ctx.face_map == i, ctx.depth, ctx.K) for i in inst_ids}
     covs = {i: face_covariance(ctx.faces[i].prim, face_pts[i], ctx.faces[i].residual, ucfg) for i in inst_ids}
     edges = _vedges(ctx, protos, fid, covs, ucfg, seg)
     vverts = [VVertex(k, v.kind, v.position, v.pixel) for k, v in enumerate(vertices)]
@@ -317,7 +317,7 @@ def assemble(
         },
         "extract": dict(ctx.stats, gap_threshold_m=ctx.gap_thr),
     }
-    h, w = ctx.instances.shape
+    h, w = ctx.face_map.shape
     return VBRep(
         vfaces,
         edges,

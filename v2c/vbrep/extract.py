@@ -59,6 +59,7 @@ def extract_vbrep(scan: Scan, seg: Segmentation, fit: FitResult, config: VBRepCo
     # specks: instances too small for a face merge into their faced neighbours, so they leave no junction clutter
     instances, graph = absorb_specks(np.asarray(seg.instances), fit.graph, set(faces), cfg, stats)
     ctx = ExtractContext(faces, sheets, K, window, scale, gap_thr, depth, instances, cfg, stats)
+    ctx.regions = np.asarray(seg.instances)  # a face's mesh and measures keep its own pixels
     # 2. edges: typed, split and lifted
     protos: list[ProtoEdge] = []
     for gi, ge in enumerate(graph.edges):
