@@ -89,6 +89,7 @@ class EdgeBuilder:
         size = fmap.length(vbrep.scale) if vbrep.scale > 0 else 100.0
         self.branch_tol = max(config.branch_tol_abs, config.branch_tol_rel * size)
         self.fit_tol = max(config.fit_tol_abs, config.fit_tol_rel * size)
+        self.pcurve_tol = max(config.pcurve_tol_abs, config.pcurve_tol_rel * size)
         self.warnings: list[str] = []
         self.surfaces: dict[int, AnalyticSurface] = {}
         self.curves: dict[int, Geom_Curve] = {}
@@ -289,14 +290,14 @@ class EdgeBuilder:
         # Characteristic length of one parameter unit: angles scale with the radius.
         unit = max(s.radius, s.minor_radius, 1.0) if s.u_periodic else 1.0
         iso = None
-        if np.ptp(uv[:, 0]) <= self.fit_tol / unit or np.ptp(uv[:, 1]) <= self.fit_tol / unit:
-            iso = iso_curve(s, uv[0], uv[-1], self.fit_tol / unit)
+        if np.ptp(uv[:, 0]) <= self.pcurve_tol / unit or np.ptp(uv[:, 1]) <= self.pcurve_tol / unit:
+            iso = iso_curve(s, uv[0], uv[-1], self.pcurve_tol / unit)
         if iso is not None:  # along an iso line: an exact circle or line with its matching pcurve
             c3, c2, t0, t1 = iso
             ends = curve_points(c3, np.array([t0, t1]))
             return EdgeGeom(curve=c3, face=face, pcurve=c2, t0=t0, t1=t1, end0=ends[0], end1=ends[1])
         try:
-            pc = fit_pcurve(uv, self.fit_tol / unit, circles=s.kind is PrimitiveType.PLANE)
+            pc = fit_pcurve(uv, self.pcurve_tol / unit, circles=s.kind is PrimitiveType.PLANE)
         except Exception as exc:  # noqa: BLE001 - OCCT approximation failures
             self.warnings.append(f"edge {e.id}: pcurve fit failed ({exc})")
             return None

@@ -127,8 +127,8 @@ def iso_curve(
 
 
 def _circle_arc(uv: np.ndarray, tol: float) -> Geom2d_Curve | None:
-    """A circular arc through open (N >= 3, 2) points when they fit one within ``tol`` (algebraic fit), from
-    the first to the last point in their direction of travel; else None."""
+    """A circular arc through open (N >= 3, 2) points when they and the polyline between them fit one within
+    ``tol`` (algebraic fit), from the first to the last point in their direction of travel; else None."""
     if len(uv) < 3 or np.linalg.norm(uv[-1] - uv[0]) <= tol:
         return None
     A = np.column_stack([2 * uv, np.ones(len(uv))])
@@ -137,7 +137,10 @@ def _circle_arc(uv: np.ndarray, tol: float) -> Geom2d_Curve | None:
     if not r2 > 0:
         return None
     r = float(np.sqrt(r2))
-    if np.abs(np.linalg.norm(uv - (a, b), axis=1) - r).max() > tol or r > 1e4 * np.ptp(uv, axis=0).max():
+    # the whole polyline must lie on the circle, not only its points: three points always fit one, and a
+    # corner's few points would become an arc bulging off the polyline between them
+    dense = densify(uv, 60)
+    if np.abs(np.linalg.norm(dense - (a, b), axis=1) - r).max() > tol or r > 1e4 * np.ptp(uv, axis=0).max():
         return None
     ang = np.unwrap(np.arctan2(uv[:, 1] - b, uv[:, 0] - a))
     ccw = ang[-1] > ang[0]

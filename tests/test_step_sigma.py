@@ -181,7 +181,10 @@ def test_pipeline_reconstruction_sigma_in_the_step(tmp_path: Path) -> None:
     for g in named_faces:
         assert g.sigma_mm == _two_digits(faces[g.id].sigma_mm), g.name
     typed = back.typed_edges
-    assert {g.id for g in typed} == set(edges) - set(report.dropped_edges)
+    # every written edge, and the dropped edges of a face bounded by its mesh outline only where its outline
+    # segments carry their names (docs/step.md, Robustness)
+    ids = {g.id for g in typed}
+    assert set(edges) - set(report.dropped_edges) <= ids <= set(edges)
     for g in typed:
         assert g.sigma_mm == _two_digits(edges[g.id].sigma_mm), g.name
         assert math.isclose(g.sigma_mm, edges[g.id].sigma_mm, rel_tol=0.05)

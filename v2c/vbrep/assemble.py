@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import shapely
 
 from v2c.camera import project
 from v2c.primitives import Plane
@@ -18,6 +19,7 @@ from v2c.vbrep.classify import FaceGeom
 from v2c.vbrep.confidence import edge_confidence, face_confidence
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.context import ExtractContext
+from v2c.vbrep.loop_mesh import loop_mesh, loop_polygon
 from v2c.vbrep.mesh import face_mesh
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VFace, VVertex
 from v2c.vbrep.pointfit import measured_points
@@ -119,7 +121,7 @@ def _vedges(
     cfg = ctx.cfg
     cmap = _calibration(cfg)
     focal = float(np.sqrt(ctx.K[0, 0] * ctx.K[1, 1]))
-    face_px = np.bincount(np.asarray(ctx.instances).ravel().clip(0))
+    face_px = np.bincount(np.asarray(ctx.face_map).ravel().clip(0))
     edges = []
     quantities = []
     for k, p in enumerate(protos):
@@ -172,7 +174,7 @@ def _part_box(ctx: ExtractContext) -> tuple[np.ndarray, np.ndarray] | None:
     cfg = ctx.cfg
     if cfg.mesh_bound_pad < 0:
         return None
-    q = measured_points(ctx.instances > 0, ctx.depth, ctx.K)
+    q = measured_points(ctx.face_map > 0, ctx.depth, ctx.K)
     if not len(q):
         return None
     return (
@@ -202,21 +204,22 @@ def _vfaces(
     loops: dict,
     covs: dict,
     face_pts: dict[int, np.ndarray],
+    protos: list[ProtoEdge],
 ) -> list[VFace]:
-    """The VB-Rep faces with their meshes, loops, confidences and sigmas (mm)."""
+    """The VB-Rep faces with their meshes, loops, confidences and sigmas (mm). A face whose loops bound a valid
+    image region gets the mesh of that region (`v2c.vbrep.loop_mesh`: the trimmed face; noted in
+    ``ctx.stats["loop_meshes"]``), any other the mesh of its pixel region."""
     cfg, scale = ctx.cfg, ctx.scale
     bounds = _part_box(ctx)
     vfaces = []
+    from_loops = []
     for inst in inst_ids:
         fg = ctx.faces[inst]
-        region = ctx.instances == inst
+        region = ctx.face_map == inst
         ch = ctx.sheets[inst]
         conf = face_confidence(fg.residual, ch.errors, ch.sheet, scale, cfg)
         box = None if bounds is None else _face_box(ctx, fg, region, conf, bounds)
-        mv, mt = face_mesh(
-            fg.prim,
-            fg.sheet,
-            region,
+        args = (
             ctx.depth,
             ctx.K,
             ctx.window,
@@ -226,6 +229,16 @@ def _vfaces(
             box,
             cfg.mesh_plane_long and isinstance(fg.prim, Plane) and conf >= cfg.mesh_loose_min_conf,
         )
+        mv = mt = None
+        poly = loop_polygon(loops.get(fid[inst], []), protos, ctx.K) if cfg.mesh_from_loops else None
+        if poly is not None and _loops_cover_region(poly, inst, ctx.face_map, set(inst_ids), cfg):
+            mv, mt = loop_mesh(fg.prim, fg.sheet, poly, *args)
+            if len(mt):
+                from_loops.append(fid[inst])
+            else:
+                mv = mt = None
+        if mv is None:
+            mv, mt = face_mesh(fg.prim, fg.sheet, region, *args)
         fsig = face_sigma_m(covs[inst], face_pts[inst]) if covs[inst] is not None else float("nan")
         vfaces.append(
             VFace(
@@ -240,7 +253,35 @@ def _vfaces(
                 sigma_mm=round(1000.0 * fsig, 5) if np.isfinite(fsig) else None,
             )
         )
+    ctx.stats["loop_meshes"] = from_loops
     return vfaces
+
+
+def _loops_cover_region(
+    poly: shapely.Polygon, inst: int, instances: np.ndarray, faced: set[int], cfg: VBRepConfig
+) -> bool:
+    """Whether a face's loop polygon (image pixels) is the face seen: its intersection over union with the face's
+    pixel region (pixel centres inside the polygon, the polygon's area) at least ``loop_mesh_min_iou``, and no
+    other face losing ``loop_mesh_max_take`` or more of its pixels to it (a loop a pixel or two off its outline
+    swallows a small neighbour, which its mesh would then hide)."""
+    sizes = np.bincount(instances.ravel().clip(0))
+    n = int(sizes[inst]) if inst < len(sizes) else 0
+    if n == 0:
+        return False
+    h, w = instances.shape
+    x0, y0, x1, y1 = poly.bounds
+    u0, v0 = max(0, int(np.floor(x0))), max(0, int(np.floor(y0)))
+    u1, v1 = min(w - 1, int(np.ceil(x1))), min(h - 1, int(np.ceil(y1)))
+    if u1 < u0 or v1 < v0:
+        return False
+    vs, us = np.mgrid[v0 : v1 + 1, u0 : u1 + 1]
+    inside = shapely.contains_xy(poly, us.ravel().astype(float), vs.ravel().astype(float))
+    labels = instances[vs.ravel()[inside], us.ravel()[inside]]
+    covered = np.bincount(labels.clip(0), minlength=len(sizes))
+    if covered[inst] < cfg.loop_mesh_min_iou * (n + poly.area - covered[inst]):
+        return False
+    other = [k for k in np.flatnonzero(covered) if k != inst and k in faced]
+    return all(covered[k] < cfg.loop_mesh_max_take * sizes[k] for k in other)
 
 
 def assemble(
@@ -256,12 +297,12 @@ def assemble(
     fid = {inst: k for k, inst in enumerate(inst_ids)}
     # positional uncertainty: each face's fit covariance from its observed points (v2c.vbrep.uncertainty)
     ucfg = uncertainty_config(ctx.cfg)
-    face_pts = {i: measured_points(ctx.instances == i, ctx.depth, ctx.K) for i in inst_ids}
+    face_pts = {i: measured_points(ctx.face_map == i, ctx.depth, ctx.K) for i in inst_ids}
     covs = {i: face_covariance(ctx.faces[i].prim, face_pts[i], ctx.faces[i].residual, ucfg) for i in inst_ids}
     edges = _vedges(ctx, protos, fid, covs, ucfg, seg)
     vverts = [VVertex(k, v.kind, v.position, v.pixel) for k, v in enumerate(vertices)]
     loops = build_loops(protos, fid, ctx.K)
-    vfaces = _vfaces(ctx, inst_ids, fid, loops, covs, face_pts)
+    vfaces = _vfaces(ctx, inst_ids, fid, loops, covs, face_pts, protos)
     meta = {
         "segmentation": seg.method,
         "faces": {
@@ -276,7 +317,7 @@ def assemble(
         },
         "extract": dict(ctx.stats, gap_threshold_m=ctx.gap_thr),
     }
-    h, w = ctx.instances.shape
+    h, w = ctx.face_map.shape
     return VBRep(
         vfaces,
         edges,

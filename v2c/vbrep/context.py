@@ -34,7 +34,9 @@ class ExtractContext:
     faces / sheets: instance id -> surface and its chosen sheet (faces without either are background); K: (3, 3)
     intrinsics (pixels); window: depth range of the ray casts (metres); scale: part size estimate (metres);
     gap_thr: depth-gap threshold of intersections (metres); depth: (H, W) observed depth (metres, 0 = none);
-    instances: (H, W) instance map; stats: counts reported in ``VBRep.meta["extract"]``.
+    instances: (H, W) instance map the edges are found in (specks merged, `v2c.vbrep.faces.absorb_specks`);
+    regions: the segmentation's own instance map, which faces are meshed and measured on (None: ``instances``);
+    stats: counts reported in ``VBRep.meta["extract"]``.
     """
 
     faces: dict[int, FaceGeom]
@@ -47,6 +49,12 @@ class ExtractContext:
     instances: np.ndarray
     cfg: VBRepConfig
     stats: dict[str, Any] = field(default_factory=dict)
+    regions: np.ndarray | None = None
+
+    @property
+    def face_map(self) -> np.ndarray:
+        """The instance map faces are meshed and measured on (``regions``, else ``instances``)."""
+        return self.instances if self.regions is None else self.regions
 
     @property
     def view(self) -> SurfaceView:

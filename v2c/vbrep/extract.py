@@ -30,7 +30,7 @@ from v2c.vbrep.assemble import assemble
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.context import ExtractContext, depth_window
 from v2c.vbrep.edges import edge_protos
-from v2c.vbrep.faces import face_geoms
+from v2c.vbrep.faces import absorb_specks, face_geoms
 from v2c.vbrep.model import VBRep
 from v2c.vbrep.postprocess import ProtoEdge, postprocess
 from v2c.vbrep.topology import drop_degenerate, snap_to_surfaces
@@ -56,13 +56,16 @@ def extract_vbrep(scan: Scan, seg: Segmentation, fit: FitResult, config: VBRepCo
     # 1. faces: surfaces and sheets
     faces, sheets = face_geoms(fit, seg, depth, K, window, scale, cfg, stats)
     gap_thr = max(cfg.int_gap * scale, cfg.int_gap_min_m)
-    ctx = ExtractContext(faces, sheets, K, window, scale, gap_thr, depth, np.asarray(seg.instances), cfg, stats)
+    # specks: instances too small for a face merge into their faced neighbours, so they leave no junction clutter
+    instances, graph = absorb_specks(np.asarray(seg.instances), fit.graph, set(faces), cfg, stats)
+    ctx = ExtractContext(faces, sheets, K, window, scale, gap_thr, depth, instances, cfg, stats)
+    ctx.regions = np.asarray(seg.instances)  # a face's mesh and measures keep its own pixels
     # 2. edges: typed, split and lifted
     protos: list[ProtoEdge] = []
-    for gi, ge in enumerate(fit.graph.edges):
+    for gi, ge in enumerate(graph.edges):
         protos += edge_protos(ctx, gi, ge)
     # 3. vertices: grouped, typed, optimised
-    vertices = make_vertices(ctx, protos, fit.graph)
+    vertices = make_vertices(ctx, protos, graph)
     # 4. clean-up, then every edge on its surfaces and ending at its vertices
     prims = {i: f.prim for i, f in faces.items()}
     protos, vertices = postprocess(

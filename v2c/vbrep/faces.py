@@ -14,10 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
 from v2c.camera import pixel_rays
 from v2c.labels import type_axis_of
 from v2c.primitives import Cylinder, Plane
+from v2c.segment.graph import EdgeGraph, build_edge_graph
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import FaceGeom
 from v2c.vbrep.config import VBRepConfig
@@ -214,3 +216,29 @@ def face_geoms(
     _add_fallbacks(fs, seg, fit, scale)
     stats["rejected_primitives"] = rejected
     return fs.faces, fs.sheets
+
+
+def absorb_specks(
+    instances: np.ndarray, graph: EdgeGraph, faced: set[int], cfg: VBRepConfig, stats: dict
+) -> tuple[np.ndarray, EdgeGraph]:
+    """The instance map with every speck (an instance without a face, smaller than ``fallback_min_px`` pixels,
+    which is never given one) given to the faced instances nearest its pixels (within ``speck_reach_px``), and its
+    edge graph rebuilt (the same construction and simplification as the fit's, `v2c.segment.graph`); unchanged
+    when there is no speck. A speck would otherwise count as background: its few-pixel boundaries cut its
+    neighbours' edges into runs shorter than ``min_edge_px`` whose contraction merges vertices several pixels
+    apart (edges that run out and back, loops of one or two edges). ``stats["specks_absorbed"]``: their ids."""
+    inst = np.asarray(instances)
+    sizes = np.bincount(inst.ravel().clip(0))
+    specks = [i for i in np.flatnonzero(sizes) if i > 0 and i not in faced and sizes[i] < cfg.fallback_min_px]
+    stats["specks_absorbed"] = [int(i) for i in specks]
+    if not specks or not faced:
+        return inst, graph
+    is_speck = np.isin(inst, specks)
+    owner = np.isin(inst, sorted(faced))
+    dist, (iy, ix) = distance_transform_edt(~owner, return_indices=True)
+    take = is_speck & (dist <= cfg.speck_reach_px)
+    if not take.any():
+        return inst, graph
+    out = inst.copy()
+    out[take] = inst[iy[take], ix[take]]
+    return out, build_edge_graph(out, cfg.graph_simplify_px)

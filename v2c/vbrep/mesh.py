@@ -91,6 +91,39 @@ def face_mesh(
         nearest = np.stack([ix[qi, qj] + x0, iy[qi, qj] + y0], 1).astype(float)
         d = q - nearest
         uv[out] = nearest + 0.5 * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    verts, good = lift_points(prim, sheet, uv, depth, K, window, surface_tol)
+    if not good.all():
+        idx[keep] = np.where(good, idx[keep], -1)
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    tris = []
+    full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
+    tris += [np.stack([a, b, c], 1)[full], np.stack([a, c, d], 1)[full]]
+    for t0, t1, t2, miss in ((b, c, d, a), (a, c, d, b), (a, b, d, c), (a, b, c, d)):
+        three = (t0 >= 0) & (t1 >= 0) & (t2 >= 0) & (miss < 0)
+        tris.append(np.stack([t0, t1, t2], 1)[three])
+    tri = np.concatenate(tris).astype(np.int64)
+    if len(tri):  # a triangle with an outline corner (``out``) whose centre pixel lies off the region spans a gap of
+        # it (a small hole, a narrow notch where another face cuts in) and would hide that face when rendered
+        rim = out[tri].any(axis=1)
+        c = np.clip(np.rint(uv[tri].mean(axis=1)).astype(int), 0, [w - 1, h - 1])
+        tri = tri[~(rim & ~region[c[:, 1], c[:, 0]])]
+    return finish_mesh(verts, tri, max_edge, bounds, long_in_bounds)
+
+
+def lift_points(
+    prim: Primitive,
+    sheet: int,
+    uv: np.ndarray,
+    depth: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    surface_tol: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Image points uv (N, 2) back-projected onto the face's sheet: (N, 3) camera-frame metres and (N,) bool
+    usable (finite, inside ``window``, on the surface: closest-approach points within ``surface_tol`` metres
+    moved onto it, farther ones unusable)."""
+    h, w = depth.shape[:2]
     pix = np.clip(np.rint(uv).astype(int), 0, [w - 1, h - 1])
     prior = depth[pix[:, 1], pix[:, 0]].astype(float)
     rays = pixel_rays(uv, K)
@@ -111,22 +144,18 @@ def face_mesh(
                 & (verts[snap, 2] >= window[0])
                 & (verts[snap, 2] <= window[1])
             )
-    if not good.all():
-        idx[keep] = np.where(good, idx[keep], -1)
-    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
-    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
-    tris = []
-    full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
-    tris += [np.stack([a, b, c], 1)[full], np.stack([a, c, d], 1)[full]]
-    for t0, t1, t2, miss in ((b, c, d, a), (a, c, d, b), (a, b, d, c), (a, b, c, d)):
-        three = (t0 >= 0) & (t1 >= 0) & (t2 >= 0) & (miss < 0)
-        tris.append(np.stack([t0, t1, t2], 1)[three])
-    tri = np.concatenate(tris).astype(np.int64)
-    if len(tri):  # a triangle with an outline corner (``out``) whose centre pixel lies off the region spans a gap of
-        # it (a small hole, a narrow notch where another face cuts in) and would hide that face when rendered
-        rim = out[tri].any(axis=1)
-        c = np.clip(np.rint(uv[tri].mean(axis=1)).astype(int), 0, [w - 1, h - 1])
-        tri = tri[~(rim & ~region[c[:, 1], c[:, 0]])]
+    return verts, good
+
+
+def finish_mesh(
+    verts: np.ndarray,
+    tri: np.ndarray,
+    max_edge: float,
+    bounds: tuple[np.ndarray, np.ndarray] | None,
+    long_in_bounds: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The kept triangles (see the module doc: ``max_edge``, ``bounds``, ``long_in_bounds``), wound to face the
+    camera, and the vertices they use (compacted)."""
     if len(tri) == 0:
         return np.zeros((0, 3)), tri
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
