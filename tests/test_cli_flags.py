@@ -38,7 +38,18 @@ def _writes_files(name: str) -> bool:
 
 
 def test_every_command_is_listed_and_documented() -> None:
-    assert set(COMMANDS) == {"bench", "fit", "fixture", "info", "reconstruct", "synth", "to-step", "train"}
+    assert set(COMMANDS) == {
+        "bench",
+        "fit",
+        "fixture",
+        "info",
+        "reconstruct",
+        "shards",
+        "synth",
+        "to-step",
+        "train",
+        "train-device",
+    }
     table = (REPO / "docs" / "cli.md").read_text()
     for flag in ("`-v`, `--verbose`", "`-q`, `--quiet`", "`-o`, `--output`", "`--force`", "`--jobs N`", "`--seed S`"):
         assert f"| {flag} |" in table, flag

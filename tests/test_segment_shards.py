@@ -194,3 +194,34 @@ def test_clutter_beside_the_part_is_ignored_and_a_plain_scan_untouched(tmp_path:
         np.testing.assert_array_equal(
             ignore_clutter(scan.gt.labels, scan.gt.faces, scan.gt.depth_clean, scan.K), scan.gt.labels
         )
+
+
+def test_shards_and_train_device_commands(scans: tuple[Path, list[Path]], tmp_path: Path) -> None:
+    """`v2c shards` packs every scan once and refuses a folder that holds shards without --force; `v2c
+    train-device` trains from them, writes a checkpoint `load_weights` reads, and refuses to train over it."""
+    from click.testing import CliRunner
+
+    from v2c.cli import main
+
+    root, dirs = scans
+    out = tmp_path / "sh"
+    res = CliRunner().invoke(main, ["shards", str(root), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for f in sorted(out.glob("shard_*.npz")) for p in read_shard(f))
+    assert names == sorted(str(d.relative_to(root)) for d in dirs)
+    res = CliRunner().invoke(main, ["shards", str(root), "-o", str(out)])
+    assert res.exit_code == 1 and f"{out}: holds shards; pass --force" in res.output, res.output
+    assert CliRunner().invoke(main, ["shards", str(root), "-o", str(out), "--force"]).exit_code == 0
+    ck = tmp_path / "ck"
+    args = ["train-device", "--shards", str(out), "-o", str(ck), "--steps", "3", "--batch", "2", "--crop", "64"]
+    args += ["--warmup", "1", "--realisations", "1", "--workers", "1", "--val-scans", "2", "--probe-steps", "1"]
+    args += ["--wide", "8,16,32"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    assert "4 packed scans from 1 shards" in res.output
+    model, _ = load_weights(ck / "wide.pt")
+    assert model.cfg.widths == (8, 16, 32)
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 1 and f"{ck}: holds checkpoints; pass --force" in res.output, res.output
+    res = CliRunner().invoke(main, ["train-device", "--shards", str(out), "-o", str(tmp_path / "w"), "--wide", "8,x"])
+    assert res.exit_code == 2 and "'8,x': expected comma-separated integers" in res.output, res.output

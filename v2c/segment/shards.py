@@ -259,22 +259,3 @@ def interleaved_scans(root: str | Path) -> list[Path]:
     out = [s for _, _, s in sorted(keyed)]
     assert len(out) == total
     return out
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m v2c.segment.shards DATA OUT [--max-mb M]``: pack the generated scans under DATA into shards."""
-    import argparse
-
-    ap = argparse.ArgumentParser(description="Pack generated training scans into shards for an accelerator.")
-    ap.add_argument("data")
-    ap.add_argument("out")
-    ap.add_argument("--max-mb", type=float, default=ShardConfig.max_shard_mb)
-    a = ap.parse_args(argv)
-    scans = interleaved_scans(a.data)
-    shards = write_shards(scans, a.data, a.out, ShardConfig(max_shard_mb=a.max_mb))
-    for s in shards:
-        print(f"{s}: {s.stat().st_size / 2**20:.1f} MiB, {len(read_shard(s))} scans")
-
-
-if __name__ == "__main__":
-    main()

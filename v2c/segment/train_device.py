@@ -13,12 +13,11 @@ realisation, features as inference computes them), in ``workers`` processes. Hel
 Time budget: after ``probe_steps`` steps the step time is measured and the schedule's length set so that the run
 ends within ``minutes`` (the cosine schedule then completes); the chosen length is recorded.
 
-Run on the machine that trains: ``python -m v2c.segment.train_device --shards DIR [DIR ...] --out DIR ...``.
+Run on the machine that trains: ``v2c train-device --shards DIR [DIR ...] --out DIR ...`` (`v2c.commands.train_device`).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from collections.abc import Callable, Sequence
@@ -332,65 +331,29 @@ def train_on_device(
     return records
 
 
-def main(argv: Sequence[str] | None = None) -> None:
-    """Command line of the accelerator run (prints progress; writes checkpoints to --out)."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--shards", nargs="+", required=True, help="folders of shard_*.npz (or shard files)")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--init", default=None, help="weights for the net named 'init' (a fine-tuning run)")
-    ap.add_argument("--wide", default="", help="comma-separated widths of a second net trained from scratch")
-    ap.add_argument("--minutes", type=float, default=None)
-    ap.add_argument("--steps", type=int, default=20000)
-    ap.add_argument("--batch", type=int, default=32)
-    ap.add_argument("--crop", type=int, default=192)
-    ap.add_argument("--lr", type=float, default=6e-4)
-    ap.add_argument("--wide-lr-scale", type=float, default=1.0, help="factor on --lr for the --wide net")
-    ap.add_argument("--warmup", type=int, default=300)
-    ap.add_argument("--realisations", type=int, default=2)
-    ap.add_argument("--workers", type=int, default=16)
-    ap.add_argument("--val-scans", type=int, default=48)
-    ap.add_argument("--eval-minutes", type=float, default=1.0)
-    ap.add_argument("--probe-steps", type=int, default=60)
-    ap.add_argument("--limit", type=int, default=None, help="use only the first N packed scans (smoke runs)")
-    ap.add_argument("--seed", type=int, default=10)
-    a = ap.parse_args(argv)
+def load_packed(shards: Sequence[str | Path], limit: int | None = None) -> tuple[list[PackedScan], int]:
+    """The packed scans of the given shard folders (their shard_*.npz) or shard files, in order; the first ``limit``
+    only if given. Returns the scans and the number of shard files read."""
     files: list[Path] = []
-    for s in a.shards:
+    for s in shards:
         p = Path(s)
         files += sorted(p.glob("shard_*.npz")) if p.is_dir() else [p]
     packed: list[PackedScan] = []
     for f in files:
         packed += read_shard(f)
-    if a.limit:
-        packed = packed[: a.limit]
-    print(f"{len(packed)} packed scans from {len(files)} shards", flush=True)
+    if limit:
+        packed = packed[:limit]
+    return packed, len(files)
+
+
+def nets_to_train(init: str | None, wide: Sequence[int]) -> dict[str, tuple[NetConfig | None, str | None]]:
+    """The nets of one run: 'init' fine-tuned from the weights file ``init``, 'wide' of widths ``wide`` from scratch,
+    or, with neither, 'scratch' of the default widths."""
     nets: dict[str, tuple[NetConfig | None, str | None]] = {}
-    if a.init:
-        nets["init"] = (None, a.init)
-    if a.wide:
-        nets["wide"] = (NetConfig(widths=tuple(int(v) for v in a.wide.split(","))), None)
+    if init:
+        nets["init"] = (None, init)
+    if wide:
+        nets["wide"] = (NetConfig(widths=tuple(int(v) for v in wide)), None)
     if not nets:
         nets["scratch"] = (NetConfig(), None)
-    cfg = TrainConfig(
-        steps=a.steps,
-        minutes=a.minutes,
-        batch=a.batch,
-        crop_px=a.crop,
-        lr=a.lr,
-        warmup_steps=a.warmup,
-        val_scans=a.val_scans,
-        seed=a.seed,
-    )
-    dcfg = DeviceTrainConfig(
-        realisations=a.realisations,
-        workers=a.workers,
-        probe_steps=a.probe_steps,
-        eval_minutes=a.eval_minutes,
-        seed=a.seed,
-    )
-    scale = {"wide": a.wide_lr_scale}
-    train_on_device(packed, a.out, nets, cfg, dcfg, lr_scale=scale, log=lambda m: print(m, flush=True))
-
-
-if __name__ == "__main__":
-    main()
+    return nets
