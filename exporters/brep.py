@@ -34,13 +34,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from OCP.Bnd import Bnd_Box
-from OCP.BRep import BRep_Builder
+from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBndLib import BRepBndLib
-from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_Transform
 from OCP.BRepCheck import BRepCheck_Analyzer
 from OCP.BRepGProp import BRepGProp
+from OCP.BRepMesh import BRepMesh_IncrementalMesh
 from OCP.gp import gp_Trsf, gp_Vec
 from OCP.GProp import GProp_GProps
+from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Shell
 
 from exporters.brep_config import BrepConfig
@@ -109,6 +111,19 @@ def part_box(vbrep: VBRep, fmap: FrameMap, margin_rel: float) -> tuple[np.ndarra
     return xyz.min(0) - pad, xyz.max(0) + pad
 
 
+def meshes(face: TopoDS_Face, deflection: float, angle_rad: float) -> bool:
+    """Whether OCCT triangulates a copy of ``face`` at this linear deflection (its units) and angle without
+    errors: BRepMesh refuses a boundary wire that crosses itself once discretised (status SelfIntersectingWire),
+    which BRepCheck passes when a vertex tolerance covers the crossing; such a face reads back from the STEP file
+    with no triangles, so FreeCAD and every mesher show a hole where it is."""
+    copy = BRepBuilderAPI_Copy(face, True, False).Shape()
+    mesher = BRepMesh_IncrementalMesh(copy, deflection, False, angle_rad, True)
+    if mesher.GetStatusFlags() != 0:
+        return False
+    tri = BRep_Tool.Triangulation_s(TopoDS.Face_s(copy), TopLoc_Location())
+    return tri is not None and tri.NbTriangles() > 0
+
+
 def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None) -> bool:
     """Whether a shape lies inside ``box`` (lo, hi), mm: the cheap, loose bounding box first (it contains the
     exact one), the exact one only when the loose one reaches outside."""
@@ -153,6 +168,7 @@ def build_brep(
     out = BuiltBRep(shape=TopoDS_Compound(), fmap=fmap, box=part_box(vbrep, fmap, cfg.box_margin_rel))
     faces: dict[int, TopoDS_Face] = {}
     face_edges: dict[int, set[int]] = {}
+    mesh_deflection = max(cfg.mesh_check_deflection_abs, cfg.mesh_check_deflection_rel * fmap.length(vbrep.scale))
     for f in vbrep.faces:
         if f.id not in eb.surfaces:
             out.skipped_faces.append(f.id)
@@ -167,6 +183,8 @@ def build_brep(
                 why = f"its loops bound {area:.4g} mm² of a {target:.4g} mm² reconstruction"
             elif not _inside(made[0], out.box):
                 why = "its loops reach outside the part's box"
+            elif not meshes(made[0], mesh_deflection, cfg.mesh_check_angle_rad):
+                why = "its boundary wire crosses itself where OCCT meshes it"
             else:
                 faces[f.id] = fb.done[f.id] = made[0]
                 face_edges[f.id] = {eid for lp in made[1] for eid, _ in lp}

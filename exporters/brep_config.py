@@ -52,6 +52,14 @@ class BrepConfig:
     # The part's box: the span of every face's mesh (the measured, clipped part) plus this fraction of the part
     # size on every side. No face or free edge of the file lies outside it.
     box_margin_rel: float = 0.05
+    # ... and only when OCCT meshes it (`exporters.brep.meshes`) at this linear deflection, the larger of the two,
+    # and this angle: a wire whose adjacent edges cross near a vertex passes BRepCheck once the vertex tolerance
+    # covers the crossing, but BRepMesh finds the discretised wire self-intersecting and leaves the face without
+    # triangles (real frame ycb_video_000005: its 6,031 mm² front side empty in the read-back, 0.1-1 mm failed,
+    # 3 mm meshed). Finer than the bench's and FreeCAD's meshes
+    mesh_check_deflection_abs: float = 0.05
+    mesh_check_deflection_rel: float = 0.001
+    mesh_check_angle_rad: float = 0.2
     roundtrip_tol_rel: float = 0.02  # a face whose area read back from the file moves more: rewritten (outline)
     outline_tol_area_rel: float = 0.005  # outline simplification moves a piece's area by at most this fraction
     outline_min_piece_rel: float = 0.002  # outline pieces and holes under this share of the face's area: dropped
