@@ -43,11 +43,13 @@ class ReadbackConfig:
 
 @dataclass(frozen=True)
 class FaceArea:
-    """One VB-Rep face: its mesh area and the area of the faces named after it in the file (mm²)."""
+    """One VB-Rep face: its mesh area, the area of the faces named after it in the file, and the area of their
+    triangulation by OCCT's mesher (what FreeCAD and any other viewer draw; mm²). None: not meshed."""
 
     id: int
     reconstructed: float
     written: float
+    meshed: float | None = None
 
     @property
     def ratio(self) -> float:
@@ -73,9 +75,17 @@ class Readback:
     config: ReadbackConfig = field(default_factory=ReadbackConfig)
 
     def off_faces(self) -> list[FaceArea]:
-        """Faces whose written area is off their reconstructed area by more than ``area_tol_rel``."""
+        """Faces whose written area is off their reconstructed area by more than ``area_tol_rel``, or that the
+        mesher draws short of that (`unmeshed_faces`)."""
         tol = self.config.area_tol_rel
-        return [f for f in self.faces if abs(f.written - f.reconstructed) > tol * f.reconstructed]
+        short = {f.id for f in self.unmeshed_faces()}
+        return [f for f in self.faces if abs(f.written - f.reconstructed) > tol * f.reconstructed or f.id in short]
+
+    def unmeshed_faces(self) -> list[FaceArea]:
+        """Faces in the file whose triangulation covers less than 1 - ``area_tol_rel`` of their area: a boundary
+        wire OCCT's mesher refuses leaves the face without triangles, a hole in every viewer."""
+        tol = self.config.area_tol_rel
+        return [f for f in self.faces if f.meshed is not None and f.meshed < (1 - tol) * f.written]
 
     @property
     def area_share(self) -> float:
@@ -111,6 +121,7 @@ class Readback:
             f"read back: {len(self.faces) - len(off)} of {len(self.faces)} faces within {tol:.0f} % of their "
             f"reconstructed area ({100 * self.area_share:.1f} % of the area written)"
             + (f", off: {detail}" if off else "")
+            + (f", {len(self.unmeshed_faces())} not meshed by OCCT" if self.unmeshed_faces() else "")
             + f"; {self.untyped_edges} of {self.n_edges} edges untyped; bounding box "
             + ("matches" if self.box_ok else "differs from")
             + " the reconstruction's"
@@ -164,7 +175,10 @@ def check_written(
         pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         if len(pts):
             recon_pts.append(pts)
-        out.faces.append(FaceArea(f.id, mesh_area(pts, f.mesh_triangles), written.get(f.id, 0.0)))
+        drawn = [mesh_area(p, t) for p, t in meshes.get(f.id, [])]
+        out.faces.append(
+            FaceArea(f.id, mesh_area(pts, f.mesh_triangles), written.get(f.id, 0.0), sum(drawn) if drawn else None)
+        )
     if recon_pts:
         allp = np.concatenate(recon_pts)
         out.box_reconstructed = (allp.min(0), allp.max(0))

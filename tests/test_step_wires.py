@@ -98,3 +98,18 @@ def test_a_face_occt_cannot_mesh_is_caught() -> None:
     built = build_brep(box_corner(), CAMERA)
     assert built.faces and all(meshes(f, 0.05, 0.2) for f in built.faces.values())
     assert not built.fallback_faces
+
+
+def test_readback_counts_faces_the_mesher_leaves_short() -> None:
+    """A face the file holds whole but OCCT's mesher draws without triangles (or only in part) is off, and
+    counted among the unmeshed faces; a face drawn within 2 % is not; a face not meshed at all (None) is not
+    judged by it."""
+    from exporters.readback import FaceArea, Readback
+
+    rb = Readback(
+        path=Path("x.step"),
+        faces=[FaceArea(0, 100.0, 100.0, 0.0), FaceArea(1, 100.0, 100.0, 99.0), FaceArea(2, 100.0, 100.0, None)],
+    )
+    assert [f.id for f in rb.unmeshed_faces()] == [0]
+    assert [f.id for f in rb.off_faces()] == [0]
+    assert "1 not meshed by OCCT" in rb.summary()

@@ -402,7 +402,8 @@ def in_group(row: dict[str, Any], group: str, cfg: SuiteConfig) -> bool:
 def summarise_group(rows: list[dict[str, Any]], process_start_s: float = float("nan")) -> dict[str, Any]:
     """`v2c.bench.run.summarise` of a group's rows, plus: ``parts`` (distinct parts or families),
     ``fallback_faces`` / ``step_faces`` (sums over the scans that wrote a STEP), ``fallback_per_scan`` (mean),
-    ``area_ok_faces`` / ``area_faces`` (faces read back within 2 % of their mesh area / faces read back),
+    ``area_ok_faces`` / ``area_faces`` (faces read back within 2 % of their mesh area and meshed by OCCT / faces
+    read back), ``unmeshed_faces`` (faces in the file that OCCT's mesher draws short: holes in a viewer),
     ``box_ratio_min`` / ``box_ratio_max`` (the STEP's largest bounding-box extent over the reconstruction's),
     ``chamfer_max`` (the worst scan), ``failures`` (every failed scan: label and error)."""
     out = summarise(rows, process_start_s)
@@ -415,6 +416,7 @@ def summarise_group(rows: list[dict[str, Any]], process_start_s: float = float("
     read = [r for r in stepped if r.get("step_area_faces") is not None]
     out["area_ok_faces"] = int(sum(r["step_area_ok_faces"] for r in read))
     out["area_faces"] = int(sum(r["step_area_faces"] for r in read))
+    out["unmeshed_faces"] = int(sum(r.get("step_unmeshed_faces", 0) for r in read))
     ratios = [r["step_box_ratio"] for r in read if math.isfinite(r.get("step_box_ratio", math.nan))]
     out["box_ratio_max"] = max(ratios) if ratios else float("nan")
     out["box_ratio_min"] = min(ratios) if ratios else float("nan")
@@ -473,6 +475,11 @@ def format_suite_tables(result: dict[str, Any]) -> str:
         out.append(
             "| STEP faces read back within 2 % of their mesh area / faces | "
             + " | ".join(f"{summ[g]['area_ok_faces']} / {summ[g]['area_faces']}" for g in groups)
+            + " |"
+        )
+        out.append(
+            "| STEP faces OCCT's mesher leaves short (holes in a viewer) | "
+            + " | ".join(str(summ[g].get("unmeshed_faces", "")) for g in groups)
             + " |"
         )
         out.append(

@@ -160,7 +160,8 @@ def evaluate_scan(
 def _readback_row(vbrep: VBRep, path: Path, report: Any) -> dict[str, Any]:
     """The written STEP read back through OCCT (`exporters.check_written`, issue 16): ``step_area_faces`` (VB-Rep
     faces compared), ``step_area_ok_faces`` (those whose written area is within the read-back's ``area_tol_rel``,
-    2 %, of their mesh area), ``step_area_share`` (written / reconstructed area over all faces) and
+    2 %, of their mesh area, and that OCCT meshes), ``step_unmeshed_faces`` (faces OCCT's mesher draws short),
+    ``step_area_share`` (written / reconstructed area over all faces) and
     ``step_box_ratio`` (the file's largest bounding-box extent / the reconstruction's; NaN without either)."""
     from exporters import check_written
 
@@ -173,6 +174,7 @@ def _readback_row(vbrep: VBRep, path: Path, report: Any) -> dict[str, Any]:
     return {
         "step_area_faces": len(rb.faces),
         "step_area_ok_faces": len(rb.faces) - len(rb.off_faces()),
+        "step_unmeshed_faces": len(rb.unmeshed_faces()),
         "step_area_share": float(rb.area_share),
         "step_box_ratio": ratio,
     }
