@@ -51,14 +51,17 @@ class GeometricConfig:
     min_height_m: float = 0.003  # without a mask: part = points this far above the ground plane (metres)
     depth_jump_rel: float = 0.015  # relative depth jump between 4-neighbours that marks a step edge
     noise_sigma_coeff: float = 0.0015  # depth noise sigma = this * z^2 (1/m, z in metres): the `sensor` profile
-    dist_sigma: float = 2.5  # inlier distance: this many noise sigmas ... (ratio)
+    dist_sigma: float = 2.5  # plane inlier distance: this many noise sigmas ... (ratio)
     dist_floor_m: float = 0.0005  # ... plus this (metres): the sensor's slow fBm warp bends a face by about this
+    curved_dist_sigma: float = 2.5  # curved primitives' inlier distance: this many noise sigmas ... (ratio)
+    curved_dist_floor_m: float = 0.0005  # ... plus this (metres)
     normal_deg: float = 20.0  # inlier normal deviation from a plane's normal (degrees)
     curved_normal_deg: float = 40.0  # ... from a curved primitive's (degrees; the smoothed normals of a small hole's
     # wall lean towards the plane around it)
     seed_window_px: int = 3  # half size of the window of a seed's local plane (pixels)
     seed_max_sigma: float = 1.5  # seeds: rms distance to their local plane at most this many noise sigmas (ratio)
     grow_iters: int = 5  # refits of a growing region (count)
+    grow_window_px: int = 16  # a region's inliers are first sought this far around it (pixels; speed only)
     fit_points: int = 3000  # most points a region's primitive is fitted to (count; strided subsample)
     polish_points: int = 400  # most points of the robust least-squares polish of a curved fit (count)
     polish_iters: int = 6  # its Gauss-Newton steps (count)
@@ -82,6 +85,7 @@ class GeometricConfig:
     strip_kinds: tuple[str, ...] = ("cylinder",)  # curved types two touching planes that are not coplanar may
     # merge into (strips of a wide cylinder that plane seeds cut; cones and spheres also joined two true planes)
     merge_sigma_floor: float = 3.0  # merge: the noise level of the GRIC comparison at least this many sensor sigmas
+    merge_floor_m: float = 0.0  # ... plus this (metres; the warp)
     merge_normal_deg: float = 10.0  # ... and planes' normals within this angle (degrees)
     max_fill_px: float = 12.0  # farthest a leftover pixel joins an instance (pixels)
     aligned_deg: float = 12.0  # axis class tolerance against the estimated part frame (degrees)
@@ -336,6 +340,7 @@ class _Grid:
     P: np.ndarray
     N: np.ndarray
     tol: np.ndarray
+    tol_curved: np.ndarray
     sigma: np.ndarray
     avail: np.ndarray
     cos_plane: float
@@ -355,16 +360,56 @@ def _component_at(mask: np.ndarray, anchor: np.ndarray) -> np.ndarray:
     return cc == int(np.argmax(hits))
 
 
-def _inliers(prim: Primitive, g: _Grid, free: np.ndarray) -> np.ndarray:
-    """(h, w) bool: free pixels within the distance and normal tolerances of ``prim``."""
-    vv, uu = np.nonzero(free)
-    x = g.P[vv, uu]
-    ok = np.abs(prim.signed_distance(x)) < g.tol[vv, uu]
+def _inliers(prim: Primitive, g: _Grid, free: np.ndarray, win: tuple[slice, slice]) -> np.ndarray:
+    """Bool mask of the window ``win``: free pixels within the distance and normal tolerances of ``prim``."""
+    fw = free[win]
+    vv, uu = np.nonzero(fw)
+    P, N = g.P[win], g.N[win]
+    x = P[vv, uu]
+    tol = (g.tol if prim.type == "plane" else g.tol_curved)[win][vv, uu]
+    ok = np.abs(prim.signed_distance(x)) < tol
     cos_t = g.cos_plane if prim.type == "plane" else g.cos_curved
-    ok &= np.abs(np.sum(prim.normal(x) * g.N[vv, uu], axis=1)) > cos_t
-    out = np.zeros(free.shape, bool)
+    ok &= np.abs(np.sum(prim.normal(x) * N[vv, uu], axis=1)) > cos_t
+    out = np.zeros(fw.shape, bool)
     out[vv[ok], uu[ok]] = True
     return out
+
+
+def _bbox(m: np.ndarray) -> tuple[int, int, int, int]:
+    rows, cols = np.nonzero(m.any(axis=1))[0], np.nonzero(m.any(axis=0))[0]
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+def _connected_inliers(
+    prim: Primitive, g: _Grid, free: np.ndarray, anchor: np.ndarray, cfg: GeometricConfig
+) -> np.ndarray:
+    """(h, w) bool: the connected set of ``prim``'s free inliers that overlaps ``anchor`` most. Evaluated in a
+    window around the anchor (``grow_window_px``), widened while the set reaches the window's edge, so a small
+    region costs what its neighbourhood costs, not the part."""
+    h, w = free.shape
+    out = np.zeros_like(free)
+    if not anchor.any():
+        return out
+    r0, r1, c0, c1 = _bbox(anchor)
+    m = cfg.grow_window_px
+    while True:
+        win = (slice(max(r0 - m, 0), min(r1 + m, h)), slice(max(c0 - m, 0), min(c1 + m, w)))
+        comp = _component_at(_inliers(prim, g, free, win), anchor[win])
+        if not comp.any():
+            return out
+        edge = (
+            (win[0].start > 0 and comp[0].any())
+            or (win[0].stop < h and comp[-1].any())
+            or (win[1].start > 0 and comp[:, 0].any())
+            or (win[1].stop < w and comp[:, -1].any())
+        )
+        if not edge:
+            out[win] = comp
+            return out
+        b = _bbox(comp)
+        r0, r1 = win[0].start + b[0], win[0].start + b[1]
+        c0, c1 = win[1].start + b[2], win[1].start + b[3]
+        m *= 2
 
 
 def _refit(
@@ -388,7 +433,7 @@ def grow(
     grown again until the region stops changing (at most ``grow_iters`` times). Returns (region, primitive)."""
     region = np.zeros_like(free)
     for _ in range(cfg.grow_iters):
-        new = _component_at(_inliers(prim, g, free), anchor | region)
+        new = _connected_inliers(prim, g, free, anchor | region, cfg)
         if new.sum() < 12:
             return new, prim
         same = np.count_nonzero(new ^ region) <= 0.01 * np.count_nonzero(new)
@@ -560,7 +605,7 @@ def _explains(prim: Primitive | None, parts: list[np.ndarray], g: _Grid, cfg: Ge
         s = _strided(len(vv), cfg.fit_points)
         x = g.P[vv[s], uu[s]]
         xs.append(x)
-        d = float(np.median(np.abs(prim.signed_distance(x)) / np.maximum(g.sigma[vv[s], uu[s]], 1e-9)))
+        d = float(np.median(np.abs(prim.signed_distance(x)) / (g.sigma[vv[s], uu[s]] + cfg.merge_floor_m / 1.5)))
         if d > cfg.merge_median_sigma:
             return None
         worst = max(worst, d)
@@ -675,7 +720,8 @@ def claim_boundaries(inst: np.ndarray, prims: dict[int, Primitive], g: _Grid, cf
             p = prims.get(int(k))
             if p is None:
                 continue
-            d = np.abs(p.signed_distance(x[sel])) / g.tol[vv[sel], uu[sel]]
+            tol = g.tol if p.type == "plane" else g.tol_curved
+            d = np.abs(p.signed_distance(x[sel])) / tol[vv[sel], uu[sel]]
             better = d < best[sel]
             idx = np.nonzero(sel)[0][better]
             best[idx] = d[better]
@@ -839,6 +885,7 @@ def segment_geometric(scan: Scan, config: GeometricConfig | None = None) -> Segm
         P,
         N,
         cfg.dist_sigma * sigma + cfg.dist_floor_m,
+        cfg.curved_dist_sigma * sigma + cfg.curved_dist_floor_m,
         sigma,
         avail,
         float(np.cos(np.deg2rad(cfg.normal_deg))),
