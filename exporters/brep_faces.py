@@ -268,7 +268,13 @@ class FaceBuilder:
         except Exception as exc:  # noqa: BLE001 - any OCCT failure: try without broken loops, then the mesh
             self.warnings.append(f"face {f.id}: ShapeFix_Face failed ({exc})")
             return None
-        if not self._cover_vertex_crossings(face, reach):
+        try:
+            covered = self._cover_vertex_crossings(face, reach)
+        except Exception as exc:  # noqa: BLE001 - OCCT's checks raise on extreme curves (Cosh overflow on a
+            # hyperbola's parameter in BRepCheck_Wire.SelfIntersect): the face is not built from these loops
+            self.warnings.append(f"face {f.id}: its boundary check failed ({exc})")
+            return None
+        if not covered:
             return None
         # ShapeFix may drop a wire it finds inconsistent and return a valid face of the rest: the face must
         # still hold every loop edge (or what ShapeFix replaced it with).
