@@ -235,12 +235,16 @@ def _simpler_where_nested(
     their points as well by GRIC with the sensor's noise model (`geometry.selection.select_type`: the extra
     parameters must buy more than their log(3N) each; a cone of half angle within noise of 0 buys nothing) take
     that type, in place. The simpler fit's axis is free (the frame's axis came in part from this instance's own
-    poor fit); it joins the frame axis within snap_deg of it, else it stays unaligned."""
+    poor fit); it joins the frame axis within snap_deg of it, else it stays unaligned. A cone or torus whose
+    label is at least ``nested_label_certain`` probable keeps its type: on a narrow chamfer strip the
+    cylinder wins GRIC for want of points, not because the surface is one."""
     if not config.nested_selection:
         return
     for i in sorted(fits.prims):  # loop over instances
         p, ip = fits.prims[i], ipts[i]
         if p.type not in NESTED:
+            continue
+        if i not in fits.searched and fits.scores.get(i, 0.0) >= config.nested_label_certain:
             continue
         cands = {p.type: RansacFit(p, fits.inliers[i], 0.0)}
         for k, t in enumerate(NESTED[p.type]):  # loop over the simpler types
