@@ -60,6 +60,10 @@ class BrepConfig:
     mesh_check_deflection_abs: float = 0.05
     mesh_check_deflection_rel: float = 0.001
     mesh_check_angle_rad: float = 0.2
+    # ... at each of these multiples of that deflection: BRepMesh's verdict is not monotone in the deflection
+    # (corpus validation, oracle: a loop face meshed at 0.001 part sizes and not at 0.002, where the read-back
+    # meshes; another not at 0.005), and a viewer may mesh at any of them
+    mesh_check_scales: tuple[float, ...] = (1.0, 2.0, 5.0)
     roundtrip_tol_rel: float = 0.02  # a face whose area read back from the file moves more: rewritten (outline)
     outline_tol_area_rel: float = 0.005  # outline simplification moves a piece's area by at most this fraction
     outline_min_piece_rel: float = 0.002  # outline pieces and holes under this share of the face's area: dropped

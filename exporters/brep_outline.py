@@ -23,6 +23,7 @@ from OCP.BRepLib import BRepLib
 from OCP.GCE2d import GCE2d_MakeSegment
 from OCP.gp import gp_Pnt, gp_Pnt2d
 from OCP.TopoDS import TopoDS_Edge, TopoDS_Face, TopoDS_Vertex, TopoDS_Wire
+from scipy.spatial import cKDTree
 
 from exporters.occ_surfaces import AnalyticSurface
 
@@ -60,15 +61,30 @@ def _metric_scale(s: AnalyticSurface, uv0: np.ndarray, step: float = 1e-4) -> np
     return np.maximum(np.array(d), 1e-9)
 
 
-def _covers(tri: np.ndarray, q: np.ndarray) -> bool:
-    """Whether the point ``q`` (2,) lies in any of the triangles ``tri`` (M, 3, 2)."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+def _covers(tri: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(K,) bool: whether each point of ``q`` (K, 2) lies in (or on the edge of) any of the triangles ``tri``
+    (M, 3, 2). Each point is tested against the triangles whose centroid lies within the largest
+    centroid-to-corner distance of it (a KD-tree query): the only ones that can hold it."""
+    q = np.asarray(q, float).reshape(-1, 2)
+    out = np.zeros(len(q), bool)
+    if len(q) == 0 or len(tri) == 0:
+        return out
+    cen = tri.mean(axis=1)
+    reach = float(np.linalg.norm(tri - cen[:, None], axis=2).max())
+    pairs = cKDTree(cen).query_ball_point(q, reach * (1 + 1e-9) + 1e-12)
+    pi = np.repeat(np.arange(len(q)), [len(p) for p in pairs])
+    if len(pi) == 0:
+        return out
+    ti = np.concatenate([np.asarray(p, np.int64) for p in pairs])
+    a, b, c, x = tri[ti, 0], tri[ti, 1], tri[ti, 2], q[pi]
 
     def side(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return (v[:, 0] - u[:, 0]) * (q[1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (q[0] - u[:, 0])
+        return (v[:, 0] - u[:, 0]) * (x[:, 1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (x[:, 0] - u[:, 0])
 
     d1, d2, d3 = side(a, b), side(b, c), side(c, a)
-    return bool(np.any(((d1 >= 0) & (d2 >= 0) & (d3 >= 0)) | ((d1 <= 0) & (d2 <= 0) & (d3 <= 0))))
+    inside = ((d1 >= 0) & (d2 >= 0) & (d3 >= 0)) | ((d1 <= 0) & (d2 <= 0) & (d3 <= 0))
+    out[np.unique(pi[inside])] = True
+    return out
 
 
 def _union_from_boundary(
@@ -89,7 +105,8 @@ def _union_from_boundary(
     noded = shapely.union_all(shapely.linestrings(uv[bnd]))
     cells = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
     tri = uv[tris]
-    kept = [p for p in cells if _covers(tri, np.asarray(p.representative_point().coords[0]))]
+    reps = shapely.get_coordinates(shapely.point_on_surface(cells)) if len(cells) else np.zeros((0, 2))
+    kept = [p for p, inside in zip(cells, _covers(tri, reps), strict=True) if inside]
     union = shapely.union_all(kept) if kept else None
     if union is None or abs(union.area - area) > rel_tol * area:
         return None
