@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import click
@@ -159,3 +160,28 @@ def frame_index_option(f: Callable[..., Any]) -> Callable[..., Any]:
         metavar="N",
         help="SCAN is a recording (.bag): read its N-th complete colour+depth pair [default: 0, the first].",
     )(f)
+
+
+def output_folder_options(what: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """``-o/--output/--out FOLDER`` (parameter ``out``, a `Path`, required) and ``--force`` for a command that
+    writes a set of ``what`` (e.g. "shards") into a folder; `refuse_to_replace` checks them."""
+
+    def wrap(f: Callable[..., Any]) -> Callable[..., Any]:
+        f = click.option("--force", is_flag=True, help=f"Write into a folder that already holds {what} (replaced).")(f)
+        return click.option(
+            "-o",
+            "--output",
+            "--out",
+            "out",
+            required=True,
+            type=click.Path(file_okay=False, path_type=Path),
+            help=f"Folder for the {what} (made when missing).",
+        )(f)
+
+    return wrap
+
+
+def refuse_to_replace(out: Path, pattern: str, what: str, force: bool) -> None:
+    """Stop (click error) when ``out`` already holds files matching ``pattern`` and ``force`` is not given."""
+    if not force and out.is_dir() and any(out.glob(pattern)):
+        raise click.ClickException(f"{out}: holds {what}; pass --force to replace them (or choose another -o)")

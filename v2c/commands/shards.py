@@ -7,20 +7,12 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import verbosity_options
+from v2c.commands import output_folder_options, refuse_to_replace
 
 
 @click.command("shards")
 @click.argument("data", type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for shard_XXX.npz (made when missing).",
-)
-@click.option("--force", is_flag=True, help="Write into a folder that already holds shards (they are replaced).")
+@output_folder_options("shards")
 @click.option(
     "--max-mb",
     type=click.FloatRange(min=1.0),
@@ -35,8 +27,7 @@ def command(data: Path, out: Path, max_mb: float | None, force: bool) -> None:
 
     from v2c.segment.shards import ShardConfig, interleaved_scans, read_shard, write_shards
 
-    if not force and out.is_dir() and any(out.glob("shard_*.npz")):
-        raise click.ClickException(f"{out}: holds shards; pass --force to replace them (or choose another -o)")
+    refuse_to_replace(out, "shard_*.npz", "shards", force)
     scans = interleaved_scans(data)
     if not scans:
         raise click.BadParameter(f"no scans with gt/ under {data}: expected `v2c synth` output", param_hint="DATA")

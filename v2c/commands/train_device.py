@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from v2c.cli_support import verbosity_options
+from v2c.commands import output_folder_options, refuse_to_replace
 from v2c.segment.train_config import TrainConfig
 
 
@@ -20,16 +21,7 @@ from v2c.segment.train_config import TrainConfig
     type=click.Path(exists=True, path_type=Path),
     help="A folder of shard_*.npz (from `v2c shards`) or one shard file; repeat for more.",
 )
-@click.option(
-    "-o",
-    "--output",
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for each net's best checkpoint (NAME.pt) and record (NAME.json).",
-)
-@click.option("--force", is_flag=True, help="Train into a folder that already holds checkpoints (they are replaced).")
+@output_folder_options("checkpoints")
 @click.option(
     "--init",
     default=None,
@@ -77,8 +69,7 @@ def command(
     same batches and each writes its best checkpoint by validation mIoU to OUT."""
     from v2c.segment.train_device import DeviceTrainConfig, load_packed, nets_to_train, train_on_device
 
-    if not force and out.is_dir() and any(out.glob("*.pt")):
-        raise click.ClickException(f"{out}: holds checkpoints; pass --force to replace them (or choose another -o)")
+    refuse_to_replace(out, "*.pt", "checkpoints", force)
     try:
         widths = tuple(int(v) for v in wide.split(",")) if wide else ()
     except ValueError:
