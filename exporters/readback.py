@@ -78,14 +78,16 @@ class Readback:
         """Faces whose written area is off their reconstructed area by more than ``area_tol_rel``, or that the
         mesher draws short of that (`unmeshed_faces`)."""
         tol = self.config.area_tol_rel
-        short = {f.id for f in self.unmeshed_faces()}
-        return [f for f in self.faces if abs(f.written - f.reconstructed) > tol * f.reconstructed or f.id in short]
+        return [f for f in self.faces if abs(f.written - f.reconstructed) > tol * f.reconstructed or self._short(f)]
 
     def unmeshed_faces(self) -> list[FaceArea]:
         """Faces in the file whose triangulation covers less than 1 - ``area_tol_rel`` of their area: a boundary
         wire OCCT's mesher refuses leaves the face without triangles, a hole in every viewer."""
-        tol = self.config.area_tol_rel
-        return [f for f in self.faces if f.meshed is not None and f.meshed < (1 - tol) * f.written]
+        return [f for f in self.faces if self._short(f)]
+
+    def _short(self, f: FaceArea) -> bool:
+        """Whether OCCT's mesher draws face ``f`` short of 1 - ``area_tol_rel`` of its written area."""
+        return f.meshed is not None and f.meshed < (1 - self.config.area_tol_rel) * f.written
 
     @property
     def area_share(self) -> float:
@@ -114,6 +116,7 @@ class Readback:
     def summary(self) -> str:
         """One line: faces written whole, area share, untyped edges, bounding box."""
         off = self.off_faces()
+        n_short = sum(self._short(f) for f in off)
         tol = 100 * self.config.area_tol_rel
         worst = sorted(off, key=lambda f: -abs(f.written - f.reconstructed))[:3]
         detail = ", ".join(f"f{f.id} {f.written:.0f} of {f.reconstructed:.0f} mm²" for f in worst)
@@ -121,7 +124,7 @@ class Readback:
             f"read back: {len(self.faces) - len(off)} of {len(self.faces)} faces within {tol:.0f} % of their "
             f"reconstructed area ({100 * self.area_share:.1f} % of the area written)"
             + (f", off: {detail}" if off else "")
-            + (f", {len(self.unmeshed_faces())} not meshed by OCCT" if self.unmeshed_faces() else "")
+            + (f", {n_short} not meshed by OCCT" if n_short else "")
             + f"; {self.untyped_edges} of {self.n_edges} edges untyped; bounding box "
             + ("matches" if self.box_ok else "differs from")
             + " the reconstruction's"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
@@ -25,12 +26,14 @@ def command(data: Path, out: Path, max_mb: float | None, force: bool) -> None:
     depth, faces, labels; noise and features are drawn again on the training machine), families interleaved."""
     from dataclasses import replace
 
-    from v2c.segment.shards import ShardConfig, interleaved_scans, read_shard, write_shards
+    from v2c.segment.shards import ShardConfig, interleaved_scans, write_shards
 
     refuse_to_replace(out, "shard_*.npz", "shards", force)
     scans = interleaved_scans(data)
     if not scans:
         raise click.BadParameter(f"no scans with gt/ under {data}: expected `v2c synth` output", param_hint="DATA")
     cfg = ShardConfig() if max_mb is None else replace(ShardConfig(), max_shard_mb=max_mb)
-    for s in write_shards(scans, data, out, cfg):
-        click.echo(f"{s}: {s.stat().st_size / 2**20:.1f} MiB, {len(read_shard(s))} scans")
+    written = write_shards(scans, data, out, cfg)
+    index = json.loads((out / "shards.json").read_text())["shards"]  # write_shards' list of each shard's scans
+    for s in written:
+        click.echo(f"{s}: {s.stat().st_size / 2**20:.1f} MiB, {len(index[s.name])} scans")

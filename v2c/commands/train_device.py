@@ -66,7 +66,7 @@ def command(
     force: bool,
 ) -> None:
     """Train on packed scans, each realised with fresh noise on this machine; the nets train in lock step on the
-    same batches and each writes its best checkpoint by validation mIoU to OUT."""
+    same batches and each writes its best checkpoint by validation mIoU into the -o folder."""
     from v2c.segment.train_device import DeviceTrainConfig, load_packed, nets_to_train, train_on_device
 
     refuse_to_replace(out, "*.pt", "checkpoints", force)
