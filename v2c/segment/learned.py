@@ -22,6 +22,7 @@ from v2c.segment.instances import InstanceConfig, extract_instances, feature_evi
 from v2c.segment.net import UNet, bf16_supported, load_weights
 from v2c.segment.refine import RefineConfig, refine_instances
 from v2c.segment.types import Segmentation
+from v2c.segment.verify import VerifyConfig, needs_regions, verify_instances
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "unet.pt"
@@ -36,6 +37,8 @@ class LearnedConfig:
     features: FeatureConfig = field(default_factory=FeatureConfig)
     instances: InstanceConfig = field(default_factory=InstanceConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)  # plane-outlier split, coplanar merge (refine.py)
+    verify: VerifyConfig = field(default_factory=VerifyConfig)  # split / merge along depth-only plane regions
+    # (verify.py; runs the geometric segmenter)
     context_px: int = 32  # margin of image context around the mask / ROI box fed to the network (pixels);
     # < 0 runs the whole image
     mirror_tta: bool = True  # average the prediction with that of the mirrored input (2x network time)
@@ -137,7 +140,12 @@ def segment_learned(
 
         region = part_region(scan, GeometricConfig())[0]
     seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat, part=region)
-    return refine_instances(seg, scan.depth, scan.K, probs, cfg.refine, normals=feat[3:6], ransac=ransac)
+    seg = refine_instances(seg, scan.depth, scan.K, probs, cfg.refine, normals=feat[3:6], ransac=ransac)
+    if not needs_regions(seg, scan.depth, scan.K, cfg.verify):
+        return seg
+    from v2c.segment.geometric import segment_geometric
+
+    return verify_instances(seg, segment_geometric(scan), scan.depth, scan.K, cfg.verify, ransac)
 
 
 def instances_from_prediction(

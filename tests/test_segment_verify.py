@@ -1,0 +1,104 @@
+"""Geometric verification of learned instances against depth-only plane regions (v2c.segment.verify) on exact
+synthetic depth maps with sensor-like noise."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from v2c.labels import label_of
+from v2c.segment.types import Segmentation
+from v2c.segment.verify import VerifyConfig, merge_by_regions, plane_regions, verify_instances
+
+H, W = 120, 160
+K = np.array([[200.0, 0.0, 80.0], [0.0, 200.0, 60.0], [0.0, 0.0, 1.0]])
+PLANE_Z, PLANE_U = label_of("plane", "Z"), label_of("plane", "U")
+CYL_Z = label_of("cylinder", "Z")
+NOISE_M = 4e-4  # depth noise (metres): about the sensor law 0.0015 z^2 at 0.5 m
+
+
+def _tilted_plane(rng: np.random.Generator) -> np.ndarray:
+    """Depth (metres) of the plane z = 0.5 + 0.1 y (seen obliquely), with Gaussian noise NOISE_M."""
+    v = np.arange(H, dtype=float)[:, None].repeat(W, 1)
+    z = 0.5 / (1.0 - 0.1 * (v - K[1, 2]) / K[1, 1])
+    return z + rng.normal(0.0, NOISE_M, z.shape)
+
+
+def _seg(inst: np.ndarray, labels: list[int], scores: list[float], method: str = "learned") -> Segmentation:
+    return Segmentation(inst.astype(np.int32), np.array(labels, np.uint8), np.array(scores, np.float32), method)
+
+
+def test_two_instances_of_one_plane_merge_where_the_depth_says_one_surface() -> None:
+    depth = _tilted_plane(np.random.default_rng(0))
+    learned = np.ones((H, W), np.int32)
+    learned[:, 70:] = 2  # the network cut one plane at a printed edge, with another (curved, unsure) label
+    seg = _seg(learned, [0, PLANE_Z, CYL_Z], [0, 0.9, 0.45])
+    regions = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 1.0], "geometric")  # the depth: one plane region
+    out = verify_instances(seg, regions, depth, K)
+    assert out.num_instances == 1 and (out.instances == 1).all()
+    assert list(out.labels) == [0, PLANE_Z]  # the plane-labelled piece's label stands
+
+
+def test_two_parallel_planes_stay_apart_and_a_straddling_instance_is_split() -> None:
+    depth = _tilted_plane(np.random.default_rng(1))
+    depth[:, 100:] += 0.005  # columns 100+: a parallel plane 5 mm lower (a step the colour does not show)
+    regions = np.where(np.arange(W)[None, :] < 100, 1, 2).repeat(H, 0)
+    depth_seg = _seg(regions, [0, PLANE_Z, PLANE_Z], [0, 1.0, 1.0], "geometric")
+    # two learned instances, one per plane: both stay
+    apart = _seg(regions, [0, PLANE_Z, PLANE_Z], [0, 0.9, 0.9])
+    out = verify_instances(apart, depth_seg, depth, K)
+    assert out.num_instances == 2 and np.array_equal(out.instances, regions)
+    # one learned instance over both planes: cut at the step, the smaller piece's type and axis left to the fit
+    straddle = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 0.9])
+    out = verify_instances(straddle, depth_seg, depth, K)
+    assert out.num_instances == 2
+    assert np.array_equal(out.instances == out.instances[0, 0], regions == 1)
+    assert list(out.labels) == [0, PLANE_Z, PLANE_U] and out.scores[2] == 0.0
+
+
+def test_a_merge_never_joins_a_curved_face_the_network_is_sure_of() -> None:
+    depth = _tilted_plane(np.random.default_rng(2))
+    learned = np.ones((H, W), np.int32)
+    learned[40:80, 60:100] = 2  # a shallow curved face the depth cannot tell from the plane, labelled surely
+    seg = _seg(learned, [0, PLANE_Z, CYL_Z], [0, 0.9, 0.95])
+    depth_seg = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 1.0], "geometric")
+    out = verify_instances(seg, depth_seg, depth, K)
+    assert out.num_instances == 2 and np.array_equal(out.instances, learned)
+
+
+def test_an_instance_one_surface_explains_is_not_split_by_regions_that_cut_it() -> None:
+    depth = _tilted_plane(np.random.default_rng(3))
+    cut = np.where(np.arange(W)[None, :] < 80, 1, 2).repeat(H, 0)  # the depth segmenter cut one plane in two
+    depth_seg = _seg(cut, [0, PLANE_Z, PLANE_Z], [0, 1.0, 1.0], "geometric")
+    seg = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 0.9])
+    out = verify_instances(seg, depth_seg, depth, K)
+    assert out.num_instances == 1 and (out.instances == 1).all()
+
+
+def test_a_curved_region_counts_as_a_plane_only_when_its_plane_explains_it() -> None:
+    rng = np.random.default_rng(4)
+    depth = _tilted_plane(rng)
+    u = np.arange(W, dtype=float)[None, :].repeat(H, 0)
+    bumped = depth + 0.004 * np.sin(u / W * np.pi)  # a 4 mm bulge across the image: not a plane
+    regions = _seg(np.ones((H, W)), [0, CYL_Z], [0, 1.0], "geometric")
+    pts_valid = np.ones((H, W), bool)
+    from v2c.camera import backproject
+
+    cfg = VerifyConfig()
+    assert len(plane_regions(regions, backproject(depth, K), pts_valid, cfg)) == 1
+    assert len(plane_regions(regions, backproject(bumped, K), pts_valid, cfg)) == 0
+    # and merge_by_regions leaves a scan without regions as it is
+    seg = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 0.9])
+    assert merge_by_regions(seg, [], backproject(depth, K), pts_valid, cfg) is seg
+
+
+def test_the_depth_regions_are_asked_for_only_when_a_plane_instance_is_not_one_plane() -> None:
+    from v2c.segment.verify import needs_regions
+
+    depth = _tilted_plane(np.random.default_rng(5))
+    one = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 0.9])
+    assert not needs_regions(one, depth, K)
+    stepped = depth.copy()
+    stepped[:, 100:] += 0.005  # a 5 mm step under the same plane label: 38 % of its points off its plane
+    assert needs_regions(one, stepped, K)
+    assert not needs_regions(one, stepped, K, VerifyConfig(enabled=False))
+    assert needs_regions(one, depth, K, VerifyConfig(gate_far_share=0.0))  # 0: always
