@@ -35,11 +35,11 @@ import numpy as np
 
 from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
-from v2c.geometry.points import estimate_part_size, instance_points
+from v2c.geometry.points import instance_points
 from v2c.geometry.ransac import ransac_fit
 from v2c.groups import UnionFind
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
-from v2c.segment.refine import _is_plane, _relabel
+from v2c.segment.refine import _is_plane, _relabel, scan_geometry
 from v2c.segment.types import Segmentation
 
 
@@ -187,19 +187,19 @@ def split_by_regions(
         if _one_surface(int(i), masks, seg, pts, valid, size, cfg, ransac, rng):
             continue
         ids = []
-        for rank, (_, k) in enumerate(pieces):  # loop over the covering regions, largest first
+        for rank, piece in enumerate(masks):  # loop over the covering regions (disjoint), largest first
             new = len(labels)
             keep = rank == 0 and bool(is_plane[i])
             labels.append(labels[i] if keep else undecided)
             scores.append(scores[i] if keep else np.float32(0.0))
-            inst[mi & regions[k].mask & (inst == i)] = new
+            inst[piece] = new
             ids.append(new)
         rest = inst == i
         if int((rest & valid).sum()) < need:  # a small rest joins the nearest piece
-            _, near = cv2.distanceTransformWithLabels(
-                (~np.isin(inst, ids)).astype(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL
-            )
             seeds = np.isin(inst, ids)
+            _, near = cv2.distanceTransformWithLabels(
+                (~seeds).astype(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL
+            )
             lut = np.zeros(int(near.max()) + 1, np.int32)
             lut[near[seeds]] = inst[seeds]
             inst[rest] = lut[near[rest]]
@@ -284,11 +284,10 @@ def verify_instances(
     if not cfg.enabled:
         return seg
     ransac = ransac or RansacConfig()
-    pts = backproject(np.asarray(depth, float), np.asarray(K, float))
     valid = (np.asarray(depth) > 0) & (seg.instances > 0)
     if not valid.any():
         return seg
-    size = estimate_part_size(pts[valid], ransac.scale_trim)
+    pts, size = scan_geometry(depth, K, seg.instances, ransac)
     regions = plane_regions(depth_seg, pts, valid, cfg)
     if not regions:
         return seg
