@@ -120,3 +120,38 @@ def test_every_frame_has_a_mask_polygon_inside_its_roi() -> None:
         assert poly[:, 1].min() >= y0 - 2 and poly[:, 1].max() <= y1 + 2, name
         share = R.polygon_mask(spec["mask"], 480, 640).sum() / ((x1 - x0) * (y1 - y0))
         assert 0.3 < share < 1.0, name
+
+
+def test_bench_real_uses_the_given_weights(shared_data: Path, tmp_path: Path, monkeypatch) -> None:
+    """`--weights` reaches the real frames' learned segmenter (it was once accepted and ignored there): the
+    segmenter is called with the given file (a copy of the shipped weights), the frame is reconstructed with it and
+    the report records the file."""
+    import shutil
+
+    import v2c.segment as S
+    from v2c.cli import main
+    from v2c.segment.learned import DEFAULT_WEIGHTS
+
+    frames = R.load_frames()
+    rois = tmp_path / "rois.json"
+    rois.write_text(json.dumps({"frames": {"lm_occluded_example": frames["lm_occluded_example"]}}))
+    given = tmp_path / "given.pt"
+    shutil.copyfile(DEFAULT_WEIGHTS, given)
+    seen: list[object] = []
+    real_segment = S.segment
+
+    def spy(scan, method="learned", **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(kwargs.get("weights"))
+        return real_segment(scan, method, **kwargs)
+
+    monkeypatch.setattr(S, "segment", spy)
+    out = tmp_path / "real.json"
+    args = ["bench", "--real", str(shared_data / "real"), "--rois", str(rois), "--segmentation", "learned"]
+    args += ["--weights", str(given), "--out", str(tmp_path / "o"), "--json", str(out), "-q"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    data = json.loads(out.read_text())
+    (row,) = data["frames"]
+    assert row["ok"], row.get("error")
+    assert seen and all(Path(str(w)) == given for w in seen)
+    assert data["weights"] == str(given)

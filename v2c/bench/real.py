@@ -180,10 +180,12 @@ def measure_frame(
     out_dir: Path,
     near_mm: float = NEAR_MM,
     use_mask: bool = False,
+    weights: Path | None = None,
 ) -> dict[str, Any]:
     """Reconstruct one frame with its ROI (and, with ``use_mask``, the ``mask`` polygon of ``spec`` as its
     mask.png), write its STEP (camera frame) and figure into ``out_dir``, read the STEP back and measure it (module
-    docstring). Raises whatever the pipeline raises."""
+    docstring). ``weights``: the learned segmenter's weights file (None: the shipped one). Raises whatever the
+    pipeline raises."""
     from dataclasses import replace
 
     from exporters import result_figure, write
@@ -199,7 +201,13 @@ def measure_frame(
     roi_scan = scan
     if use_mask:
         scan = replace(scan, mask=polygon_mask(spec["mask"], scan.height, scan.width))
-    vbrep, seg, fit = pipeline.reconstruct(scan, segmentation=segmentation, return_stages=True)
+    seg_in: Any = segmentation
+    if weights is not None and segmentation == "learned":
+        from v2c.segment import segment
+
+        cfg = pipeline.PipelineConfig()
+        seg_in = segment(scan, segmentation, refine=cfg.refine, ransac=cfg.fit, weights=weights)
+    vbrep, seg, fit = pipeline.reconstruct(scan, segmentation=seg_in, return_stages=True)
     step_path = out_dir / f"{stem}.step"
     report = write(vbrep, step_path, frame="camera", product=stem)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -280,10 +288,12 @@ def real_bench(
     progress: bool = True,
     start: bool = True,
     masks: bool = False,
+    weights: Path | None = None,
 ) -> dict[str, Any]:
     """Every frame of ``rois_path`` found in ``data_dir``, with every segmentation method: `measure_frame`, a
     frame that fails reported with its error. ``start``: also measure the process start once; ``masks``: frames
-    with a ``mask`` polygon are reconstructed and measured with it (module docstring)."""
+    with a ``mask`` polygon are reconstructed and measured with it (module docstring); ``weights``: the learned
+    segmenter's weights file (None: the shipped one)."""
     from tqdm import tqdm
 
     frames_spec = load_frames(rois_path)
@@ -308,7 +318,7 @@ def real_bench(
             continue
         t = time.perf_counter()
         try:
-            row.update(measure_frame(folder, spec, method, out_dir, use_mask=masks))
+            row.update(measure_frame(folder, spec, method, out_dir, use_mask=masks, weights=weights))
         except Exception as exc:  # noqa: BLE001 - the report says which frame failed and why
             row.update(ok=False, error=error_text(exc), seconds=time.perf_counter() - t)
     summary = {m: _summary([r for r in rows if r["segmentation"] == m]) for m in segmentations}
@@ -318,6 +328,7 @@ def real_bench(
             "data_dir": str(data_dir),
             "segmentations": list(segmentations),
             "masks": masks,
+            "weights": None if weights is None else str(weights),
             "out_dir": str(out_dir),
             "near_mm": NEAR_MM,
             "process_start_s": start_s,

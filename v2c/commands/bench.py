@@ -355,7 +355,13 @@ def command(
         from v2c.bench import real
 
         report = real.real_bench(
-            real_dir, rois or run.DEFAULT_ROIS, segmentation, out_dir, progress=progress, masks=real_masks
+            real_dir,
+            rois or run.DEFAULT_ROIS,
+            segmentation,
+            out_dir,
+            progress=progress,
+            masks=real_masks,
+            weights=weights,
         )
         click.echo(real.format_table(report))
         click.echo(f"outputs in {report['out_dir']}")

@@ -1,6 +1,7 @@
 """The segmentation network: a small U-Net with a label head (18 classes) and a face-boundary head.
 
-CPU-sized (about 1.9 M parameters at widths 16-128). Input: the (C, H, W) stack of ``v2c.segment.data``; output at
+CPU-sized: 1.23 M parameters at the default widths 16-128 (CPU training), 2.76 M at the shipped weights' 24-192
+(a weights file carries its widths). Input: the (C, H, W) stack of ``v2c.segment.data``; output at
 full resolution: label logits (18, H, W) and boundary logits (1, H, W). H and W need not be multiples of 16: the
 input is padded and the output cropped.
 """
