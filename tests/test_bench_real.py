@@ -27,6 +27,24 @@ def test_distances_to_mesh_are_exact_near_the_threshold() -> None:
     assert np.all(got >= truth - 1e-6)
 
 
+def test_surface_distances_leave_out_pixels_without_depth() -> None:
+    """Points of a plane 2 mm off its fitted plane are 2 mm away; an instance pixel without depth (its point the
+    camera centre, 0.8 m from the plane) is not a distance (it once made the mask path's depth RMS 74-602 mm)."""
+    from types import SimpleNamespace
+
+    from v2c.primitives import Plane
+
+    plane = Plane(np.array([0.0, 0.0, 0.8]), np.array([0.0, 0.0, -1.0]))
+    pts = np.zeros((2, 3, 3))
+    pts[..., 2] = 0.802  # 2 mm behind the plane
+    pts[0, 0] = 0.0  # no depth reading: backproject gives the camera centre
+    valid = np.ones((2, 3), bool)
+    valid[0, 0] = False
+    inst = np.ones((2, 3), np.int32)
+    d = R._surface_distances(pts, inst, SimpleNamespace(primitives={1: plane}), valid)
+    assert d.shape == (5,) and np.allclose(d, 0.002)
+
+
 def test_format_table_rows_and_summary() -> None:
     row = {
         "frame": "f1",

@@ -13,8 +13,10 @@ Per frame and segmentation method (``learned``, ``geometric``):
   the two largest planes whatever their direction; and `box_angles` (the three largest planes of distinct
   directions, their largest deviation from 90 degrees).
 - ``can``: the radius of the largest cylindrical face (`can_radius`) against the published size.
-- ``depth_rms_mm``: RMS distance (mm) from the points of the pixels the segmentation assigned to fitted faces to
-  their own face's surface (the unbounded primitive); ``depth_median_mm`` the median of the same distances.
+- ``depth_rms_mm``: RMS distance (mm) from the points of the pixels with depth that the segmentation assigned to
+  fitted faces to their own face's surface (the unbounded primitive); ``depth_median_mm`` the median of the same
+  distances. (Until 2026-11-27 the assigned pixels without depth counted too, as points at the camera centre:
+  with a mask, 74-602 mm.)
 - ``coverage_3mm``: the share of the object's depth pixels within ``near_mm`` (3 mm) of a face of the STEP file
   as written (camera frame, mm) and read back through OCCT. The object's pixels are *not* the segmentation's: they
   are the ROI's valid depth pixels standing more than `GeometricConfig.min_height_m` above the RANSAC ground plane
@@ -163,11 +165,13 @@ def distances_to_mesh(points: np.ndarray, vertices: np.ndarray, triangles: np.nd
     return out
 
 
-def _surface_distances(points: np.ndarray, inst: np.ndarray, fit: FitResult) -> np.ndarray:
-    """Distances (m) of the face pixels' points to their own fitted primitive (camera frame)."""
+def _surface_distances(points: np.ndarray, inst: np.ndarray, fit: FitResult, valid: np.ndarray) -> np.ndarray:
+    """Distances (m) of the face pixels' points to their own fitted primitive (camera frame); pixels without a
+    depth reading (``valid`` False) have no point and are left out (an instance may hold such pixels: with a mask
+    they join the nearest instance)."""
     out = []
     for i, prim in fit.primitives.items():
-        m = inst == i
+        m = (inst == i) & valid
         if m.any():
             out.append(np.abs(prim.signed_distance(points[m])))
     return np.concatenate(out) if out else np.zeros(0)
@@ -260,7 +264,7 @@ def measure_frame(
 
     pts = backproject(scan.depth, scan.K)
     inst = np.asarray(seg.instances)
-    d_fit = _surface_distances(pts, inst, fit)
+    d_fit = _surface_distances(pts, inst, fit, scan.valid)
     entry["depth_rms_mm"] = float(1000 * np.sqrt(np.mean(d_fit**2))) if len(d_fit) else float("nan")
     entry["depth_median_mm"] = float(1000 * np.median(d_fit)) if len(d_fit) else float("nan")
 

@@ -13,6 +13,14 @@ import numpy as np
 from v2c.geometry.config import RansacConfig
 from v2c.primitives.directions import unit
 
+#: Median absolute deviation to standard deviation, for normally distributed residuals.
+MAD_TO_SIGMA = 1.4826
+
+
+def mad_sigma(r: np.ndarray) -> float:
+    """Robust standard deviation of residuals ``r`` about 0: MAD_TO_SIGMA x median |r| (the units of ``r``)."""
+    return MAD_TO_SIGMA * float(np.median(np.abs(r)))
+
 
 @dataclass
 class InstancePoints:

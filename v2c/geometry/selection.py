@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from v2c.geometry.config import RansacConfig
+from v2c.geometry.points import mad_sigma
 from v2c.geometry.ransac import RansacFit, ransac_fit
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.directions import unit
@@ -125,7 +126,7 @@ def select_type(fits: dict[str, RansacFit], x: np.ndarray, scale: float, config:
     d = {t: np.abs(f.primitive.signed_distance(x)) for t, f in fits.items()}
     # per point: the sensor model's depth sigma, at least the best candidate's robust residual level
     sigma = np.maximum(
-        max(1.4826 * min(float(np.median(v)) for v in d.values()), config.gric_min_sigma * scale),
+        max(min(mad_sigma(v) for v in d.values()), config.gric_min_sigma * scale),
         noise_sigma(x, config),
     )
     lam = np.log(3 * max(len(x), 1))

@@ -33,6 +33,7 @@ import numpy as np
 
 from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
+from v2c.geometry.points import mad_sigma
 from v2c.geometry.selection import supported
 from v2c.labels import AxisClass, PrimitiveType, axis_class, label_of
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere
@@ -323,8 +324,8 @@ def ranked_primitives(
             cands.append(p)
     if len(cands) <= 1:
         return cands
-    med = min(float(np.median(np.abs(p.signed_distance(x)))) for p in cands)
-    sigma = np.maximum(1.4826 * med, cfg.noise_sigma_coeff * x[:, 2] ** 2)
+    level = min(mad_sigma(p.signed_distance(x)) for p in cands)
+    sigma = np.maximum(level, cfg.noise_sigma_coeff * x[:, 2] ** 2)
     return sorted(cands, key=lambda p: (gric(p, x, sigma, cfg), _DOF[p.type]))
 
 
@@ -634,7 +635,7 @@ def _joint(
         return None
     x, in_a = g.P[vv, uu], ma[vv, uu]
     r_own = np.where(in_a, prims[a].signed_distance(x), prims[b].signed_distance(x))
-    level = 1.4826 * float(np.median(np.abs(r_own)))
+    level = mad_sigma(r_own)
     sigma = np.maximum(level, cfg.merge_sigma_floor * g.sigma[vv, uu])
     lam = float(np.log(3 * len(x)))
     prior = dict(cfg.type_prior)

@@ -35,7 +35,7 @@ from scipy.optimize import least_squares
 
 from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
-from v2c.geometry.points import estimate_part_size, instance_points
+from v2c.geometry.points import estimate_part_size, instance_points, mad_sigma
 from v2c.geometry.ransac import RansacFit, ransac_fit, refine_primitive
 from v2c.geometry.selection import select_type, supported
 from v2c.groups import UnionFind
@@ -214,7 +214,7 @@ def design_effect(
     if block_px < 2 or len(pixels) < block_px * block_px:
         return 1.0
     r = np.asarray(residuals, float) - float(np.median(residuals))
-    spread = 3.0 * 1.4826 * float(np.median(np.abs(r)))
+    spread = 3.0 * mad_sigma(r)
     if spread <= 0:
         return 1.0
     keep = np.abs(r) <= spread  # outliers (flying pixels at a silhouette) leave the blocks they touch out
@@ -309,7 +309,7 @@ def split_plane_outliers(
         nrm, off = _plane_ransac(x, 0.5 * tol, cfg, rng)
         r = x @ nrm - off
         inl = np.abs(r) < 0.5 * tol
-        sigma = 1.4826 * float(np.median(np.abs(r[inl]))) if inl.any() else 0.0
+        sigma = mad_sigma(r[inl]) if inl.any() else 0.0
         off_plane = np.abs(r) > max(tol, cfg.tol_noise * sigma)
         if normals is not None:
             nm = normals[:, m].T
@@ -363,7 +363,7 @@ def _coaxial_step(
 
     r0 = cyl.radius / size
     sol = least_squares(residuals, [0.0, 0.0, 0.0, 0.0, r0, r0], loss="soft_l1", f_scale=cfg.coax_step_part)
-    sigma = 1.4826 * float(np.median(np.abs(sol.fun)))
+    sigma = mad_sigma(sol.fun)
     n_small = min(int(side.sum()), int((~side).sum()))
     step = float(sol.x[5] - sol.x[4])
     return step, abs(step) / max(sigma * np.sqrt(2.0 / max(n_small, 1)), 1e-12)
@@ -409,7 +409,7 @@ def split_coaxial_steps(
         e = cyl.signed_distance(x[order])
         if cfg.coax_clip_mad > 0:  # mean-shift CUSUM of clipped residuals: zero at both ends, peaks at the step
             med = np.median(e)
-            spread = cfg.coax_clip_mad * 1.4826 * np.median(np.abs(e - med))
+            spread = cfg.coax_clip_mad * mad_sigma(e - med)
             e = np.clip(e, med - spread, med + spread)
             cusum = np.cumsum(e - e.mean())
         else:
@@ -458,7 +458,7 @@ def _flat(
     depth-gradient normals; ``where``: the points' flat pixel indices and the image shape, for the design effect
     of the curved fit's residuals, `_gric_config`): a true shallow cone or a wide fillet keeps its own face."""
     sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-    if 1.4826 * np.median(np.abs(x @ nrm - off)) > cfg.flat_sigma * sigma:
+    if mad_sigma(x @ nrm - off) > cfg.flat_sigma * sigma:
         return False
     ptype = TYPE_NAMES[int(TYPE_OF_LABEL[int(labels[i])])]
     if ptype not in ("cylinder", "cone", "sphere", "torus") or len(x) < 6:

@@ -35,7 +35,7 @@ import numpy as np
 
 from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
-from v2c.geometry.points import instance_points
+from v2c.geometry.points import instance_points, mad_sigma
 from v2c.geometry.ransac import ransac_fit
 from v2c.groups import UnionFind
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
@@ -70,11 +70,6 @@ class VerifyConfig:
     # are each one plane has nothing to split; 0 always computes them
 
 
-def _robust_sigma(r: np.ndarray) -> float:
-    """1.4826 x the median absolute deviation of residuals ``r`` from 0 (metres)."""
-    return 1.4826 * float(np.median(np.abs(r)))
-
-
 def _plane(x: np.ndarray, trim_sigma: float) -> tuple[np.ndarray, float]:
     """(unit normal, offset) of the least-squares plane n.x = d of ``x`` (n, 3), refitted once on the points
     within ``trim_sigma`` robust sigmas of the first fit."""
@@ -83,7 +78,7 @@ def _plane(x: np.ndarray, trim_sigma: float) -> tuple[np.ndarray, float]:
         _, _, vt = np.linalg.svd(x - c, full_matrices=False)
         n = vt[2]
         r = (x - c) @ n
-        keep = np.abs(r) <= trim_sigma * max(_robust_sigma(r), 1e-9)
+        keep = np.abs(r) <= trim_sigma * max(mad_sigma(r), 1e-9)
         if keep.sum() < 3 or keep.all():
             break
         x = x[keep]
@@ -109,7 +104,7 @@ def plane_regions(depth_seg: Segmentation, pts: np.ndarray, valid: np.ndarray, c
             continue
         n, d = _plane(x, cfg.trim_sigma)
         sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-        if is_plane[g] or _robust_sigma(x @ n - d) <= cfg.region_sigma * sigma:
+        if is_plane[g] or mad_sigma(x @ n - d) <= cfg.region_sigma * sigma:
             out.append(_Region(m, n, d))
     return out
 
