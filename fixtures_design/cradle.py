@@ -10,19 +10,38 @@ part's up direction made perpendicular to the axis, x = y x z. With R = radius +
 
 The block spans ``length`` along the axis, starting ``end_margin`` from the rim circle, clamped to the length of
 the cylinder face the view shows.
+
+A cylinder that stands in the body of an up-facing plane (a pillow block's bearing housing on its base plate, a
+half-round on a block) has no underside: the block under it would lie inside that body, which neither the scan's
+points nor the meshes show inside the block (the plane's top is above it). The plane's own mesh shows it: it
+runs beside the cylinder, over the block's footprint, above the block's bottom. Such a cylinder is refused
+(`resting_plane`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from build123d import Plane, Solid
 
 from fixtures_design.frames import FrameMap
-from fixtures_design.model import Fixture, FixtureKind, Seating, local_plane, place, prism, sample_face, unit
+from fixtures_design.model import (
+    Fixture,
+    FixtureKind,
+    Seating,
+    local_plane,
+    place,
+    prism,
+    sample_face,
+    sample_triangles,
+    unit,
+)
 from fixtures_design.references import CircleReference, ReferenceKind
+
+if TYPE_CHECKING:
+    from v2c.vbrep.model import VBRep
 
 _S45 = np.sqrt(0.5)
 
@@ -38,6 +57,10 @@ class CradleParams:
     end_margin: float = 2.0  # mm: kept free from the rim circle and from the far end of the seen cylinder
     wrap_deg: float = 120.0  # degrees: U groove's angular span around the underside
     max_tilt_deg: float = 30.0  # degrees: largest angle between the cylinder axis and the horizontal
+    rest_plane_tilt_deg: float = 30.0  # degrees: a plane whose outward normal lies within this of up, beside
+    # the cylinder under the block, holds the block's place (`resting_plane`)
+    rest_samples: int = 2000  # points drawn on each up-facing plane's mesh (area-weighted) for that test
+    rest_min_points: int = 5  # of them beside the cylinder, over the block's footprint, refuse the cradle (count)
 
 
 def _u_block(radius: float, p: CradleParams, z0: float, z1: float) -> Solid:
@@ -57,13 +80,55 @@ def _v_profile(radius: float, p: CradleParams) -> np.ndarray:
     return np.array([(-w, bottom), (w, bottom), (w, y_top), (x_top, y_top), (0.0, apex), (-x_top, y_top), (-w, y_top)])
 
 
+def resting_plane(
+    vbrep: VBRep, ref: CircleReference, fmap: FrameMap, up: np.ndarray, params: CradleParams = CradleParams()
+) -> int | None:
+    """The id of an up-facing plane face (outward normal within ``rest_plane_tilt_deg`` of ``up``, output frame)
+    with at least ``rest_min_points`` of ``rest_samples`` points drawn on its mesh beside the cylinder of ``ref``
+    under the cradle's block (along the seen cylinder, between its radius and its radius plus the wall from its
+    axis, sideways) and above the block's bottom: that plane's body fills the block's place, so nothing is under
+    the cylinder for a cradle. None when there is none. A free lying cylinder has no such plane beside it (the
+    ground is not a face); a flat on its top lies within its radius; a block a boss stands out of lies behind the
+    boss, not along it."""
+    z = unit(fmap.vectors(ref.axis))
+    up = unit(up)
+    y = unit(up - (up @ z) * z)
+    x = np.cross(y, z)
+    origin = fmap.points(ref.center)
+    radius = fmap.length(ref.radius)
+    seen = fmap.length(ref.extent)
+    cos_tilt = np.cos(np.radians(params.rest_plane_tilt_deg))
+    for f in vbrep.faces:  # loop over up-facing plane faces
+        if f.id == ref.cylinder_face or f.primitive.get("type") != "plane":
+            continue
+        normal = unit(fmap.vectors(np.asarray(f.primitive["params"]["normal"], float)))
+        if normal @ up < cos_tilt:
+            continue
+        v = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
+        t = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
+        if not len(v) or not len(t):
+            continue
+        q = sample_triangles(v[t], params.rest_samples, seed=int(f.id)) - origin
+        along, side, height = q @ z, np.abs(q @ x), q @ y
+        beside = (along >= 0) & (along <= seen) & (side > radius) & (side <= radius + params.wall)
+        if int(np.count_nonzero(beside & (height > -(radius + params.wall)))) >= params.rest_min_points:
+            return int(f.id)
+    return None
+
+
 def design_cradle(
-    ref: CircleReference, fmap: FrameMap, up: np.ndarray, params: CradleParams = CradleParams()
+    ref: CircleReference,
+    fmap: FrameMap,
+    up: np.ndarray,
+    params: CradleParams = CradleParams(),
+    vbrep: VBRep | None = None,
 ) -> Fixture:
     """A cradle under the boss/cylinder of ``ref`` (camera frame, metres), output frame of ``fmap`` (mm).
 
-    up: (3,) the part's up direction in the output frame (`fixtures_design.frames.up_vector`).
-    Mating faces: the U groove (or the two V flanks); contact points on the groove (or the V's contact lines).
+    up: (3,) the part's up direction in the output frame (`fixtures_design.frames.up_vector`). vbrep: the
+    reconstruction ``ref`` comes from; when given, a cylinder standing in an up-facing plane's body is refused
+    (`resting_plane`). Mating faces: the U groove (or the two V flanks); contact points on the groove (or the V's
+    contact lines).
     """
     if ref.kind is not ReferenceKind.BOSS:
         raise ValueError(f"edge e{ref.edge_id} is the rim of a {ref.kind.value}: a cradle needs a boss/cylinder")
@@ -75,6 +140,13 @@ def design_cradle(
             f"cylinder of e{ref.edge_id} is {tilt:.0f} deg off the horizontal (cradles take up to "
             f"{params.max_tilt_deg:.0f} deg)"
         )
+    if vbrep is not None:
+        rest = resting_plane(vbrep, ref, fmap, up, params)
+        if rest is not None:
+            raise ValueError(
+                f"the cylinder of e{ref.edge_id} stands in the body of face {rest} (an up-facing plane beside it "
+                "over the cradle's footprint, above the cradle's bottom): nothing under it for a cradle"
+            )
     y = unit(up - (up @ z) * z)
     x = np.cross(y, z)
     seen = fmap.length(ref.extent)

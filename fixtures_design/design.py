@@ -161,7 +161,7 @@ def design_fixture(
             elif kind is FixtureKind.PIN:
                 fx = design_pin(ref, fmap, p)
             else:
-                fx = design_cradle(ref, fmap, up_vector(vbrep, fmap), p)
+                fx = design_cradle(ref, fmap, up_vector(vbrep, fmap), p, vbrep=vbrep)
         except ValueError as exc:
             if reference is not None:
                 raise

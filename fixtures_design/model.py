@@ -135,6 +135,22 @@ def sample_face(face: Face, tolerance_mm: float = 0.2, grid: int = 8) -> np.ndar
     return np.concatenate(pts)
 
 
+def sample_triangles(tri: np.ndarray, n_points: int, seed: int = 0) -> np.ndarray:
+    """(n_points, 3) points drawn on the triangles ``tri`` (T, 3, 3), area-weighted, seeded; (0, 3) when they have
+    no area."""
+    tri = np.asarray(tri, float).reshape(-1, 3, 3)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    if not len(tri) or not area.sum() > 0:
+        return np.zeros((0, 3))
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(tri), n_points, p=area / area.sum())
+    a, b = rng.random((2, n_points, 1))
+    flip = a + b > 1
+    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
+    t = tri[pick]
+    return t[:, 0] + a * (t[:, 1] - t[:, 0]) + b * (t[:, 2] - t[:, 0])
+
+
 def transformed(shape: Shape, m: np.ndarray) -> Shape:
     """``shape`` moved by a (4, 4) rigid transform (rotation + translation, in the shape's units)."""
     trsf = gp_Trsf()

@@ -11,7 +11,7 @@ import numpy as np
 from build123d import Face, Shape, Vertex
 from OCP.BRepExtrema import BRepExtrema_DistShapeShape
 
-from fixtures_design.model import Fixture, common_volume, sample_face
+from fixtures_design.model import Fixture, common_volume, sample_face, sample_triangles
 from v2c.vbrep.model import VBRep
 
 
@@ -76,17 +76,9 @@ def part_inside_share(fixture: Fixture, vbrep: VBRep, n_points: int = 3000, seed
             tris.append(fixture.fmap.points(v)[t])
     if not tris:
         return 0.0
-    tri = np.concatenate(tris)
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    if not area.sum() > 0:
+    pts = sample_triangles(np.concatenate(tris), n_points, seed)
+    if not len(pts):
         return 0.0
-    rng = np.random.default_rng(seed)
-    pick = rng.choice(len(tri), n_points, p=area / area.sum())
-    a, b = rng.random((2, n_points, 1))
-    flip = a + b > 1
-    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
-    t = tri[pick]
-    pts = t[:, 0] + a * (t[:, 1] - t[:, 0]) + b * (t[:, 2] - t[:, 0])
     cls = BRepClass3d_SolidClassifier(fixture.solid.wrapped)
     inside = 0
     for p in pts:

@@ -130,3 +130,45 @@ def test_corner_on_the_reconstruction_of_a_generated_scan(scans):
     tol = max(0.5, 0.01 * vb_true.scale * 1000.0)
     assert mating.max < tol, mating
     assert frac < 1e-3, common
+
+
+def _pillow_block(plate_mm=(120.0, 60.0, 12.0), radius_mm: float = 20.0, length_mm: float = 40.0):
+    """A plate (its own frame, mm, on Z = 0) with a horizontal cylinder along Y standing in it: its axis 6 mm
+    above the plate's top, so the plate's body fills the space under the cylinder."""
+    from build123d import Box, Cylinder, Pos, Rot
+
+    lx, ly, lz = plate_mm
+    plate = Pos(0, 0, lz / 2) * Box(lx, ly, lz)
+    return plate + Pos(0, 0, lz + 6.0) * Rot(90, 0, 0) * Cylinder(radius_mm, length_mm)
+
+
+def test_cradle_refuses_a_cylinder_standing_in_a_plate_and_keeps_a_lying_rod():
+    """A cradle under a pillow block's cylinder would lie inside the plate (its top is above the cradle's block,
+    so no scan point or face mesh is inside the block): the plate's mesh beside the cylinder refuses it, naming the
+    plate's face. A free lying rod (nothing beside it but the ground) still gets its cradle, and it does not cut
+    the rod."""
+    from fixtures_design import NoReferenceError
+    from fixtures_design.cradle import resting_plane
+    from fixtures_design.frames import output_frame
+    from fixtures_design.references import select_references
+
+    from scenes.truth import lying_rod, posed_part, vbrep_from_shape
+
+    block, axes = posed_part(_pillow_block(), azimuth_deg=-60)
+    vb = vbrep_from_shape(block, axes)
+    boss = [r for r in select_references(vb, ["boss"]) if r.radius == pytest.approx(0.02, abs=1e-6)]
+    assert boss, "the cylinder's rim must be a boss reference"
+    fmap = output_frame(vb, "part")
+    plate_top = resting_plane(vb, boss[0], fmap, up_vector(vb, fmap))
+    assert plate_top is not None
+    normal = np.asarray(next(f for f in vb.faces if f.id == plate_top).primitive["params"]["normal"], float)
+    assert normal @ axes[2] == pytest.approx(1.0, abs=1e-6)  # the plate's top, facing up
+    with pytest.raises(NoReferenceError, match=f"stands in the body of face {plate_top}"):
+        design_fixture(vb, "cradle", frame="part")
+
+    rod, axes = posed_part(lying_rod(), azimuth_deg=-60)
+    vb = vbrep_from_shape(rod, axes)
+    fx = design_fixture(vb, "cradle", frame="part")
+    assert resting_plane(vb, fx.reference, fx.fmap, up_vector(vb, fx.fmap)) is None
+    truth = transformed(rod, camera_mm_matrix(fx.fmap))
+    assert interference(fx, truth)[1] < 1e-3
