@@ -99,7 +99,7 @@ def resting_plane(
     seen = fmap.length(ref.extent)
     cos_tilt = np.cos(np.radians(params.rest_plane_tilt_deg))
     for f in vbrep.faces:  # loop over up-facing plane faces
-        if f.id == ref.cylinder_face or f.primitive.get("type") != "plane":
+        if f.primitive.get("type") != "plane":
             continue
         normal = unit(fmap.vectors(np.asarray(f.primitive["params"]["normal"], float)))
         if normal @ up < cos_tilt:

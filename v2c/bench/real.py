@@ -194,6 +194,7 @@ def measure_frame(
 
     from exporters import result_figure, write
     from v2c import pipeline
+    from v2c.bench.workers import segment_scan
     from v2c.scan import backproject, load_scan
     from v2c.segment.geometric import GeometricConfig, part_region
 
@@ -205,12 +206,7 @@ def measure_frame(
     roi_scan = scan
     if use_mask:
         scan = replace(scan, mask=polygon_mask(spec["mask"], scan.height, scan.width))
-    seg_in: Any = segmentation
-    if weights is not None and segmentation == "learned":
-        from v2c.segment import segment
-
-        cfg = pipeline.PipelineConfig()
-        seg_in = segment(scan, segmentation, refine=cfg.refine, ransac=cfg.fit, weights=weights)
+    seg_in: Any = segment_scan(scan, segmentation, weights) if weights is not None else segmentation
     vbrep, seg, fit = pipeline.reconstruct(scan, segmentation=seg_in, return_stages=True)
     step_path = out_dir / f"{stem}.step"
     report = write(vbrep, step_path, frame="camera", product=stem)
