@@ -275,3 +275,105 @@ def test_labelled_fallback_from_one_edge() -> None:
             assert abs(abs(ledge.axis_vector[1]) - 1.0) < 1e-12  # the frame's Y axis
             assert abs(abs(ledge.axis_vector @ ledge.origin) - edge_y) < 0.001  # through the edge: within 1 mm
             assert faces[2].extra.get("fallback")
+
+
+def _chamfer_strip_scene(noise_m: float, seed: int = 0):
+    """A face-on plane A (rows 60-99), a 45-degree chamfer strip B (rows 100-104, unfitted) and a steep wall C
+    (rows 105-140), meeting at the pixel sides between rows 99 / 100 and 104 / 105; depth of B with noise."""
+    from v2c.camera import pixel_rays
+    from v2c.primitives import Plane
+
+    K = np.array([[600.0, 0.0, 160.0], [0.0, 600.0, 120.0], [0.0, 0.0, 1.0]])
+
+    def row_ray(v: float) -> np.ndarray:
+        return pixel_rays(np.array([[160.0, v]]), K)[0]
+
+    a = Plane([0.0, 0.0, 0.5], [0.0, 0.0, -1.0])
+    p0 = row_ray(99.5) * 0.5  # on A, on the A-B edge
+    nb = np.array([0.0, 1.0, -1.0]) / np.sqrt(2.0)
+    b = Plane(p0, nb)
+    p1 = row_ray(104.5) * float(nb @ p0 / (nb @ row_ray(104.5)))  # on B, on the B-C edge
+    nc = np.array([0.0, 1.0, -0.2]) / np.hypot(1.0, 0.2)
+    c = Plane(p1, nc)
+    inst = np.zeros((240, 320), np.int32)
+    inst[60:100, 100:220], inst[100:105, 100:220], inst[105:141, 100:220] = 1, 2, 3
+    vs, us = np.nonzero(inst > 0)
+    rays = pixel_rays(np.stack([us, vs], 1).astype(float), K)
+    depth = np.zeros(inst.shape)
+    for k, p in ((1, a), (2, b), (3, c)):
+        sel = inst[vs, us] == k
+        n = np.asarray(p.axis_vector, float)
+        depth[vs[sel], us[sel]] = float(n @ np.asarray(p.origin, float)) / (rays[sel] @ n)
+    rng = np.random.default_rng(seed)
+    depth[inst == 2] += rng.normal(0.0, noise_m, int((inst == 2).sum()))
+    return K, inst, depth, a, b, c
+
+
+def test_fallback_edges_are_lifted_at_the_shared_pixel_sides() -> None:
+    # An unfitted chamfer strip between two fitted planes: its edges with them, lifted onto them, lie on the strip's
+    # own plane (the true edge lines), not a pixel's footprint times the angle off it as its boundary pixels do.
+    from v2c.vbrep.classify import FaceGeom
+    from v2c.vbrep.faces import fallback_plane_points
+
+    K, inst, depth, a, b, c = _chamfer_strip_scene(0.0)
+    faces = {1: FaceGeom(1, a), 3: FaceGeom(3, c)}
+    own, *edges = fallback_plane_points(2, inst, depth, K, faces, (0.05, 5.0))
+    assert len(own) == 5 * 120 and len(edges) == 2
+    for pts in edges:
+        assert np.abs(b.signed_distance(pts)).max() < 1e-9  # metres: on both planes, exactly
+    boundary = np.array([[160.0, 100.0]])  # the strip's own first row, lifted onto A: off B by ~0.3 mm
+    from v2c.camera import pixel_rays
+
+    off = pixel_rays(boundary, K)[0] * 0.5
+    assert abs(float(b.signed_distance(off[None])[0])) > 2.5e-4
+
+
+def test_small_unlabelled_strip_gets_its_own_plane() -> None:
+    # The same strip with 0.4 mm depth noise and no usable label: its fallback plane is the chamfer's, within 1.5
+    # degrees (0.1-0.6 over five noise seeds; 3.1 with its boundary pixels lifted instead of the pixel sides).
+    from types import SimpleNamespace
+
+    from v2c.labels import label_of
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.faces import face_geoms
+
+    K, inst, depth, a, b, c = _chamfer_strip_scene(NOISE_M, seed=3)
+    fit = SimpleNamespace(
+        primitives={1: a, 3: c}, residuals={1: 0.0, 3: 0.0}, axis_labels={1: "Z", 3: None}, frame=np.eye(3)
+    )
+    labels = [0, label_of("plane", "Z"), label_of("plane", "U"), label_of("plane", "U")]
+    seg = SimpleNamespace(instances=inst, labels=np.array(labels, np.uint8))
+    faces, _ = face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig(), {})
+    assert faces[2].extra.get("fallback")
+    cos = abs(float(faces[2].prim.axis_vector @ b.axis_vector))
+    assert np.degrees(np.arccos(min(1.0, cos))) < 1.5
+
+
+@pytest.mark.parametrize(("far_m", "drawn"), [(0.52, True), (0.6, False)])
+def test_free_fallback_plane_seen_edge_on_is_not_drawn(far_m: float, drawn: bool) -> None:
+    # A strip without depth between a face-on plane at 0.5 m (rows 60-99) and one at far_m (rows 105-140): its
+    # evidence is its two edges, and the plane through them is seen 12 degrees from edge-on (0.52 m: drawn) or
+    # 2.6 degrees (0.6 m: under VBRepConfig.fallback_min_view_deg, 5; its pixels cannot be on it).
+    from types import SimpleNamespace
+
+    from v2c.labels import label_of
+    from v2c.primitives import Plane
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.faces import face_geoms
+
+    K = np.array([[600.0, 0.0, 160.0], [0.0, 600.0, 120.0], [0.0, 0.0, 1.0]])
+    inst = np.zeros((240, 320), np.int32)
+    inst[60:100, 100:220], inst[100:105, 100:220], inst[105:141, 100:220] = 1, 2, 3
+    depth = np.where(inst == 1, 0.5, np.where(inst == 3, far_m, 0.0))
+    fit = SimpleNamespace(
+        primitives={1: Plane([0.0, 0.0, 0.5], [0.0, 0.0, -1.0]), 3: Plane([0.0, 0.0, far_m], [0.0, 0.0, -1.0])},
+        residuals={1: 0.0, 3: 0.0},
+        axis_labels={1: "Z", 3: "Z"},
+        frame=np.eye(3),
+    )
+    labels = [0, label_of("plane", "Z"), label_of("plane", "U"), label_of("plane", "Z")]
+    seg = SimpleNamespace(instances=inst, labels=np.array(labels, np.uint8))
+    faces, _ = face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig(), {})
+    assert (2 in faces) == drawn
+    if drawn:
+        assert faces[2].extra.get("fallback")

@@ -110,6 +110,9 @@ class VBRepConfig:
     fallback_min_angle_deg: float = 5.0  # degrees: ... and the plane does not coincide with a fitted plane (within
     #                                      this angle and fallback_rms; evidence from at least two sources: its own
     #                                      depth, or a neighbour's edge each)
+    fallback_min_view_deg: float = 5.0  # degrees: ... and its evidence's centroid sees it at least this far from
+    #                                     edge-on (a free plane there is no surface its pixels show; the upright
+    #                                     sugar box's side, 0.5 degrees behind edge-on, came out as 10 STEP slivers)
     fallback_trim: float = 0.8  # share: the free plane and sphere fits are refitted on this share of the evidence
     #                             closest to their first fit
     fallback_fit_iters: int = 10  # Gauss-Newton iterations of the cylinder fit with a given axis

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-import cv2
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
@@ -90,21 +89,30 @@ def fallback_plane_points(
 ) -> list[np.ndarray]:
     """3D evidence (camera frame, metres) for an instance the geometry stage could not fit (e.g. a face seen at a
     grazing angle, where the sensor returns no depth): its own depth points, plus its boundary pixels next to each
-    fitted neighbour lifted onto that neighbour's surface (where two faces meet, the edge lies on both). Returns
-    the point sets of each source with at least 3 points."""
+    fitted neighbour lifted onto that neighbour's surface (where two faces meet, the edge lies on both), at the
+    pixel sides they share (half a pixel from either pixel's centre: the face's own boundary pixels lifted onto a
+    neighbour that meets it at an angle lie off it by up to a pixel's footprint times that angle's tangent,
+    which on a face of a few pixels turned the fitted plane by tens of degrees). Returns the point sets of each
+    source with at least 3 points."""
     m = inst_map == inst
     pts = [measured_points(m, depth, K)]
-    ring = cv2.dilate(m.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~m
-    for j in np.unique(inst_map[ring]):
-        if int(j) not in faces:
+    h, w = m.shape
+    vs, us = np.nonzero(m)
+    crossings: dict[int, list[np.ndarray]] = {}
+    for dv, du in ((0, 1), (0, -1), (1, 0), (-1, 0)):  # loop over the 4 neighbours of the face's pixels
+        v2, u2 = vs + dv, us + du
+        ok = (v2 >= 0) & (v2 < h) & (u2 >= 0) & (u2 < w)
+        other = np.zeros(len(vs), inst_map.dtype)
+        other[ok] = inst_map[v2[ok], u2[ok]]
+        for j in np.unique(other[ok & (other != inst)]):
+            sel = ok & (other == j)
+            # the shared pixel side: half a pixel from the face's pixel towards the neighbour's
+            crossings.setdefault(int(j), []).append(np.stack([us[sel] + du / 2, vs[sel] + dv / 2], 1))
+    for j in sorted(crossings):  # loop over the fitted neighbours
+        if j not in faces:
             continue
-        nb = cv2.dilate((inst_map == j).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & m
-        bv, bu = np.nonzero(nb)
-        uv = np.stack([bu, bv], 1).astype(float)
-        pts.append(
-            pixel_rays(uv, K)
-            * sheet_depth(intersect(faces[int(j)].prim, pixel_rays(uv, K), window), faces[int(j)].sheet)[:, None]
-        )
+        rays = pixel_rays(np.concatenate(crossings[j]).astype(float), K)
+        pts.append(rays * sheet_depth(intersect(faces[j].prim, rays, window), faces[j].sheet)[:, None])
     return [p for p in pts if len(p) >= 3]
 
 
@@ -170,6 +178,15 @@ def _add_fitted(fs: _FaceSet, fit: FitResult, scale: float) -> list[int]:
     return rejected
 
 
+def _facing_view(plane: Plane, evidence: np.ndarray, min_deg: float) -> bool:
+    """Whether the camera sees ``plane`` at least ``min_deg`` degrees from edge-on along the ray through the
+    centroid of its evidence (N, 3): a free plane whose evidence puts it edge-on (or facing away) cannot be what
+    its pixels show; its few pixels lie on neighbouring surfaces or the background behind."""
+    ray = evidence.mean(axis=0)
+    ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
+    return abs(float(np.asarray(plane.axis_vector, float) @ ray)) >= np.sin(np.deg2rad(min_deg))
+
+
 def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float) -> None:
     """A surface for each instance of at least fallback_min_px pixels still without one, where its evidence
     fixes one (module docstring)."""
@@ -193,7 +210,12 @@ def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float
         if got is None:
             continue
         plane, rms, flat = got
-        if rms <= cfg.fallback_rms * scale and flat >= cfg.fallback_flatness and not fs.coincides(plane, scale):
+        if (
+            rms <= cfg.fallback_rms * scale
+            and flat >= cfg.fallback_flatness
+            and not fs.coincides(plane, scale)
+            and _facing_view(plane, evidence, cfg.fallback_min_view_deg)
+        ):
             fs.add(int(inst), plane, rms, None, {"fallback": True})
 
 
