@@ -94,6 +94,7 @@ def fit_labelled(
     seed: int,
     label_certain: float | None = None,
     nested_certain: float | None = None,
+    nested_from_axis: bool = True,
 ) -> Primitive:
     """The primitive `fit_scan` gives instance 1, the rendered ``patch`` (depth, m) with ``label`` at confidence
     ``score``, on a part whose other instance (2) is a plane labelled Z with its normal orthogonal to the camera
@@ -114,6 +115,7 @@ def fit_labelled(
         cfg = replace(cfg, support_label_certain=label_certain)
     if nested_certain is not None:
         cfg = replace(cfg, nested_label_certain=nested_certain)
+    cfg = replace(cfg, nested_from_axis=nested_from_axis)
     return fit_scan(PatchScan(noisy.astype(np.float32), K, noisy > 0), seg, cfg).primitives[1]
 
 
@@ -256,3 +258,33 @@ def test_certain_cone_label_skips_the_nested_test(seed: int) -> None:
     assert p.type == "cone", (seed, p)
     q = fit_labelled(can, label_of("cone", "X"), 0.95, seed, nested_certain=1.01)
     assert isinstance(q, Cylinder) and abs(q.radius - 0.033) <= 0.05 * 0.033, (seed, q)
+
+
+#: Partly seen tapered sides (radius m, half angle degrees, depth m, pixel columns, pixel rows): a band of each
+#: cone's camera-facing side, as a boss's draft or a countersink shows between its neighbours.
+PARTLY_SEEN_CONES = [
+    (0.03, 5.0, 0.6, (240, 400), (200, 235)),
+    (0.03, 8.0, 0.6, (260, 380), (205, 240)),
+    (0.02, 10.0, 0.5, (280, 360), (215, 240)),
+]
+
+
+def test_partly_seen_cone_is_not_taken_for_a_tilted_cylinder() -> None:
+    """A band of a cone's side (5-10 degrees half angle, 1,800-3,900 px, sensor noise) labelled cone at 0.85
+    (under `nested_label_certain`, so the nested test runs) stays a cone on its axis (within 1 degree) for every
+    one of 3 noise seeds: it is tested against the cylinder nested in it (`FitConfig.nested_from_axis`, on the
+    cone's axis direction). A free RANSAC cylinder tilts by about the half angle to lie along the seen band and
+    wins GRIC on some of these seeds, which is what the nested test replaced."""
+    tilted = 0
+    for r, half, z0, cols, rows in PARTLY_SEEN_CONES:
+        band = cone_depth(r, half, z0, cols)
+        band[: rows[0]] = 0.0
+        band[rows[1] :] = 0.0
+        for seed in range(3):
+            p = fit_labelled(band, label_of("cone", "X"), LEARNED_SCORE, seed)
+            assert p.type == "cone", (half, seed, p)
+            assert np.degrees(np.arccos(min(1.0, abs(float(p.axis_vector[0]))))) < 1.0, (half, seed, p)
+            q = fit_labelled(band, label_of("cone", "X"), LEARNED_SCORE, seed, nested_from_axis=False)
+            tilt = np.degrees(np.arccos(min(1.0, abs(float(q.axis_vector[0])))))
+            tilted += int(isinstance(q, Cylinder) and abs(tilt - half) < 1.5)
+    assert tilted >= 1

@@ -19,7 +19,7 @@ from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.result import ABLATIONS, FitResult
 from v2c.fit.tangency import constrain_blends, tangent_junctions
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points
-from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, torus_ok
+from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
 from v2c.geometry.selection import fit_instance, noise_sigma, select_type, supported
 from v2c.labels import type_axis_of
@@ -223,6 +223,59 @@ def _planes_where_unsupported(
 NESTED = {"cone": ("cylinder",), "torus": ("cylinder",)}
 
 
+def _nested_cylinder(
+    cone: Primitive, ip: InstancePoints, inliers: np.ndarray, scale: float, config: FitConfig
+) -> RansacFit | None:
+    """The cylinder nested in ``cone`` (its half angle taken to 0, its axis direction kept): through the circle
+    of the cone's inlier points, its axis line and radius refined on them with the direction held. A free
+    cylinder, RANSAC's or one whose axis may turn, tilts by about the half angle to lie along the seen side of a
+    partly seen cone (or across a narrow chamfer strip) and wins GRIC for want of points while explaining
+    nothing of the cone's shape (corpus validation split, learned: type 91.5 -> 92.7 %, alignment 0.064 ->
+    0.058 with the direction held; 0.061 with it free to turn)."""
+    use = inliers if np.count_nonzero(inliers) >= 10 else np.ones(len(ip.points), bool)
+    a = np.asarray(cone.axis_vector, float)
+    start = start_with_axis("cylinder", ip.points[use], ip.normals[use], a, by_points=True)
+    if start is None or not start.is_finite():
+        return None
+    q = refine_primitive(start, ip.points[use], scale, config, axis=a)
+    if not (q.is_finite() and plausible(q, scale, config)):
+        return None
+    m = _inliers(q, ip, scale, config)
+    return RansacFit(q, m, float(np.count_nonzero(m)) / max(len(ip.points), 1))
+
+
+def _nested_after_joint(
+    fits: _Fits,
+    ipts: dict[int, InstancePoints],
+    order: list[int],
+    prims: list[Primitive],
+    scale: float,
+    config: FitConfig,
+) -> bool:
+    """The nested test again on the cones of the joint fit (``prims``, in ``order``), whose axes the shared
+    frame has now set: the seen side of a cylinder (a can labelled cone) fits a cone whose axis is tilted by
+    about its half angle, and the cylinder held on that tilted axis loses to it before the joint fit; held on
+    the axis the frame gives it, it explains the points as well. Every instance takes its joint-fit primitive
+    in ``fits`` (the next joint fit's start), a cone that loses GRIC to its nested cylinder that cylinder.
+    Returns whether any cone changed."""
+    changed = False
+    for i, p in zip(order, prims, strict=True):
+        fits.prims[i] = p
+        if p.type != "cone" or (i not in fits.searched and fits.scores.get(i, 0.0) >= config.nested_label_certain):
+            continue
+        ip = ipts[i]
+        inl = _inliers(p, ip, scale, config)
+        f = _nested_cylinder(p, ip, inl, scale, config)
+        if f is None or not supported(f.primitive, ip.points, config):
+            continue
+        cands = {p.type: RansacFit(p, inl, 0.0), "cylinder": f}
+        if select_type(cands, ip.points, scale, config) == "cylinder":
+            fits.prims[i] = _canonical(f.primitive, ip.points)
+            fits.inliers[i] = f.inliers
+            changed = True
+    return changed
+
+
 def _simpler_where_nested(
     fits: _Fits,
     ipts: dict[int, InstancePoints],
@@ -234,8 +287,11 @@ def _simpler_where_nested(
     """Cones and tori (labelled or type-searched) whose simpler nested type (`NESTED`: the cylinder) explains
     their points as well by GRIC with the sensor's noise model (`geometry.selection.select_type`: the extra
     parameters must buy more than their log(3N) each; a cone of half angle within noise of 0 buys nothing) take
-    that type, in place. The simpler fit's axis is free (the frame's axis came in part from this instance's own
-    poor fit); it joins the frame axis within snap_deg of it, else it stays unaligned. A cone or torus whose
+    that type, in place. A cone's cylinder is the nested one with ``nested_from_axis`` (`_nested_cylinder`: on
+    the cone's axis direction; tested again after the joint fit, `_nested_after_joint`); a torus's, and with it
+    off a cone's, a free RANSAC fit. Either
+    way the simpler fit's axis ends free (the frame's axis came in part from this instance's own poor fit); it
+    joins the frame axis within snap_deg of it, else it stays unaligned. A cone or torus whose
     label is at least ``nested_label_certain`` probable keeps its type: on a narrow chamfer strip the
     cylinder wins GRIC for want of points, not because the surface is one."""
     if not config.nested_selection:
@@ -248,7 +304,10 @@ def _simpler_where_nested(
             continue
         cands = {p.type: RansacFit(p, fits.inliers[i], 0.0)}
         for k, t in enumerate(NESTED[p.type]):  # loop over the simpler types
-            f = ransac_fit(t, ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 5, k]))
+            if config.nested_from_axis and p.type == "cone":
+                f = _nested_cylinder(p, ip, fits.inliers[i], scale, config)
+            else:
+                f = ransac_fit(t, ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 5, k]))
             if f is None:
                 continue
             q = f.primitive
@@ -457,6 +516,24 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
             config.lsmr_tol,
         )
         prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
+        if (
+            config.nested_selection
+            and config.nested_from_axis
+            and _nested_after_joint(fits, ipts, order, prims, scale, config)
+        ):
+            order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
+            frame, prims = align_fit(
+                terms,
+                frame,
+                scale,
+                config.loss,
+                config.loss_scale,
+                config.max_nfev,
+                config.ftol,
+                config.jacobian,
+                config.lsmr_tol,
+            )
+            prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
     timings["align"] = perf_counter() - t
     t = perf_counter()
 
