@@ -443,6 +443,25 @@ def _keep_plausible(
     return out
 
 
+def _joint_fit(
+    terms: list[Term], frame: np.ndarray, scale: float, config: FitConfig
+) -> tuple[np.ndarray, list[Primitive]]:
+    """Step 2's aligned joint least squares (`align.align_fit` with the config's solver settings), each result
+    kept only where plausible (`_keep_plausible`); returns the frame and the primitives in ``terms``' order."""
+    frame, prims = align_fit(
+        terms,
+        frame,
+        scale,
+        config.loss,
+        config.loss_scale,
+        config.max_nfev,
+        config.ftol,
+        config.jacobian,
+        config.lsmr_tol,
+    )
+    return frame, _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
+
+
 def _one_blas_thread() -> contextlib.AbstractContextManager:
     """Every matrix here is small: multi-threaded BLAS only adds overhead, and on a loaded machine
     oversubscription made one fit 6x slower. threadpoolctl limits it where installed."""
@@ -504,36 +523,14 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
     prims = [tm.prim for tm in terms]
     if ablation != "fit-only":
-        frame, prims = align_fit(
-            terms,
-            frame,
-            scale,
-            config.loss,
-            config.loss_scale,
-            config.max_nfev,
-            config.ftol,
-            config.jacobian,
-            config.lsmr_tol,
-        )
-        prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
+        frame, prims = _joint_fit(terms, frame, scale, config)
         if (
             config.nested_selection
             and config.nested_from_axis
             and _nested_after_joint(fits, ipts, order, prims, scale, config)
         ):
             order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
-            frame, prims = align_fit(
-                terms,
-                frame,
-                scale,
-                config.loss,
-                config.loss_scale,
-                config.max_nfev,
-                config.ftol,
-                config.jacobian,
-                config.lsmr_tol,
-            )
-            prims = _keep_plausible(prims, [tm.prim for tm in terms], terms, frame, scale, config)
+            frame, prims = _joint_fit(terms, frame, scale, config)
     timings["align"] = perf_counter() - t
     t = perf_counter()
 
