@@ -289,11 +289,10 @@ def _simpler_where_nested(
     parameters must buy more than their log(3N) each; a cone of half angle within noise of 0 buys nothing) take
     that type, in place. A cone's cylinder is the nested one with ``nested_from_axis`` (`_nested_cylinder`: on
     the cone's axis direction; tested again after the joint fit, `_nested_after_joint`); a torus's, and with it
-    off a cone's, a free RANSAC fit. Either
-    way the simpler fit's axis ends free (the frame's axis came in part from this instance's own poor fit); it
-    joins the frame axis within snap_deg of it, else it stays unaligned. A cone or torus whose
-    label is at least ``nested_label_certain`` probable keeps its type: on a narrow chamfer strip the
-    cylinder wins GRIC for want of points, not because the surface is one."""
+    off a cone's, a free RANSAC fit. Either way the simpler fit's axis ends free (the frame's axis came in part
+    from this instance's own poor fit); it joins the frame axis within snap_deg of it, else it stays unaligned.
+    A cone or torus whose label is at least ``nested_label_certain`` probable keeps its type: on a narrow
+    chamfer strip the cylinder wins GRIC for want of points, not because the surface is one."""
     if not config.nested_selection:
         return
     for i in sorted(fits.prims):  # loop over instances
