@@ -180,7 +180,7 @@ def _add_fitted(fs: _FaceSet, fit: FitResult, scale: float) -> list[int]:
 
 def _facing_view(plane: Plane, evidence: np.ndarray, min_deg: float) -> bool:
     """Whether the camera sees ``plane`` at least ``min_deg`` degrees from edge-on along the ray through the
-    centroid of its evidence (N, 3): a free plane whose evidence puts it edge-on (or facing away) cannot be what
+    centroid of its evidence (N, 3): a free plane whose evidence puts it (nearly) edge-on cannot be what
     its pixels show; its few pixels lie on neighbouring surfaces or the background behind."""
     ray = evidence.mean(axis=0)
     ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
