@@ -80,6 +80,15 @@ def _v_profile(radius: float, p: CradleParams) -> np.ndarray:
     return np.array([(-w, bottom), (w, bottom), (w, y_top), (x_top, y_top), (0.0, apex), (-x_top, y_top), (-w, y_top)])
 
 
+def _cradle_axes(ref: CircleReference, fmap: FrameMap, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cradle's axes in the output frame (module docstring): z along the cylinder's axis, y the part's ``up``
+    made perpendicular to it, x = y x z (unit vectors)."""
+    z = unit(fmap.vectors(ref.axis))
+    up = unit(up)
+    y = unit(up - (up @ z) * z)
+    return np.cross(y, z), y, z
+
+
 def resting_plane(
     vbrep: VBRep, ref: CircleReference, fmap: FrameMap, up: np.ndarray, params: CradleParams = CradleParams()
 ) -> int | None:
@@ -90,10 +99,8 @@ def resting_plane(
     the cylinder for a cradle. None when there is none. A free lying cylinder has no such plane beside it (the
     ground is not a face); a flat on its top lies within its radius; a block a boss stands out of lies behind the
     boss, not along it."""
-    z = unit(fmap.vectors(ref.axis))
+    x, y, z = _cradle_axes(ref, fmap, up)
     up = unit(up)
-    y = unit(up - (up @ z) * z)
-    x = np.cross(y, z)
     origin = fmap.points(ref.center)
     radius = fmap.length(ref.radius)
     seen = fmap.length(ref.extent)
@@ -132,7 +139,7 @@ def design_cradle(
     """
     if ref.kind is not ReferenceKind.BOSS:
         raise ValueError(f"edge e{ref.edge_id} is the rim of a {ref.kind.value}: a cradle needs a boss/cylinder")
-    z = unit(fmap.vectors(ref.axis))
+    x, y, z = _cradle_axes(ref, fmap, up)
     up = unit(up)
     tilt = float(np.degrees(np.arcsin(min(1.0, abs(z @ up)))))
     if tilt > params.max_tilt_deg:
@@ -147,8 +154,6 @@ def design_cradle(
                 f"the cylinder of e{ref.edge_id} stands in the body of face {rest} (an up-facing plane beside it "
                 "over the cradle's footprint, above the cradle's bottom): nothing under it for a cradle"
             )
-    y = unit(up - (up @ z) * z)
-    x = np.cross(y, z)
     seen = fmap.length(ref.extent)
     length = min(params.length, seen - 2 * params.end_margin)
     if length <= 0:

@@ -223,6 +223,12 @@ def _planes_where_unsupported(
 NESTED = {"cone": ("cylinder",), "torus": ("cylinder",)}
 
 
+def _label_trusted(fits: _Fits, i: int, config: FitConfig) -> bool:
+    """Whether instance ``i`` keeps its labelled type untested against the nested simpler one: its type came from
+    its label, not the type search, and the label is at least ``nested_label_certain`` probable."""
+    return i not in fits.searched and fits.scores.get(i, 0.0) >= config.nested_label_certain
+
+
 def _nested_cylinder(
     cone: Primitive, ip: InstancePoints, inliers: np.ndarray, scale: float, config: FitConfig
 ) -> RansacFit | None:
@@ -261,7 +267,7 @@ def _nested_after_joint(
     changed = False
     for i, p in zip(order, prims, strict=True):
         fits.prims[i] = p
-        if p.type != "cone" or (i not in fits.searched and fits.scores.get(i, 0.0) >= config.nested_label_certain):
+        if p.type != "cone" or _label_trusted(fits, i, config):
             continue
         ip = ipts[i]
         inl = _inliers(p, ip, scale, config)
@@ -299,7 +305,7 @@ def _simpler_where_nested(
         p, ip = fits.prims[i], ipts[i]
         if p.type not in NESTED:
             continue
-        if i not in fits.searched and fits.scores.get(i, 0.0) >= config.nested_label_certain:
+        if _label_trusted(fits, i, config):
             continue
         cands = {p.type: RansacFit(p, fits.inliers[i], 0.0)}
         for k, t in enumerate(NESTED[p.type]):  # loop over the simpler types
