@@ -19,17 +19,31 @@ from scenes.truth import synthetic_scan
 
 
 @pytest.mark.parametrize(
-    ("family", "seed", "hole", "horizontal"),
+    ("family", "seed", "hole", "horizontal", "hole_any", "horizontal_any"),
     [
-        ("shaft", 0, False, True),  # a lying stepped shaft: bosses with horizontal axes, no bore
-        ("block", 0, False, False),  # no feature (meta "feature": "none"): only 90-degree corner fillets
-        ("bracket", 0, True, False),  # the bracket whose hole takes the pin of tests/test_fixtures_design.py
+        ("shaft", 0, False, True, False, True),  # a lying stepped shaft: bosses with horizontal axes, no bore
+        ("block", 0, False, False, False, False),  # no feature (meta "feature": "none"): 90-degree corner fillets
+        # the bracket whose hole takes the pin of tests/test_fixtures_design.py
+        ("bracket", 0, True, False, True, False),
+        # an upright knob with 7 flutes round its base (concave cylinders of r 3.4 mm whose wall the part closes
+        # in under half of the directions round their axes) and a blind hole too small to be seen: no hole
+        ("feat_knob", 3, False, False, True, False),
+        # a pillow block: counterbored holes in its base; its bearing housing (a horizontal convex cylinder) stands
+        # on its pedestal and base plate, which fill the place of a cradle's block under it: no horizontal cylinder
+        ("feat_block", 0, True, False, True, True),
     ],
 )
-def test_visible_holes_and_horizontal_cylinders(tmp_path: Path, family: str, seed: int, hole: bool, horizontal: bool):
+def test_visible_holes_and_horizontal_cylinders(
+    tmp_path: Path, family: str, seed: int, hole: bool, horizontal: bool, hole_any: bool, horizontal_any: bool
+):
     scan = load_scan(synthetic_scan(tmp_path, family, seed))
     marks = visible_cylinders(scan, FixtureBenchConfig(min_visible_px=50))  # 320 x 240: a quarter of the pixels
-    assert marks == {"hole": hole, "horizontal_cylinder": horizontal}
+    assert marks == {
+        "hole": hole,
+        "horizontal_cylinder": horizontal,
+        "hole_any": hole_any,
+        "horizontal_cylinder_any": horizontal_any,
+    }
 
 
 def test_stage_fixtures_on_a_shaft(tmp_path: Path) -> None:

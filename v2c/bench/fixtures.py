@@ -17,12 +17,14 @@ constrains until its mating faces hold the part). A seat that moves the part mor
 the clearance + ``seat_bound_mm`` (+ the design's standoff, a nest's floor gap) is a failed design: it counts as
 cutting and not touching.
 
-From the ground truth alone (``gt/primitives.json``, ``gt/faces.png``, ``gt/depth_clean.npy``) each scan is marked
-as having a visible **hole** (a cylinder of at least ``min_visible_px`` pixels showing at least ``min_arc_deg`` of
-arc, whose seen wall faces away from the camera: concave) and a visible **horizontal cylinder** (a convex one whose
-axis lies within ``max_tilt_deg`` of horizontal); the pin and cradle qualification rates are the shares of those
-scans on which a pin / cradle was designed. Scans are generated once into a cache folder keyed by generator
-version, noise, size, seed and families.
+From the ground truth alone (``gt/primitives.json``, ``gt/faces.png``, ``gt/depth_clean.npy``, ``gt/part.step``) each
+scan is marked as having a visible **hole** (a cylinder of at least ``min_visible_px`` pixels showing at least
+``min_arc_deg`` of arc, whose seen wall faces away from the camera: concave, and which the true part closes round its
+axis: not a flute or a slot's end) and a visible **horizontal cylinder** (a convex one whose axis lies within
+``max_tilt_deg`` of horizontal, with room under it for the default cradle: not a housing standing on its base); the
+pin and cradle qualification rates are the shares of those scans on which a pin / cradle was designed. The looser
+marks (every concave cylinder, every horizontal convex one) are reported beside them (`visible_cylinders`). Scans
+are generated once into a cache folder keyed by generator version, noise, size, seed and families.
 """
 
 from __future__ import annotations
@@ -71,6 +73,12 @@ class FixtureBenchConfig:
     )
     min_arc_deg: float = 120.0  # degrees of arc a gt cylinder must show to count (a fillet spans 90)
     max_tilt_deg: float = 30.0  # degrees: a cylinder axis within this of horizontal is "horizontal" (as the cradle)
+    hole_min_closure: float = 0.75  # a concave gt cylinder is a hole a pin can take when the true part's material
+    # lies just beyond its radius in at least this share of the directions round its axis (fraction; a drilled hole
+    # 1, a flute round a knob or a slot's round end at most 0.5: open grooves, no pin enters them)
+    probe_mm: float = 0.3  # mm: how far beyond (or inside) a gt cylinder's radius the true part is probed, at least
+    probe_rel: float = 0.05  # ... and this share of the radius (fraction)
+    probe_directions: int = 36  # directions round the axis probed for a hole's closure (count)
     cache_dir: Path | None = None  # None: v2c.bench.cache.default_cache_dir()
     seat_clearance_factor: float = 3.0  # a seat moving the true part more than this x the clearance + seat_bound_mm
     seat_bound_mm: float = 2.0  # (mm; + a nest's floor gap) fails the design: the lead's rule for issue 18, not tuned
@@ -143,18 +151,62 @@ def _arc_deg(radial: np.ndarray, axis: np.ndarray) -> float:
     return float(360.0 - gaps.max())
 
 
+def _inside_probe(step_path: Path) -> Callable[[np.ndarray], np.ndarray]:
+    """A test of points (N, 3, the STEP's frame, mm) against the solid of ``step_path``: True where strictly
+    inside (OCCT's solid classifier)."""
+    from OCP.BRepClass3d import BRepClass3d_SolidClassifier
+    from OCP.gp import gp_Pnt
+    from OCP.TopAbs import TopAbs_IN
+
+    from v2c.synth.occ import read_step
+
+    cls = BRepClass3d_SolidClassifier(read_step(step_path))
+
+    def inside(p: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(p), bool)
+        for k, q in enumerate(np.asarray(p, float)):  # loop over the probes (a few dozen per cylinder)
+            cls.Perform(gp_Pnt(*map(float, q)), 1e-6)
+            out[k] = cls.State() == TopAbs_IN
+        return out
+
+    return inside
+
+
+def _ring(axis: np.ndarray, n: int) -> np.ndarray:
+    """(n, 3) unit directions perpendicular to ``axis``, evenly round it."""
+    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    phi = 2 * np.pi * np.arange(n) / n
+    return np.outer(np.cos(phi), u) + np.outer(np.sin(phi), v)
+
+
 def visible_cylinders(scan: Any, cfg: FixtureBenchConfig) -> dict[str, bool]:
-    """From a scan's ground truth: ``hole`` (a visible concave cylinder) and ``horizontal_cylinder`` (a visible
-    convex cylinder whose axis is within ``max_tilt_deg`` of horizontal; up = the part's Z, meta axes_cam).
-    Concave or convex: whether the seen wall faces away from the camera or towards it (the median over its pixels of
-    the radial direction dotted with the direction to the camera)."""
+    """From a scan's ground truth, the cylinders a pin or a cradle could take, among those seen (at least
+    ``min_visible_px`` pixels of ``gt/faces.png`` showing ``min_arc_deg`` of arc):
+
+    - ``hole``: a concave cylinder (its seen wall faces away from the camera: the median over its pixels of the
+      radial direction dotted with the direction to the camera) that the true part closes round its axis: at the
+      seen wall's median height, material just beyond the radius in ``hole_min_closure`` of the directions. A
+      drilled, blind or counterbored hole; not a flute round a knob, a groove or a slot's end;
+    - ``horizontal_cylinder``: a convex cylinder whose axis is within ``max_tilt_deg`` of horizontal (up = the
+      part's Z, meta axes_cam) and whose underside leaves room for the default cradle (`_free_underside`): a shaft,
+      a boss standing out sideways; not a housing standing on or through a base plate, whose plate the cradle's
+      block would cut;
+    - ``hole_any`` / ``horizontal_cylinder_any``: the same without the true part's closure / free underside (the
+      bench's marks before 2026-11-27 evening: every concave cylinder, every horizontal convex one).
+
+    The true part is probed at ``max(probe_mm, probe_rel x radius)`` beyond or inside the radius (gt/part.step, the
+    camera frame in mm)."""
     from v2c.camera import backproject
 
     gt = scan.gt
     up = np.asarray(gt.meta["axes_cam"], float)[2]
     up /= np.linalg.norm(up)
     pts = backproject(gt.depth_clean, scan.K)
-    out = {"hole": False, "horizontal_cylinder": False}
+    out = {"hole": False, "horizontal_cylinder": False, "hole_any": False, "horizontal_cylinder_any": False}
+    radius_of = {int(p["pixel_value"]): float(p["params"]["radius"]) for p in gt.primitives if p["type"] == "cylinder"}
+    inside: Callable[[np.ndarray], np.ndarray] | None = None
     for axis, origin, vals in _cylinders(gt.primitives):
         pix = np.isin(gt.faces, vals) & (gt.depth_clean > 0)
         if int(pix.sum()) < cfg.min_visible_px:
@@ -166,11 +218,53 @@ def visible_cylinders(scan: Any, cfg: FixtureBenchConfig) -> dict[str, bool]:
         if _arc_deg(radial, axis) < cfg.min_arc_deg:  # a fillet (90 deg), not a hole or a boss
             continue
         convex = float(np.median(np.sum(radial * to_cam, axis=1))) > 0  # a boss shows the side facing the camera
+        horizontal = abs(float(axis @ up)) <= np.sin(np.radians(cfg.max_tilt_deg))
+        if convex and not horizontal:
+            continue
+        out["hole_any" if not convex else "horizontal_cylinder_any"] = True
+        inside = inside or _inside_probe(Path(gt.step_path))
+        r_mm = 1000.0 * radius_of[vals[0]]
+        delta = max(cfg.probe_mm, cfg.probe_rel * r_mm)
+        centre = 1000.0 * (origin + float(np.median(q @ axis)) * axis)  # on the axis, at the seen wall's height
         if not convex:
-            out["hole"] = True
-        elif abs(float(axis @ up)) <= np.sin(np.radians(cfg.max_tilt_deg)):
-            out["horizontal_cylinder"] = True
+            ring = _ring(axis, cfg.probe_directions)
+            closure = float(np.mean(inside(centre + (r_mm + delta) * ring)))
+            out["hole"] |= closure >= cfg.hole_min_closure
+        else:
+            out["horizontal_cylinder"] |= _free_underside(inside, axis, up, pts[pix], origin, r_mm, delta, cfg)
     return out
+
+
+def _free_underside(
+    inside: Callable[[np.ndarray], np.ndarray],
+    axis: np.ndarray,
+    up: np.ndarray,
+    seen: np.ndarray,
+    origin: np.ndarray,
+    r_mm: float,
+    delta: float,
+    cfg: FixtureBenchConfig,
+) -> bool:
+    """Whether the true part leaves room under a convex cylinder for the default cradle (`CradleParams`' U block:
+    the groove's wrap and the wall below and beside it, ``delta`` mm clear of the cylinder): no probe of that
+    region is inside the part, at three heights along the seen wall (``seen``: its points, metres), and the part
+    has material just inside the cylinder's lowest line (it is the part's own surface, not a hole's far wall)."""
+    from fixtures_design.cradle import CradleParams
+
+    p = CradleParams()
+    y_ax = up - (up @ axis) * axis
+    y_ax /= np.linalg.norm(y_ax)
+    x_ax = np.cross(y_ax, axis)
+    half = np.radians(p.wrap_deg) / 2
+    w = r_mm * np.sin(half) + p.wall
+    xs, ys = np.meshgrid(np.linspace(-w, w, 9), np.linspace(-(r_mm + p.wall), -r_mm * np.cos(half), 5))
+    keep = np.hypot(xs, ys) > r_mm + delta
+    grid = np.outer(xs[keep], x_ax) + np.outer(ys[keep], y_ax)
+    heights = 1000.0 * np.percentile((seen - origin) @ axis, [20, 50, 80])
+    base = 1000.0 * origin
+    probes = np.concatenate([base + h * axis + grid for h in heights])
+    body = base + heights[1] * axis - (r_mm - delta) * y_ax
+    return bool(inside(body[None])[0] and not inside(probes).any())
 
 
 def evaluate_scan(
@@ -320,6 +414,12 @@ def summarise(rows: list[dict], cfg: FixtureBenchConfig) -> dict[str, Any]:
                 ]
                 s.update(qualifying_scans=len(scans), designed_on=len(hit))
                 s["qualification_rate"] = len(hit) / len(scans) if scans else None
+                # the marks before the true part's closure / free underside were checked (visible_cylinders)
+                loose = [r for r in rows if r.get(f"{qual[kind]}_any", r[qual[kind]])]
+                s["qualifying_scans_any"] = len(loose)
+                s["designed_on_any"] = sum(
+                    any(d["ok"] and d["kind"] == kind and d["k"] == float(k) for d in r["designs"]) for r in loose
+                )
             per[kind] = s
         out[f"{float(k):g}"] = per
     return out
@@ -365,22 +465,28 @@ def weights_sha1(weights: Path | None) -> str | None:
 
 def format_table(result: dict[str, Any]) -> str:
     """Markdown table: one row per k and kind (and all kinds): designs, cut and touch rates in the camera frame and
-    seated, failed seats, median seat and clearance, pin / cradle qualification."""
+    seated, failed seats, median seat and clearance, pin / cradle qualification (holes a pin can take, cylinders
+    with room for a cradle; and every concave / horizontal convex cylinder, `visible_cylinders`)."""
     lines = [
         "| k | kind | designs | cut rate | touch rate | seated cut rate | seated touch rate | failed seats | "
-        "median seat (mm) | median clearance (mm) | qualifying scans | designed on |",
-        "|" + " --- |" * 12,
+        "median seat (mm) | median clearance (mm) | qualifying scans | designed on | "
+        "every concave / horizontal convex cylinder: scans | designed on |",
+        "|" + " --- |" * 14,
     ]
     for k, per in result["summary"].items():
         for kind, s in per.items():
             q = "" if "qualifying_scans" not in s else str(s["qualifying_scans"])
-            on = ""
+            on = q_any = on_any = ""
             if "qualifying_scans" in s and s["qualification_rate"] is not None:
                 on = f"{s['designed_on']} ({100 * s['qualification_rate']:.0f} %)"
+            if s.get("qualifying_scans_any"):
+                q_any = str(s["qualifying_scans_any"])
+                on_any = f"{s['designed_on_any']} ({100 * s['designed_on_any'] / s['qualifying_scans_any']:.0f} %)"
             lines.append(
                 f"| {k} | {'**all**' if kind == 'all' else kind} | {s['designs']} | {_pct(s['cut_rate'])} | "
                 f"{_pct(s['touch_rate'])} | {_pct(s['seated_cut_rate'])} | {_pct(s['seated_touch_rate'])} | "
-                f"{s['seat_failures']} | {_f(s['median_seat_mm'])} | {_f(s['median_clearance_mm'])} | {q} | {on} |"
+                f"{s['seat_failures']} | {_f(s['median_seat_mm'])} | {_f(s['median_clearance_mm'])} | {q} | {on} | "
+                f"{q_any} | {on_any} |"
             )
     return "\n".join(lines)
 
