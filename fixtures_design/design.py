@@ -82,6 +82,30 @@ def outline_sigma_mm(vbrep: VBRep) -> float | None:
 DEPTH_BIAS_MM = 0.74
 
 
+#: A pin's radial clearance (`pin_clearance`) comes from the error of the hole's *radius*, not from its faces'
+#: positional sigma: seated, the part sits on the pin, so the hole's place (and the scan's depth offset, which moves
+#: the whole part) sets where the part goes, not whether the pin fits. On the training holes of `v2c bench --stage
+#: fixtures --families train --seed 7100 --n 48` (26 pins whose hole matched a true one; 640x480 `sensor` noise,
+#: learned segmentation) the fitted radius was off by -0.65..+0.53 mm, RMS 0.22 mm: HOLE_RADIUS_SIGMA_MM. It
+#: tracked neither the fit's covariance (errors of 0.04-2.6 times its radius sigma: the far, small holes with the
+#: largest covariance sigma were among the best fitted), nor the depth noise at the hole (the largest errors were on
+#: near holes), nor the rim's pixel footprint (RMS 0.23 px, but the far holes again fitted best): a constant in mm
+#: was the best model (docs/fixtures.md, "Pins: the hole's radius"). PIN_CLEARANCE_K = 3 (three sigma, 0.66 mm)
+#: clears every training hole's radius error (the largest, +0.53 mm, needs k >= 2.4) while the loosest pin's play
+#: (clearance - error) stays at 1.0 mm. Before, k x hypot(faces' sigma, DEPTH_BIAS_MM) gave the training pins
+#: clearances of 0.77-1.54 mm and 5 of 26 sat loose (seated mating median over 1 mm).
+HOLE_RADIUS_SIGMA_MM = 0.22
+PIN_CLEARANCE_K = 3.0
+
+
+def pin_clearance(params: Params, k: float = PIN_CLEARANCE_K) -> Params:
+    """``params`` with clearance max(params.clearance, k * HOLE_RADIUS_SIGMA_MM) (mm): the pin's radial play
+    against the hole's radius error; unchanged when k is not positive."""
+    if not k > 0:
+        return params
+    return replace(params, clearance=max(params.clearance, k * HOLE_RADIUS_SIGMA_MM))
+
+
 def sigma_clearance(
     params: Params, sigma_mm: float | None, k: float = CLEARANCE_K, bias_mm: float = DEPTH_BIAS_MM
 ) -> Params:
@@ -115,6 +139,7 @@ def design_fixture(
     points: np.ndarray | None = None,
     evidence: EvidenceConfig | None = None,
     bias_mm: float = DEPTH_BIAS_MM,
+    pin_k: float | None = None,
 ) -> Fixture:
     """A fixture of ``kind`` for ``vbrep`` (camera frame, metres), built in ``frame`` (millimetres).
 
@@ -133,7 +158,9 @@ def design_fixture(
     mask): a corner, pin or cradle holding more than ``evidence.max_points`` of them deeper than the depth noise
     (`fixtures_design.verify.observed_inside`) is refused with the reason, and the next reference tried (a given
     ``reference`` raises ValueError). None: no check (a VB-Rep or STEP without its scan). bias_mm: the scan's
-    depth-offset 1-sigma in the default clearance (`sigma_clearance`).
+    depth-offset 1-sigma in the default clearance (`sigma_clearance`). A pin's default clearance is instead
+    ``pin_k`` (None: PIN_CLEARANCE_K) times the hole radius's 1-sigma (`pin_clearance`, HOLE_RADIUS_SIGMA_MM;
+    ``clearance_k`` and ``bias_mm`` do not apply to it).
     """
     kind = FixtureKind(kind)
     evidence = evidence or EvidenceConfig()
@@ -154,7 +181,12 @@ def design_fixture(
         if reference is None and max_sigma_mm is not None and sigma is not None and sigma > max_sigma_mm:
             errors.append(f"e{ref.edge_id}: its faces' 1-sigma {sigma:.2f} mm is over max_sigma_mm {max_sigma_mm:g}")
             continue
-        p = sigma_clearance(params, sigma, clearance_k, bias_mm) if auto else params
+        if not auto:
+            p = params
+        elif kind is FixtureKind.PIN:  # the hole's radius error, not its place (HOLE_RADIUS_SIGMA_MM)
+            p = pin_clearance(params, PIN_CLEARANCE_K if pin_k is None else pin_k)
+        else:
+            p = sigma_clearance(params, sigma, clearance_k, bias_mm)
         try:
             if kind is FixtureKind.CORNER:
                 fx = design_corner(ref, fmap, p)

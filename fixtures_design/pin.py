@@ -2,8 +2,9 @@
 
 Local frame: origin at the hole's rim centre (on the plane the hole pierces), z along the hole axis into the
 material. The pin (radius = hole radius - clearance) runs from the flange down to ``depth`` into the hole (clamped
-to the hole depth the view shows, less the clearance); the flange (radius = pin radius + ``flange``, thickness
-``wall``) sits ``clearance`` above the plane, no wider than the plane face around the hole (``land``).
+to ``depth_radii`` hole radii and to the hole depth the view shows, less the clearance); the flange (radius = pin
+radius + ``flange``, thickness ``wall``) sits ``clearance`` above the plane, no wider than the plane face around the
+hole (``land``).
 """
 
 from __future__ import annotations
@@ -24,8 +25,13 @@ class PinParams:
 
     clearance: float = 0.1  # mm: radial gap pin-hole, and the gap between flange and the hole's plane
     depth: float = 10.0  # mm: insertion depth of the pin below the hole's rim
+    depth_radii: float = 1.0  # ... and at most this many of the hole's radii (ratio): a counterbore's step lies
+    # below its rim by about a radius, and a pin past it runs into the narrower hole (on the training holes of
+    # `v2c bench --stage fixtures`, 2 of 26 pins; docs/fixtures.md, "Pins: the hole's radius")
     wall: float = 5.0  # mm: flange thickness
-    flange: float = 4.0  # mm: flange radius beyond the pin radius (clamped to the plane's land around the hole)
+    flange: float = 2.0  # mm: flange radius beyond the pin radius (clamped to the plane's land around the hole); a
+    # narrow flange stays clear of a counterbore's wall when the part moves across to clear the pin (4 mm before:
+    # 1 of 26 training pins pushed its flange into the counterbore's wall)
 
 
 def design_pin(ref: CircleReference, fmap: FrameMap, params: PinParams = PinParams()) -> Fixture:
@@ -44,7 +50,7 @@ def design_pin(ref: CircleReference, fmap: FrameMap, params: PinParams = PinPara
         raise ValueError(
             f"hole e{ref.edge_id} radius {fmap.length(ref.radius):.2f} mm is not above the clearance {c} mm"
         )
-    depth = min(params.depth, fmap.length(ref.extent) - c)
+    depth = min(params.depth, params.depth_radii * fmap.length(ref.radius), fmap.length(ref.extent) - c)
     if depth <= 0:
         raise ValueError(f"hole e{ref.edge_id} shows only {fmap.length(ref.extent):.2f} mm of depth")
     flange_r = min(r + params.flange, max(r + c, fmap.length(ref.land) - c))

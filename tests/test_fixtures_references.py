@@ -157,7 +157,7 @@ def test_a_hole_whose_plane_mesh_stops_short_of_the_rim_keeps_its_land_and_the_p
     assert hole.land / hole.radius == pytest.approx(full.land / full.radius, abs=0.15)
     fmap = output_frame(vb, "camera")
     fx = design_pin(hole, fmap, PinParams(clearance=0.2))
-    assert fx.notes["flange_radius_mm"] == pytest.approx(fx.notes["pin_radius_mm"] + 4.0)
+    assert fx.notes["flange_radius_mm"] == pytest.approx(fx.notes["pin_radius_mm"] + PinParams().flange)
     truth = transformed(block, camera_mm_matrix(fmap))
     seat = seat_part(fx, truth)
     assert seat.ok and seat.push_mm == pytest.approx(0.2, abs=0.02)  # down by the flange's clearance onto the top

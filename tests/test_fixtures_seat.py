@@ -77,12 +77,13 @@ def test_a_seat_larger_than_the_bound_fails_the_design(corner: tuple, coeffs: tu
 @pytest.fixture(scope="module")
 def designs(tmp_path_factory: pytest.TempPathFactory) -> dict:
     """Pin (bracket seed 0), cradle (shaft seed 0) and nest (block seed 0) on ground-truth VB-Reps, default
-    parameters, with their true parts in the output frame."""
+    parameters with the kinds' own clearances (no uncertainty term: clearance_k and pin_k 0), with their true parts
+    in the output frame."""
     out = tmp_path_factory.mktemp("seat_kinds")
     res = {}
     for family, seed, kind in [("bracket", 0, "pin"), ("shaft", 0, "cradle"), ("block", 0, "nest")]:
         vb, truth_cam = vbrep_from_scan(synthetic_scan(out, family, seed))
-        fx = design_fixture(vb, kind, clearance_k=0.0)
+        fx = design_fixture(vb, kind, clearance_k=0.0, pin_k=0.0)
         res[kind] = (fx, transformed(truth_cam, camera_mm_matrix(fx.fmap)))
     return res
 

@@ -272,11 +272,11 @@ def evaluate_scan(
 ) -> dict:
     """One scan: its reconstruction, every kind at every k designed and checked. Returns ``{"scan", "family",
     "hole", "horizontal_cylinder", "seconds_reconstruct", "designs": [...]}``; a design row has kind, k, ok
-    (False: no reference, with ``error``), clearance (mm), sigma_mm, probability, cut_mm3, cut_share, cuts,
-    mating_median_mm, mating_max_mm, touches (camera frame), and seated: seat_move_mm (the translation (3,), output
-    frame mm), seat_mm (its length), seat_push_mm, seat_bound_mm, seat_ok, seat_reason, seat_overlap_mm,
-    seated_cut_mm3, seated_cut_share, seated_mating_median_mm, seated_mating_max_mm (None when the seat failed),
-    seated_cuts, seated_touches.
+    (False: no reference, with ``error``), clearance (mm), sigma_mm (what the clearance came from, `_design_sigma`),
+    probability, cut_mm3, cut_share, cuts, mating_median_mm, mating_max_mm, touches (camera frame), and seated:
+    seat_move_mm (the translation (3,), output frame mm), seat_mm (its length), seat_push_mm, seat_bound_mm, seat_ok,
+    seat_reason, seat_overlap_mm, seated_cut_mm3, seated_cut_share, seated_mating_median_mm, seated_mating_max_mm
+    (None when the seat failed), seated_cuts, seated_touches.
     ``vbrep``: the scan's reconstruction when already made."""
     from fixtures_design.assembly import true_part
     from fixtures_design.design import design_fixture, mating_sigma_mm, outline_sigma_mm
@@ -332,7 +332,7 @@ def evaluate_scan(
             d.update(
                 ok=True,
                 clearance=float(fx.params.clearance),
-                sigma_mm=outline_sigma_mm(vbrep) if ref is None else mating_sigma_mm(vbrep, ref),
+                sigma_mm=_design_sigma(vbrep, kind, ref, outline_sigma_mm, mating_sigma_mm),
                 probability=None if ref is None else float(ref.confidence),
                 edge=None if ref is None else int(ref.edge_id),
                 cut_mm3=float(vol),
@@ -378,6 +378,16 @@ def evaluate_scan(
                     )
                 )
     return row
+
+
+def _design_sigma(vbrep: Any, kind: str, ref: Any, outline: Callable, mating: Callable) -> float | None:
+    """The 1-sigma (mm) a design's default clearance came from: a nest's faces' median, a pin's hole radius
+    (`fixtures_design.design.HOLE_RADIUS_SIGMA_MM`), else the mating faces' largest."""
+    from fixtures_design.design import HOLE_RADIUS_SIGMA_MM
+
+    if ref is None:
+        return outline(vbrep)
+    return HOLE_RADIUS_SIGMA_MM if kind == "pin" else mating(vbrep, ref)
 
 
 def _f(v: float | None) -> str:
