@@ -46,6 +46,7 @@ REFERENCE_OF: dict[FixtureKind, ReferenceKind] = {
 #: pushed home, `fixtures_design.seat`; docs/fixtures.md "Seated: the part pushed home"), on the same 24 scans after
 #: the hole land fix: k = 0.5 / 1 with DEPTH_BIAS_MM cut 7.4 / 3.7 % and touch 88.9 / 81.5 %, without it (k = 0.5 / 1)
 #: 7.4 / 7.4 % and 92.6 / 85.2 %: only pins differ, and the smaller clearances let a second wrong hole cut, so 1 stays.
+#: Pins have their own rule since (`pin_clearance`, PIN_CLEARANCE_K): CLEARANCE_K is the corners', cradles' and nests'.
 CLEARANCE_K = 1.0
 
 #: References whose mating faces' 1-sigma position error exceeds this (mm) are refused by `design_fixture`. None
