@@ -107,3 +107,24 @@ def test_clearance_k_belongs_to_the_fixture_stage() -> None:
     assert res.exit_code == 2 and "--clearance-k belongs to --stage fixtures" in res.output
     res = CliRunner().invoke(main, ["bench", "--stage", "fixtures", "--clearance-k", "-1"])
     assert res.exit_code == 2 and "expected numbers >= 0" in res.output
+
+
+def test_fixture_kinds_belong_to_the_fixture_stage_and_are_checked() -> None:
+    res = CliRunner().invoke(main, ["bench", "--stage", "fit", "--fixture-kinds", "pin"])
+    assert res.exit_code == 2 and "--fixture-kinds belongs to --stage fixtures" in res.output
+    res = CliRunner().invoke(main, ["bench", "--stage", "fixtures", "--fixture-kinds", "pin,clamp"])
+    assert res.exit_code == 2 and "'pin,clamp': expected kinds from corner, pin, cradle, nest" in res.output
+
+
+def test_fixture_kinds_choose_what_is_designed(tmp_path: Path) -> None:
+    """--fixture-kinds cradle on one generated shaft: only cradles are designed, reported and summarised."""
+    out = tmp_path / "fx.json"
+    args = ["bench", "--stage", "fixtures", "--n", "1", "--seed", "0", "--families", "shaft", "--size", "320x240"]
+    args += ["--segmentation", "oracle", "--fixture-kinds", "cradle", "--cache", str(tmp_path / "cache")]
+    res = CliRunner().invoke(main, [*args, "--json", str(out), "-q"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    r = json.loads(out.read_text())
+    assert r["config"]["kinds"] == ["cradle"]
+    assert {d["kind"] for row in r["rows"] for d in row["designs"]} == {"cradle"}
+    assert set(r["summary"]["1"]) == {"cradle", "all"} and r["summary"]["1"]["cradle"]["designs"] == 1
+    assert "| 1 | cradle | 1 |" in res.output and "| corner |" not in res.output

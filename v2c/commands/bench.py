@@ -191,6 +191,13 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     "to measure several  [default: fixtures_design.design.CLEARANCE_K].",
 )
 @click.option(
+    "--fixture-kinds",
+    "fixture_kinds",
+    default=None,
+    help="--stage fixtures: the kinds designed on every scan, comma-separated from corner, pin, cradle, nest "
+    "(a nest takes minutes to design and check; corner,pin,cradle measures the rest quickly)  [default: all four].",
+)
+@click.option(
     "--suite",
     default="family",
     show_default=True,
@@ -275,6 +282,7 @@ def command(
     seg_only: bool,
     families: str | None,
     clearance_k: str | None,
+    fixture_kinds: str | None,
     suite: str,
     views: int,
     corpus_dir: Path | None,
@@ -308,6 +316,8 @@ def command(
         raise click.UsageError("--families belongs to --stage synth / parts / fixtures")
     if clearance_k is not None and stage != "fixtures":
         raise click.UsageError("--clearance-k belongs to --stage fixtures")
+    if fixture_kinds is not None and stage != "fixtures":
+        raise click.UsageError("--fixture-kinds belongs to --stage fixtures")
     if stage != "pipeline":
         for name, flag in (("real_dir", "--real"), ("suite", "--suite"), ("reliability", "--reliability")):
             if given(name):
@@ -339,6 +349,7 @@ def command(
             segmentation=segmentation[0],
             weights=weights,
             clearance_k=clearance_k,
+            kinds=fixture_kinds,
             cache_dir=cache_dir,
             json_out=json_out,
             progress=progress,
@@ -667,6 +678,7 @@ def _fixtures_stage(
     segmentation: str,
     weights: Path | None,
     clearance_k: str | None,
+    kinds: str | None,
     cache_dir: Path | None,
     json_out: Path | None,
     progress: bool,
@@ -675,7 +687,15 @@ def _fixtures_stage(
     from v2c.bench import fixtures as F
     from v2c.bench import run
 
-    extra = {}
+    extra: dict = {}
+    if kinds is not None:
+        chosen = tuple(dict.fromkeys(k.strip() for k in kinds.split(",") if k.strip()))
+        wrong = [k for k in chosen if k not in F.KINDS]
+        if wrong or not chosen:
+            raise click.BadParameter(
+                f"{kinds!r}: expected kinds from {', '.join(F.KINDS)}, comma-separated", param_hint="--fixture-kinds"
+            )
+        extra["kinds"] = chosen
     if clearance_k is not None:
         try:
             ks = tuple(dict.fromkeys(float(k) for k in clearance_k.split(",") if k.strip()))
