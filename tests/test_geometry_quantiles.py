@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from v2c.geometry.quantiles import median_exact, percentiles_linear
+from v2c.geometry.quantiles import median_exact, percentile_values, percentiles_linear
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
@@ -41,10 +41,16 @@ def test_median_exact_equals_numpy() -> None:
     assert _same_bits([median_exact(x[:, 0]), median_exact(x[:, 1])], np.median(x, axis=0))
 
 
+def test_percentile_values_as_floats() -> None:
+    for x in _samples():
+        assert _same_bits(percentile_values(x, [5.0, 95.0]), np.percentile(x, [5.0, 95.0]))
+
+
 def test_nan_sample_gives_nan() -> None:
     x = np.array([1.0, np.nan, 3.0, 0.5])
     assert np.all(np.isnan(percentiles_linear(x, [5.0, 95.0])))
     assert np.isnan(median_exact(x))
+    assert np.isnan(percentile_values(x, [5.0])[0])
 
 
 def test_input_left_unchanged() -> None:

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from v2c.geometry.config import RansacConfig
-from v2c.geometry.quantiles import median_exact, percentiles_linear
+from v2c.geometry.quantiles import median_exact, percentile_values
 from v2c.geometry.residuals import Layout, Term, recon_jacobian_blocks, recon_residuals
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.base import radial_coords, radial_frame
@@ -218,10 +218,10 @@ def torus_limits(prim: Torus, x: np.ndarray, config: RansacConfig) -> tuple[floa
     m = m - np.array([median_exact(rho), median_exact(h)])  # np.median(m, axis=0), without its overhead
     u = np.linalg.eigh(m.T @ m)[1][:, -1]
     q = config.torus_span_pct
-    lo, hi = percentiles_linear(m @ u, [q, 100 - q])  # np.percentile's values (geometry.quantiles)
+    lo, hi = percentile_values(m @ u, [q, 100 - q])  # np.percentile's values (geometry.quantiles)
     span = max(float(hi - lo), 1e-5)
     r_lo, r_hi = config.torus_minor_span[0] * span, config.torus_minor_span[1] * span
-    rho_lo, rho_hi = percentiles_linear(rho, [q, 100 - q])
+    rho_lo, rho_hi = percentile_values(rho, [q, 100 - q])
     big_lo = max(float(rho_lo) - r_hi, config.torus_min_ratio * r_lo, 1e-6)
     return r_lo, r_hi, big_lo, max(float(rho_hi) + r_hi, big_lo * (1 + 1e-6))
 
