@@ -8,7 +8,7 @@ import pytest
 
 from v2c.labels import AxisClass
 from v2c.primitives import Cone, Cylinder, Plane, Sphere, Torus, from_dict
-from v2c.primitives.directions import perturb_direction, rotation_exp, tangent_basis, unit
+from v2c.primitives.directions import cross_vec, perturb_direction, rotation_exp, tangent_basis, unit
 
 
 def test_plane_distance_closest_normal_uv() -> None:
@@ -109,3 +109,10 @@ def test_direction_reparameterisation_and_axis_class() -> None:
     tilted = Plane([0, 0, 0.5], perturb_direction(frame[2], np.array([np.tan(np.deg2rad(2.0)), 0])))
     assert tilted.axis_class(frame) is AxisClass.U
     assert Sphere([0, 0, 0], 1.0).axis_class(frame) is None
+
+
+def test_cross_vec_equals_np_cross_bit_for_bit() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        a, b = rng.normal(size=3) * 10.0 ** rng.uniform(-5, 5), rng.normal(size=3)
+        assert np.array_equal(cross_vec(a, b).view(np.int64), np.cross(a, b).view(np.int64))

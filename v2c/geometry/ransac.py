@@ -253,8 +253,9 @@ def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: RansacConfig) -
     """Comparable score of torus candidates on the same points ``x`` (lower is better): the truncated squared
     distance (MSAC, in part-size units) plus the refinement's weak prior on the minor radius."""
     eps = config.d_inlier * scale
-    d = np.minimum(np.abs(prim.signed_distance(x)), eps) / scale
-    near = x[np.abs(prim.signed_distance(x)) < eps]
+    dist = np.abs(prim.signed_distance(x))
+    d = np.minimum(dist, eps) / scale
+    near = x[dist < eps]
     r_lo = torus_limits(prim, near if len(near) >= 3 else x, config)[0]
     span = r_lo / config.torus_minor_span[0]
     cost = float(np.sum(d * d))
@@ -324,15 +325,22 @@ def refine_primitive(
     terms = [Term(prim, x, mode)]
     layout = Layout(terms, np.eye(3))
     w_prior = config.torus_prior_weight * np.sqrt(len(x)) / scale
+    last: list = [None, None]  # (parameters, their primitives): the solver asks for jac at the fun's last point
+
+    def prims_at(v: np.ndarray) -> list[Primitive]:
+        key = v.tobytes()
+        if last[0] != key:
+            last[:] = [key, layout.primitives(v)[1]]
+        return last[1]
 
     def fun(v: np.ndarray) -> np.ndarray:
-        r = recon_residuals(layout.primitives(v)[1], terms, scale)
+        r = recon_residuals(prims_at(v), terms, scale)
         if len(prior):
             r = np.concatenate([r, w_prior * (v[prior[:, 0].astype(int)] - prior[:, 1])])
         return r
 
     def jac(v: np.ndarray) -> np.ndarray:
-        j = recon_jacobian_blocks(layout, v, layout.primitives(v)[1], scale)[0][2]
+        j = recon_jacobian_blocks(layout, v, prims_at(v), scale)[0][2]
         if len(prior):
             jp = np.zeros((len(prior), layout.size))
             jp[np.arange(len(prior)), prior[:, 0].astype(int)] = w_prior
