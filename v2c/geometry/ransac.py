@@ -60,8 +60,9 @@ class RansacFit:
 def inlier_mask(prim: Primitive, x: np.ndarray, n: np.ndarray, eps: float, cos_min: float) -> np.ndarray:
     """Points within ``eps`` metres of ``prim`` whose normal is within acos(cos_min) of the surface's (either
     orientation: concave faces seen from inside have normals facing the axis)."""
-    d = np.abs(prim.signed_distance(x))
-    c = np.abs(np.sum(prim.normal(x) * n, axis=1))
+    dist, nrm = prim.distance_and_normal(x)
+    d = np.abs(dist)
+    c = np.abs(np.sum(nrm * n, axis=1))
     return (d < eps) & (c > cos_min)
 
 

@@ -74,10 +74,15 @@ class Primitive(ABC):
     def normal(self, x: np.ndarray) -> np.ndarray:
         """Unit outward normal (N, 3) of the surface at the point closest to each ``x`` (N, 3)."""
 
+    def distance_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(``signed_distance(x)``, ``normal(x)``): the same values; curved types share the work of the two."""
+        return self.signed_distance(x), self.normal(x)
+
     def closest_point(self, x: np.ndarray) -> np.ndarray:
         """Closest surface point (N, 3) to each ``x`` (N, 3), metres."""
         x = np.asarray(x, float).reshape(-1, 3)
-        return x - self.signed_distance(x)[:, None] * self.normal(x)
+        d, nrm = self.distance_and_normal(x)
+        return x - d[:, None] * nrm
 
     @abstractmethod
     def uv(self, x: np.ndarray) -> np.ndarray:
