@@ -8,7 +8,7 @@ import pytest
 
 from v2c.labels import AxisClass
 from v2c.primitives import Cone, Cylinder, Plane, Sphere, Torus, from_dict
-from v2c.primitives.directions import perturb_direction, rotation_exp, tangent_basis, unit
+from v2c.primitives.directions import cross_vec, perturb_direction, rotation_exp, tangent_basis, unit
 
 
 def test_plane_distance_closest_normal_uv() -> None:
@@ -109,3 +109,27 @@ def test_direction_reparameterisation_and_axis_class() -> None:
     tilted = Plane([0, 0, 0.5], perturb_direction(frame[2], np.array([np.tan(np.deg2rad(2.0)), 0])))
     assert tilted.axis_class(frame) is AxisClass.U
     assert Sphere([0, 0, 0], 1.0).axis_class(frame) is None
+
+
+def test_cross_vec_equals_np_cross_bit_for_bit() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        a, b = rng.normal(size=3) * 10.0 ** rng.uniform(-5, 5), rng.normal(size=3)
+        assert np.array_equal(cross_vec(a, b).view(np.int64), np.cross(a, b).view(np.int64))
+
+
+@pytest.mark.parametrize(
+    "prim",
+    [
+        Plane([0.0, 0.0, 0.5], [0.2, 0.1, -1.0]),
+        Sphere([0.0, 0.0, 0.5], 0.05),
+        Cylinder([0.0, 0.0, 0.5], [0.1, 1.0, 0.2], 0.04),
+        Cone([0.0, 0.0, 0.4], [0.0, 0.3, 1.0], 0.4),
+        Torus([0.0, 0.0, 0.5], [0.2, 0.1, 1.0], 0.06, 0.01),
+    ],
+)
+def test_distance_and_normal_equals_the_two_calls(prim: Plane | Sphere | Cylinder | Cone | Torus) -> None:
+    x = np.random.default_rng(5).normal(size=(300, 3)) * 0.05 + np.array([0.0, 0.0, 0.5])
+    x[0] = prim.origin  # on the axis / at the centre or apex
+    d, n = prim.distance_and_normal(x)
+    assert np.array_equal(d, prim.signed_distance(x)) and np.array_equal(n, prim.normal(x))

@@ -41,9 +41,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from v2c.geometry.config import RansacConfig
+from v2c.geometry.quantiles import median_exact, percentile_values
 from v2c.geometry.residuals import Layout, Term, recon_jacobian_blocks, recon_residuals
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere, Torus
-from v2c.primitives.base import radial_frame
+from v2c.primitives.base import radial_coords, radial_frame
 from v2c.primitives.directions import unit
 
 
@@ -59,8 +60,9 @@ class RansacFit:
 def inlier_mask(prim: Primitive, x: np.ndarray, n: np.ndarray, eps: float, cos_min: float) -> np.ndarray:
     """Points within ``eps`` metres of ``prim`` whose normal is within acos(cos_min) of the surface's (either
     orientation: concave faces seen from inside have normals facing the axis)."""
-    d = np.abs(prim.signed_distance(x))
-    c = np.abs(np.sum(prim.normal(x) * n, axis=1))
+    dist, nrm = prim.distance_and_normal(x)
+    d = np.abs(dist)
+    c = np.abs(np.sum(nrm * n, axis=1))
     return (d < eps) & (c > cos_min)
 
 
@@ -212,15 +214,15 @@ def torus_limits(prim: Torus, x: np.ndarray, config: RansacConfig) -> tuple[floa
     r_hi (the tube centre circle lies within r of every surface point), and above torus_min_ratio * r_lo."""
     if len(x) < 3:  # nothing to measure: no bounds
         return 0.0, np.inf, 1e-6, np.inf
-    h, rho, _ = radial_frame(np.asarray(x, float) - prim.origin, prim.axis)
+    h, rho = radial_coords(np.asarray(x, float) - prim.origin, prim.axis)
     m = np.stack([rho, h], axis=1)
-    m = m - np.median(m, axis=0)
+    m = m - np.array([median_exact(rho), median_exact(h)])  # np.median(m, axis=0), without its overhead
     u = np.linalg.eigh(m.T @ m)[1][:, -1]
     q = config.torus_span_pct
-    lo, hi = np.percentile(m @ u, [q, 100 - q])
+    lo, hi = percentile_values(m @ u, [q, 100 - q])  # np.percentile's values (geometry.quantiles)
     span = max(float(hi - lo), 1e-5)
     r_lo, r_hi = config.torus_minor_span[0] * span, config.torus_minor_span[1] * span
-    rho_lo, rho_hi = np.percentile(rho, [q, 100 - q])
+    rho_lo, rho_hi = percentile_values(rho, [q, 100 - q])
     big_lo = max(float(rho_lo) - r_hi, config.torus_min_ratio * r_lo, 1e-6)
     return r_lo, r_hi, big_lo, max(float(rho_hi) + r_hi, big_lo * (1 + 1e-6))
 
@@ -252,8 +254,9 @@ def torus_msac(prim: Torus, x: np.ndarray, scale: float, config: RansacConfig) -
     """Comparable score of torus candidates on the same points ``x`` (lower is better): the truncated squared
     distance (MSAC, in part-size units) plus the refinement's weak prior on the minor radius."""
     eps = config.d_inlier * scale
-    d = np.minimum(np.abs(prim.signed_distance(x)), eps) / scale
-    near = x[np.abs(prim.signed_distance(x)) < eps]
+    dist = np.abs(prim.signed_distance(x))
+    d = np.minimum(dist, eps) / scale
+    near = x[dist < eps]
     r_lo = torus_limits(prim, near if len(near) >= 3 else x, config)[0]
     span = r_lo / config.torus_minor_span[0]
     cost = float(np.sum(d * d))
@@ -323,15 +326,22 @@ def refine_primitive(
     terms = [Term(prim, x, mode)]
     layout = Layout(terms, np.eye(3))
     w_prior = config.torus_prior_weight * np.sqrt(len(x)) / scale
+    last: list = [None, None]  # (parameters, their primitives): the solver asks for jac at the fun's last point
+
+    def prims_at(v: np.ndarray) -> list[Primitive]:
+        key = v.tobytes()
+        if last[0] != key:
+            last[:] = [key, layout.primitives(v)[1]]
+        return last[1]
 
     def fun(v: np.ndarray) -> np.ndarray:
-        r = recon_residuals(layout.primitives(v)[1], terms, scale)
+        r = recon_residuals(prims_at(v), terms, scale)
         if len(prior):
             r = np.concatenate([r, w_prior * (v[prior[:, 0].astype(int)] - prior[:, 1])])
         return r
 
     def jac(v: np.ndarray) -> np.ndarray:
-        j = recon_jacobian_blocks(layout, v, layout.primitives(v)[1], scale)[0][2]
+        j = recon_jacobian_blocks(layout, v, prims_at(v), scale)[0][2]
         if len(prior):
             jp = np.zeros((len(prior), layout.size))
             jp[np.arange(len(prior)), prior[:, 0].astype(int)] = w_prior

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 
 from v2c.primitives import Primitive
-from v2c.primitives.directions import perturb_direction, rotation_exp, tangent_basis
+from v2c.primitives.directions import cross_vec, perturb_direction, rotation_exp, tangent_basis
 
 
 @dataclass
@@ -107,7 +107,7 @@ class Layout:
             length = float(np.sqrt(u @ u))
             a = u / length
             g = prim.rotation_gradient(pts)
-            blocks.append(np.stack([g @ np.cross(a, (tb - a * (a @ tb)) / length) for tb in (t1, t2)], axis=1))
+            blocks.append(np.stack([g @ cross_vec(a, (tb - a * (a @ tb)) / length) for tb in (t1, t2)], axis=1))
         return np.concatenate(blocks, axis=1)
 
 

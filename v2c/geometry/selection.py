@@ -43,8 +43,8 @@ def curvature_support(prim: Primitive, x: np.ndarray, config: RansacConfig) -> t
     x = np.asarray(x, float)
     if len(x) < 3 or isinstance(prim, Plane):
         return 0.0, 0.0
-    nrm = prim.normal(x)
-    q = x - prim.signed_distance(x)[:, None] * nrm  # the points' closest points on the surface
+    dist, nrm = prim.distance_and_normal(x)
+    q = x - dist[:, None] * nrm  # the points' closest points on the surface
     mean = unit(nrm.mean(axis=0))
     ang = np.arccos(np.clip(nrm @ mean, -1.0, 1.0))
     lo_pct, hi_pct = config.support_trim_pct, 100.0 - config.support_trim_pct

@@ -27,14 +27,25 @@ def _vec(v: Any) -> np.ndarray:
     return a
 
 
+def _radial_split(p: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Height h (N,), radial offset q (N, 3) and radius rho (N,) of offsets ``p`` (N, 3) from a point on ``axis``."""
+    h = p @ axis
+    q = p - h[:, None] * axis
+    return h, q, np.sqrt(np.einsum("ij,ij->i", q, q))
+
+
+def radial_coords(p: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Height h (N,) and radius rho (N,) of `radial_frame` (the same values), without the radial directions."""
+    h, _, rho = _radial_split(p, axis)
+    return h, rho
+
+
 def radial_frame(p: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Split offsets ``p`` (N, 3) from a point on an axis into height h (N,), radius rho (N,) and unit radial e (N, 3).
 
     Points on the axis get an arbitrary but fixed radial direction (the axis' first tangent vector).
     """
-    h = p @ axis
-    q = p - h[:, None] * axis
-    rho = np.sqrt(np.einsum("ij,ij->i", q, q))
+    h, q, rho = _radial_split(p, axis)
     on_axis = rho <= 1e-15
     if on_axis.any():
         e = q / np.where(on_axis, 1.0, rho)[:, None]
@@ -63,10 +74,15 @@ class Primitive(ABC):
     def normal(self, x: np.ndarray) -> np.ndarray:
         """Unit outward normal (N, 3) of the surface at the point closest to each ``x`` (N, 3)."""
 
+    def distance_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(``signed_distance(x)``, ``normal(x)``): the same values; curved types share the work of the two."""
+        return self.signed_distance(x), self.normal(x)
+
     def closest_point(self, x: np.ndarray) -> np.ndarray:
         """Closest surface point (N, 3) to each ``x`` (N, 3), metres."""
         x = np.asarray(x, float).reshape(-1, 3)
-        return x - self.signed_distance(x)[:, None] * self.normal(x)
+        d, nrm = self.distance_and_normal(x)
+        return x - d[:, None] * nrm
 
     @abstractmethod
     def uv(self, x: np.ndarray) -> np.ndarray:
@@ -144,4 +160,4 @@ def as_points(x: np.ndarray) -> np.ndarray:
     return np.asarray(x, float).reshape(-1, 3)
 
 
-__all__ = ["Primitive", "_vec", "as_points", "radial_frame", "unit"]
+__all__ = ["Primitive", "_vec", "as_points", "radial_coords", "radial_frame", "unit"]

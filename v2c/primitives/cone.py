@@ -58,6 +58,11 @@ class Cone(Primitive):
         p, _, t, m, _ = self._split(x)
         return np.where((t >= 0)[:, None], m, unit(p))
 
+    def distance_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(`signed_distance`, `normal`) of points ``x`` (N, 3) from one split."""
+        p, _, t, m, d = self._split(x)
+        return np.where(t >= 0, d, np.linalg.norm(p, axis=1)), np.where((t >= 0)[:, None], m, unit(p))
+
     def closest_point(self, x: np.ndarray) -> np.ndarray:
         """Closest point (N, 3) on the nappe, or the apex for points behind it (metres)."""
         x = as_points(x)

@@ -47,6 +47,11 @@ class Cylinder(Primitive):
         """Unit radial direction (N, 3) from the axis line towards each point."""
         return radial_frame(as_points(x) - self.origin, self.axis)[2]
 
+    def distance_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(`signed_distance`, `normal`) of points ``x`` (N, 3) from one radial frame."""
+        _, rho, e = radial_frame(as_points(x) - self.origin, self.axis)
+        return rho - self.radius, e
+
     def uv(self, x: np.ndarray) -> np.ndarray:
         """(N, 2): angle around the axis (radians, from its first tangent vector), height from ``origin`` (metres)."""
         h, _, e = radial_frame(as_points(x) - self.origin, self.axis)

@@ -31,8 +31,9 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of two 3-vectors (np.cross is slow on single vectors)."""
+def cross_vec(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two 3-vectors (np.cross is slow on single vectors); the same products and differences as
+    np.cross, so the same values."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
@@ -45,9 +46,9 @@ def tangent_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     d = d / np.sqrt(d @ d)
     e = np.zeros(3)
     e[int(np.argmin(np.abs(d)))] = 1.0
-    t1 = _cross(d, e)
+    t1 = cross_vec(d, e)
     t1 /= np.sqrt(t1 @ t1)
-    return t1, _cross(d, t1)
+    return t1, cross_vec(d, t1)
 
 
 def perturb_direction(d0: np.ndarray, ab: np.ndarray, basis: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:

@@ -56,6 +56,12 @@ class Torus(Primitive):
         n = np.linalg.norm(w, axis=1, keepdims=True)
         return np.where(n > 1e-15, w / np.where(n > 1e-15, n, 1.0), e)
 
+    def distance_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(`signed_distance`, `normal`) of points ``x`` (N, 3) from one tube offset."""
+        w, _, _, e = self._tube_offset(x)
+        n = np.linalg.norm(w, axis=1, keepdims=True)
+        return n[:, 0] - self.minor_radius, np.where(n > 1e-15, w / np.where(n > 1e-15, n, 1.0), e)
+
     def uv(self, x: np.ndarray) -> np.ndarray:
         """(N, 2): angle around the axis (from its first tangent vector) and around the tube (radians)."""
         _, h, rho, e = self._tube_offset(x)

@@ -51,8 +51,9 @@ def project_to_intersection(
         return x
     start = x.copy()
     for _ in range(iters):
-        f = np.stack([pa.signed_distance(x), pb.signed_distance(x)], 1)  # (N, 2)
-        J = np.stack([pa.normal(x), pb.normal(x)], 1)  # (N, 2, 3)
+        (da, na), (db, nb) = pa.distance_and_normal(x), pb.distance_and_normal(x)
+        f = np.stack([da, db], 1)  # (N, 2)
+        J = np.stack([na, nb], 1)  # (N, 2, 3)
         JJ = J @ J.transpose(0, 2, 1) + 1e-6 * np.eye(2)
         lam = np.linalg.solve(JJ, f[:, :, None])  # (N, 2, 1)
         x -= (J.transpose(0, 2, 1) @ lam)[:, :, 0]
