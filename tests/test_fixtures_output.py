@@ -210,3 +210,28 @@ def test_fixture_from_a_to_step_file_matches_the_one_from_its_vbrep(tmp_path):
     assert np.abs(va - vb_).max() < 2e-3
     res = freecad_import(out / "fixture_corner_assembly.step", tmp_path)
     assert res["read"]["solids"] == 1 and res["read"]["faces"] == len(direct.solid.faces()) + 3
+
+
+def test_cli_says_where_a_pins_clearance_comes_from(tmp_path):
+    """`v2c fixture --kind pin` with default parameters prints the pin's clearance as PIN_CLEARANCE_K times the hole
+    radius's 1-sigma (a generated bracket's ground-truth VB-Rep: its hole qualifies); --clearance is used as given."""
+    from fixtures_design.design import HOLE_RADIUS_SIGMA_MM, PIN_CLEARANCE_K
+    from v2c.cli import main
+
+    from scenes.truth import synthetic_scan, vbrep_from_scan
+
+    vb, _ = vbrep_from_scan(synthetic_scan(tmp_path, "bracket", 0))
+    src = tmp_path / "bracket.vbrep.json"
+    vb.save(src)
+    r = CliRunner().invoke(main, ["fixture", str(src), "--kind", "pin", "-o", str(tmp_path / "a")])
+    assert r.exit_code == 0, r.output
+    c = PIN_CLEARANCE_K * HOLE_RADIUS_SIGMA_MM
+    assert (
+        f"clearance {c:.2f} mm ({PIN_CLEARANCE_K:g} x the hole radius's 1-sigma {HOLE_RADIUS_SIGMA_MM:g} mm)"
+        in r.output
+    )
+    r = CliRunner().invoke(
+        main, ["fixture", str(src), "--kind", "pin", "-o", str(tmp_path / "b"), "--clearance", "0.3"]
+    )
+    assert r.exit_code == 0, r.output
+    assert "clearance 0.30 mm\n" in r.output

@@ -125,9 +125,14 @@ def command(
         what = f"edge e{ref.edge_id} ({ref.kind.value}, confidence {ref.confidence:.2f} = probability right{extra})"
     else:
         what = f"footprint ({len(ref.outlines)} outline(s))"
+    why = ""
+    if kind == "pin" and clearance is None:  # a pin's default play: the hole radius's error, not the faces' sigma
+        from fixtures_design.design import HOLE_RADIUS_SIGMA_MM, PIN_CLEARANCE_K
+
+        why = f" ({PIN_CLEARANCE_K:g} x the hole radius's 1-sigma {HOLE_RADIUS_SIGMA_MM:g} mm)"
     click.echo(
         f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces, "
-        f"clearance {fx.params.clearance:.2f} mm"
+        f"clearance {fx.params.clearance:.2f} mm{why}"
     )
     for p in (res.files.step, res.files.stl, res.files.assembly):
         click.echo(f"  {p}")
