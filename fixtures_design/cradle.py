@@ -63,11 +63,16 @@ class CradleParams:
     rest_min_points: int = 5  # of them beside the cylinder, over the block's footprint, refuse the cradle (count)
 
 
-def _u_block(radius: float, p: CradleParams, z0: float, z1: float) -> Solid:
+def u_block_extent(radius: float, p: CradleParams) -> tuple[float, float, float]:
+    """(half width, top y, bottom y) of the U block under a cylinder of ``radius`` (mm, the cradle's local x / y;
+    the module docstring): it wraps ``wrap_deg`` round the underside with ``wall`` below and beside the groove."""
     half = np.radians(p.wrap_deg) / 2
-    y_top = -radius * np.cos(half)
-    w = radius * np.sin(half) + p.wall
-    block = prism(np.array([(-w, y_top), (w, y_top), (w, -(radius + p.wall)), (-w, -(radius + p.wall))]), z0, z1)
+    return radius * np.sin(half) + p.wall, -radius * np.cos(half), -(radius + p.wall)
+
+
+def _u_block(radius: float, p: CradleParams, z0: float, z1: float) -> Solid:
+    w, y_top, y_bottom = u_block_extent(radius, p)
+    block = prism(np.array([(-w, y_top), (w, y_top), (w, y_bottom), (-w, y_bottom)]), z0, z1)
     return block.cut(Solid.make_cylinder(radius, z1 - z0 + 2, Plane.XY.offset(z0 - 1))).clean()
 
 
@@ -80,13 +85,18 @@ def _v_profile(radius: float, p: CradleParams) -> np.ndarray:
     return np.array([(-w, bottom), (w, bottom), (w, y_top), (x_top, y_top), (0.0, apex), (-x_top, y_top), (-w, y_top)])
 
 
-def _cradle_axes(ref: CircleReference, fmap: FrameMap, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The cradle's axes in the output frame (module docstring): z along the cylinder's axis, y the part's ``up``
-    made perpendicular to it, x = y x z (unit vectors)."""
-    z = unit(fmap.vectors(ref.axis))
+def cradle_axes(axis: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A cradle's axes (module docstring) for a cylinder ``axis`` and the part's ``up`` (one frame): z along the
+    axis, y ``up`` made perpendicular to it, x = y x z (unit vectors)."""
+    z = unit(axis)
     up = unit(up)
     y = unit(up - (up @ z) * z)
     return np.cross(y, z), y, z
+
+
+def _cradle_axes(ref: CircleReference, fmap: FrameMap, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cradle's axes in the output frame (`cradle_axes` of the reference's axis)."""
+    return cradle_axes(fmap.vectors(ref.axis), up)
 
 
 def resting_plane(

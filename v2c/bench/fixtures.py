@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from v2c.bench.cache import default_cache_dir
+from v2c.primitives.directions import tangent_basis
 
 KINDS = ("corner", "pin", "cradle", "nest")
 
@@ -121,9 +122,9 @@ def prepare_scans(cfg: FixtureBenchConfig, log: Callable[[str], None] | None = N
     return dirs
 
 
-def _cylinders(primitives: list[dict]) -> list[tuple[np.ndarray, np.ndarray, list[int]]]:
+def _cylinders(primitives: list[dict]) -> list[tuple[np.ndarray, np.ndarray, float, list[int]]]:
     """The gt cylinder faces grouped by surface (a generated cylinder is often split into several faces): one
-    (unit axis, origin, pixel values) per distinct (axis line, radius), to 1e-5 m."""
+    (unit axis, origin, radius (m), pixel values) per distinct (axis line, radius), to 1e-5 m."""
     groups: list[tuple[np.ndarray, np.ndarray, float, list[int]]] = []
     for p in primitives:
         if p["type"] != "cylinder":
@@ -138,7 +139,7 @@ def _cylinders(primitives: list[dict]) -> list[tuple[np.ndarray, np.ndarray, lis
                 break
         else:
             groups.append((axis, origin, radius, [int(p["pixel_value"])]))
-    return [(a, o, vals) for a, o, _, vals in groups]
+    return groups
 
 
 def _arc_deg(radial: np.ndarray, axis: np.ndarray) -> float:
@@ -174,9 +175,7 @@ def _inside_probe(step_path: Path) -> Callable[[np.ndarray], np.ndarray]:
 
 def _ring(axis: np.ndarray, n: int) -> np.ndarray:
     """(n, 3) unit directions perpendicular to ``axis``, evenly round it."""
-    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
+    u, v = tangent_basis(axis)
     phi = 2 * np.pi * np.arange(n) / n
     return np.outer(np.cos(phi), u) + np.outer(np.sin(phi), v)
 
@@ -205,9 +204,8 @@ def visible_cylinders(scan: Any, cfg: FixtureBenchConfig) -> dict[str, bool]:
     up /= np.linalg.norm(up)
     pts = backproject(gt.depth_clean, scan.K)
     out = {"hole": False, "horizontal_cylinder": False, "hole_any": False, "horizontal_cylinder_any": False}
-    radius_of = {int(p["pixel_value"]): float(p["params"]["radius"]) for p in gt.primitives if p["type"] == "cylinder"}
     inside: Callable[[np.ndarray], np.ndarray] | None = None
-    for axis, origin, vals in _cylinders(gt.primitives):
+    for axis, origin, radius, vals in _cylinders(gt.primitives):
         pix = np.isin(gt.faces, vals) & (gt.depth_clean > 0)
         if int(pix.sum()) < cfg.min_visible_px:
             continue
@@ -223,7 +221,7 @@ def visible_cylinders(scan: Any, cfg: FixtureBenchConfig) -> dict[str, bool]:
             continue
         out["hole_any" if not convex else "horizontal_cylinder_any"] = True
         inside = inside or _inside_probe(Path(gt.step_path))
-        r_mm = 1000.0 * radius_of[vals[0]]
+        r_mm = 1000.0 * radius
         delta = max(cfg.probe_mm, cfg.probe_rel * r_mm)
         centre = 1000.0 * (origin + float(np.median(q @ axis)) * axis)  # on the axis, at the seen wall's height
         if not convex:
@@ -249,15 +247,11 @@ def _free_underside(
     the groove's wrap and the wall below and beside it, ``delta`` mm clear of the cylinder): no probe of that
     region is inside the part, at three heights along the seen wall (``seen``: its points, metres), and the part
     has material just inside the cylinder's lowest line (it is the part's own surface, not a hole's far wall)."""
-    from fixtures_design.cradle import CradleParams
+    from fixtures_design.cradle import CradleParams, cradle_axes, u_block_extent
 
-    p = CradleParams()
-    y_ax = up - (up @ axis) * axis
-    y_ax /= np.linalg.norm(y_ax)
-    x_ax = np.cross(y_ax, axis)
-    half = np.radians(p.wrap_deg) / 2
-    w = r_mm * np.sin(half) + p.wall
-    xs, ys = np.meshgrid(np.linspace(-w, w, 9), np.linspace(-(r_mm + p.wall), -r_mm * np.cos(half), 5))
+    x_ax, y_ax, _ = cradle_axes(axis, up)
+    w, y_top, y_bottom = u_block_extent(r_mm, CradleParams())
+    xs, ys = np.meshgrid(np.linspace(-w, w, 9), np.linspace(y_bottom, y_top, 5))
     keep = np.hypot(xs, ys) > r_mm + delta
     grid = np.outer(xs[keep], x_ax) + np.outer(ys[keep], y_ax)
     heights = 1000.0 * np.percentile((seen - origin) @ axis, [20, 50, 80])
@@ -279,7 +273,7 @@ def evaluate_scan(
     (None when the seat failed), seated_cuts, seated_touches.
     ``vbrep``: the scan's reconstruction when already made."""
     from fixtures_design.assembly import true_part
-    from fixtures_design.design import design_fixture, mating_sigma_mm, outline_sigma_mm
+    from fixtures_design.design import design_fixture
     from fixtures_design.model import transformed
     from fixtures_design.references import NoReferenceError
     from fixtures_design.run import ground_height
@@ -332,7 +326,7 @@ def evaluate_scan(
             d.update(
                 ok=True,
                 clearance=float(fx.params.clearance),
-                sigma_mm=_design_sigma(vbrep, kind, ref, outline_sigma_mm, mating_sigma_mm),
+                sigma_mm=_design_sigma(vbrep, kind, ref),
                 probability=None if ref is None else float(ref.confidence),
                 edge=None if ref is None else int(ref.edge_id),
                 cut_mm3=float(vol),
@@ -380,14 +374,14 @@ def evaluate_scan(
     return row
 
 
-def _design_sigma(vbrep: Any, kind: str, ref: Any, outline: Callable, mating: Callable) -> float | None:
+def _design_sigma(vbrep: Any, kind: str, ref: Any) -> float | None:
     """The 1-sigma (mm) a design's default clearance came from: a nest's faces' median, a pin's hole radius
     (`fixtures_design.design.HOLE_RADIUS_SIGMA_MM`), else the mating faces' largest."""
-    from fixtures_design.design import HOLE_RADIUS_SIGMA_MM
+    from fixtures_design.design import HOLE_RADIUS_SIGMA_MM, mating_sigma_mm, outline_sigma_mm
 
     if ref is None:
-        return outline(vbrep)
-    return HOLE_RADIUS_SIGMA_MM if kind == "pin" else mating(vbrep, ref)
+        return outline_sigma_mm(vbrep)
+    return HOLE_RADIUS_SIGMA_MM if kind == "pin" else mating_sigma_mm(vbrep, ref)
 
 
 def _f(v: float | None) -> str:
