@@ -38,7 +38,8 @@ def _lerp(a: float, b: float, t: float) -> float:
 
 
 def percentile_values(values: np.ndarray, pcts: Sequence[float]) -> list[float]:
-    """`percentiles_linear` as a list of floats."""
+    """``np.percentile(values, pcts)`` (method 'linear') of a non-empty float sample ``values`` (flattened), for
+    the percentages ``pcts`` (each in [0, 100]), as a list of floats in the units of ``values``."""
     arr = np.asarray(values, dtype=np.float64).ravel()
     idx = [_linear_index(arr.size, p) for p in pcts]
     # numpy's partition indices exactly (its `_quantile`): equal values (0.0 and -0.0) then land where numpy's do
@@ -46,12 +47,6 @@ def percentile_values(values: np.ndarray, pcts: Sequence[float]) -> list[float]:
     if math.isnan(part[-1]):  # NaN sorts last: numpy's result is NaN
         return [math.nan] * len(idx)
     return [_lerp(float(part[prev]), float(part[nxt]), t) for prev, nxt, t in idx]
-
-
-def percentiles_linear(values: np.ndarray, pcts: Sequence[float]) -> np.ndarray:
-    """``np.percentile(values, pcts)`` (method 'linear') of a non-empty float sample ``values`` (flattened), for
-    the percentages ``pcts`` (each in [0, 100]); (len(pcts),) float64, in the units of ``values``."""
-    return np.array(percentile_values(values, pcts))
 
 
 def median_exact(values: np.ndarray) -> float:
