@@ -173,6 +173,8 @@ def build_brep(
         cfg.outline_min_piece_rel,
         cfg.fix_precision,
         max_stretch=cfg.outline_max_stretch,
+        min_piece_tris=cfg.outline_min_piece_tris,
+        speck_budget_rel=cfg.outline_speck_budget_rel,
     )
     out = BuiltBRep(shape=TopoDS_Compound(), fmap=fmap, box=part_box(vbrep, fmap, cfg.box_margin_rel))
     faces: dict[int, TopoDS_Face] = {}

@@ -41,13 +41,37 @@ class OutlinePiece:
     edges: list[tuple[TopoDS_Edge, int]] = field(default_factory=list)
 
 
+def _triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(M,) areas of the triangles (M, 3) of a mesh with vertices (N, 3), in the vertices' units squared."""
+    t = np.asarray(triangles, int).reshape(-1, 3)
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    return np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1) / 2
+
+
 def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
     """Total area of a triangle mesh (vertices (N, 3), triangles (M, 3)), in the vertices' units squared."""
-    t = np.asarray(triangles, int).reshape(-1, 3)
-    if len(t) == 0:
-        return 0.0
-    v = np.asarray(vertices, float).reshape(-1, 3)
-    return float(np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1).sum() / 2)
+    return float(_triangle_areas(vertices, triangles).sum())
+
+
+def _median_triangle_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """Median area of the triangles of a mesh (vertices (N, 3), triangles (M, 3)); 0 without triangles."""
+    a = _triangle_areas(vertices, triangles)
+    return float(np.median(a)) if len(a) else 0.0
+
+
+def _drop_specks(polys: list[shapely.Polygon], speck_area: float, budget: float) -> list[shapely.Polygon]:
+    """``polys`` without its specks (pieces under ``speck_area``), smallest first, as long as the dropped area
+    stays within ``budget`` (the same units squared): a speck beside a large face goes, an island that holds a
+    visible share of a small face stays."""
+    dropped = 0.0
+    drop = set()
+    for k in sorted(range(len(polys)), key=lambda k: polys[k].area):  # loop over pieces, smallest first
+        a = polys[k].area
+        if a >= speck_area or dropped + a > budget or len(drop) == len(polys) - 1:
+            break
+        dropped += a
+        drop.add(k)
+    return [p for k, p in enumerate(polys) if k not in drop]
 
 
 def _metric_scale(s: AnalyticSurface, uv0: np.ndarray, step: float = 1e-4) -> np.ndarray:
@@ -233,6 +257,8 @@ class OutlineBuilder:
     tol: simplification tolerance (mm); tol_area_rel: it is halved until simplification moves a piece's area
     by at most this fraction;
     min_piece_rel: pieces and holes smaller than this fraction of the face's mesh area are dropped;
+    min_piece_tris, speck_budget_rel: pieces smaller than this many of its median mesh triangles are specks,
+    dropped smallest first while together they hold at most this fraction of the face's mesh area;
     precision: OCCT face/vertex precision (mm); rings of one face are kept ``gap_factor`` precisions apart;
     max_stretch: see `outline_polygons`.
     """
@@ -247,6 +273,8 @@ class OutlineBuilder:
         precision: float,
         gap_factor: float = 20.0,
         max_stretch: float = 4.0,
+        min_piece_tris: float = 0.0,
+        speck_budget_rel: float = 0.0,
     ) -> None:
         self.vb = vbrep
         self.fmap = fmap
@@ -256,6 +284,8 @@ class OutlineBuilder:
         self.precision = precision
         self.gap = gap_factor * precision
         self.max_stretch = max_stretch
+        self.min_piece_tris = min_piece_tris
+        self.speck_budget_rel = speck_budget_rel
         self.bb = BRep_Builder()
 
     def build(self, f: VFace, s: AnalyticSurface) -> list[OutlinePiece]:
@@ -265,13 +295,16 @@ class OutlineBuilder:
         total = mesh_area(pts, tris)
         if total <= 0:
             return []
+        min_area = self.min_piece_rel * total
         # A first pass at the cap finds the pieces; each is then simplified within its own area budget.
-        polys, scale = outline_polygons(s, pts, tris, 0.0, self.min_piece_rel * total, self.max_stretch)
+        polys, scale = outline_polygons(s, pts, tris, 0.0, min_area, self.max_stretch)
+        speck = self.min_piece_tris * _median_triangle_area(pts, tris)
+        polys = _drop_specks(polys, speck, self.speck_budget_rel * total)
         cands = edge_candidates(self.vb, self.fmap, f.id)
         out = []
         for poly in polys:
             simple = _simplify_keeping_area(poly, self.tol, self.tol_area_rel)
-            for part in _separate_rings(simple, self.gap, self.min_piece_rel * total):
+            for part in _separate_rings(simple, self.gap, min_area):
                 piece = self._face(s, part, scale, cands)
                 if piece is not None:
                     out.append(piece)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from exporters import step
+from exporters.brep_config import BrepConfig
 from exporters.brep_outline import mesh_area
 from exporters.readback import check_written
 from v2c.vbrep.model import EdgeType, VEdge
@@ -87,6 +88,49 @@ def test_wild_loops_are_not_trusted(tmp_path: Path) -> None:
     # the other faces keep their loops (exact edges): intersection edges 2 (faces 1, 2) is shared by both
     assert sorted(report.face_edges) == [0, 1, 2] and report.face_edges[0] == set()
     assert 2 in report.face_edges[1] and 2 in report.face_edges[2]
+
+
+def test_loops_a_few_percent_off_the_mesh_give_way_to_the_outline(tmp_path: Path) -> None:
+    """The area gate is the read-back's 2 %: loops that close the whole quad while the mesh covers 19 of its 20
+    columns (loops 5 % larger) are replaced by the outline, so the face reads back at its mesh's area; under the
+    former gate (half the area) the same loops were kept and read back 5 % large."""
+    vb = box_corner()
+    _grid_face(vb, 0, lambda i, j: i < N - 2)
+    path = tmp_path / "gate.step"
+    report = step.write(vb, path, frame="camera")
+    assert report.fallback_faces == [0]
+    a0 = _written_area(check_written(vb, path, report.frame_map), 0)
+    assert a0.written == pytest.approx(a0.reconstructed, rel=0.01)
+    loose = step.write(vb, tmp_path / "loose.step", frame="camera", config=BrepConfig(area_tol_rel=0.5))
+    assert 0 not in loose.fallback_faces
+    a0 = _written_area(check_written(vb, tmp_path / "loose.step", loose.frame_map), 0)
+    assert a0.written == pytest.approx(a0.reconstructed * (N - 1) / (N - 2), rel=0.01)
+
+
+def test_outline_drops_specks_of_a_few_pixels(tmp_path: Path) -> None:
+    """A mesh piece of one grid cell (two triangles, a pixel) beside the face's body is a speck: the outline
+    writes the body alone (min_piece_tris; the speck holds 0.3 % of the face, within the 1 % budget), at the
+    mesh's area within 1 %; with the speck rule off it is a face of its own in the file. Beside a body of 9
+    cells the same cell is a tenth of the face: over the budget, it stays."""
+    vb = box_corner()
+    _grid_face(vb, 0, lambda i, j: i <= 14 or (i, j) == (18, 18))
+    vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]  # the loop does not close: outline
+    counts = {}
+    for tris in (8.0, 0.0):
+        path = tmp_path / f"speck_{tris}.step"
+        report = step.write(vb, path, frame="camera", config=BrepConfig(outline_min_piece_tris=tris))
+        assert report.fallback_faces == [0]
+        counts[tris] = len([f for f in step.read_typed(path).faces if f.id == 0])
+        a0 = _written_area(check_written(vb, path, report.frame_map), 0)
+        assert a0.written == pytest.approx(a0.reconstructed, rel=0.01)
+    assert counts == {8.0: 1, 0.0: 2}
+    vb = box_corner()
+    _grid_face(vb, 0, lambda i, j: (i <= 2 and j <= 2) or (i, j) == (18, 18))
+    vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]
+    path = tmp_path / "island.step"
+    report = step.write(vb, path, frame="camera")
+    assert report.fallback_faces == [0]
+    assert len([f for f in step.read_typed(path).faces if f.id == 0]) == 2
 
 
 def test_nothing_written_outside_the_part_box(tmp_path: Path) -> None:

@@ -88,11 +88,14 @@ def _inlay_face(v, inp):  # noqa: ANN001, ANN202 - test helper
 # enclosed nothing and the face was written from its mesh outline. Left between the planes it bounds the face in
 # the STEP: 0.84 of the (pixel) mesh area on 2026-11-25; 0.93 of its mesh since the mesh is made from its loop
 # (v2c.vbrep.loop_mesh) and its polyline is thinned at 0.1 px instead of 0.5 px; the rest is the smoothing spline
-# of the closed edge's (u, v) fit (a known limit, docs/step.md).
-@pytest.mark.parametrize("radius, tilt_deg, least", [(0.03, 1.0, 0.98), (0.004, 9.0, 0.9)])
-def test_face_enclosed_by_one_neighbour_keeps_its_loop_in_the_step(radius, tilt_deg, least, tmp_path):
+# of the closed edge's (u, v) fit (a known limit, docs/step.md). Since 2026-11-28 the exporter keeps loops only
+# within 2 % of the mesh (docs/step.md, "The area gate"), so the 4 mm inlay is written from its outline, at its
+# mesh's area (which is within 5 % of the true face, checked below) instead of 0.93 of it.
+@pytest.mark.parametrize("radius, tilt_deg, loop_in_step", [(0.03, 1.0, True), (0.004, 9.0, False)])
+def test_face_enclosed_by_one_neighbour_keeps_its_loop_in_the_step(radius, tilt_deg, loop_in_step, tmp_path):
     """A round inlay whose top (a plane tilted by ``tilt_deg``) is enclosed in the image by the plate's top alone:
-    the two planes meet only on a line through the centre."""
+    the two planes meet only on a line through the centre. Its VB-Rep loops enclose it; the STEP bounds it by
+    them where they bound its area within 2 %, else by its mesh outline, and either way holds it whole."""
     inp = scene_inputs(inlay_scene(radius=radius, tilt_deg=tilt_deg), noise_m=0.0004, seed=0)
     v = extract_vbrep(inp.scan, inp.seg, inp.fit)
     t = check_topology(v)
@@ -111,9 +114,9 @@ def test_face_enclosed_by_one_neighbour_keeps_its_loop_in_the_step(radius, tilt_
         poly = np.concatenate([np.asarray(v.edges[e].polyline)[::-1] if r else v.edges[e].polyline for e, r in lp])
         assert _image_area(project(poly, v.K)) >= 0.75 * region_px
     rep = step.write(v, tmp_path / "inlay.step", frame="camera")
-    assert inlay.id not in rep.fallback_faces, rep.warnings
+    assert (inlay.id not in rep.fallback_faces) == loop_in_step, rep.warnings
     back = check_written(v, tmp_path / "inlay.step", rep.frame_map)
     got = next(f for f in back.faces if f.id == inlay.id)
     true_mm2 = np.pi * (1000 * radius) ** 2 / np.cos(np.deg2rad(tilt_deg))
     assert abs(got.reconstructed - true_mm2) <= 0.05 * true_mm2  # the mesh is the face
-    assert least <= got.written / got.reconstructed <= 1.02, (got.written, got.reconstructed)
+    assert 0.98 <= got.written / got.reconstructed <= 1.02, (got.written, got.reconstructed)

@@ -67,8 +67,14 @@ def test_scene_vbrep_is_consistent(scene):
 # face now. Its face 8 (6,881 mm²) was built valid but OCCT's STEP reader split it and lost its name: the file
 # held it as two unnamed faces, and the loss went unseen. Faces a round trip changes are now written from their
 # outline. Every face of these samples is written at its reconstructed area (checked below).
+#
+# 2026-11-28: the area gate is the read-back's 2 % (docs/step.md, "The area gate"; it was half the area), so every
+# face is now checked within 2 % of its mesh (it was 0.5-1.5), and loops 2-9 % off their mesh give way to the
+# outline: bracket 2 -> 5 outline faces (its f10's loops bound 2,231 mm² of a 2,183 mm² mesh), turned 1 -> 4 (f7:
+# 129 of 142 mm²), knob 4 -> 4. The cost shows on the bracket's grazing plane f1: its loops (0.57 of a mesh that
+# runs past the plate) were right, and its outline now follows the mesh.
 @pytest.mark.parametrize(
-    "name, max_fallback", [("bracket_planes_cylinders", 2), ("turned_unaligned", 1), ("knob_cone_torus_sphere", 4)]
+    "name, max_fallback", [("bracket_planes_cylinders", 5), ("turned_unaligned", 4), ("knob_cone_torus_sphere", 4)]
 )
 def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):
     from exporters.readback import check_written
@@ -82,6 +88,5 @@ def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):
     assert len(rep.fallback_faces) <= max_fallback, rep.warnings
     back = check_written(v, tmp_path / "x.step", rep.frame_map)
     assert back.untyped_edges == 0 and back.box_inside(0.05)
-    # every face is in the file (read back by name), none losing or gaining more than half its mesh area (the
-    # bracket's grazing plane f1 keeps its loops at 0.57 of a mesh that runs past the plate: the loops are right)
-    assert all(0.5 <= f.ratio <= 1.5 for f in back.faces), [(f.id, f.ratio) for f in back.faces]
+    # every face is in the file (read back by name), at its mesh area within the read-back's 2 %
+    assert all(0.98 <= f.ratio <= 1.02 for f in back.faces), [(f.id, f.ratio) for f in back.faces]
