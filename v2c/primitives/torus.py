@@ -52,9 +52,7 @@ class Torus(Primitive):
 
     def normal(self, x: np.ndarray) -> np.ndarray:
         """Unit direction (N, 3) from the tube's centre circle to each point (radial where they coincide)."""
-        w, _, _, e = self._tube_offset(x)
-        n = np.linalg.norm(w, axis=1, keepdims=True)
-        return np.where(n > 1e-15, w / np.where(n > 1e-15, n, 1.0), e)
+        return self.distance_and_normal(x)[1]
 
     def distance_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(`signed_distance`, `normal`) of points ``x`` (N, 3) from one tube offset."""
