@@ -377,3 +377,99 @@ def test_free_fallback_plane_seen_edge_on_is_not_drawn(far_m: float, drawn: bool
     assert (2 in faces) == drawn
     if drawn:
         assert faces[2].extra.get("fallback")
+
+
+def _fillet_scene(noise_m: float, seed: int = 0):
+    """A face-on plane A (z = 0.5 m, rows 60-99), a 5 mm fillet along the x axis (rows 100-104, labelled
+    cylinder, unfitted: too few points for RANSAC) and the plane C it blends into, 60 degrees on (rows 105-140):
+    the fillet is tangent to A at the pixel side between rows 99 and 100. Returns K, instances, depth, A, C, the
+    fillet's axis centre (y, z) and radius (metres)."""
+    from v2c.camera import pixel_rays
+    from v2c.primitives import Plane
+
+    K = np.array([[600.0, 0.0, 160.0], [0.0, 600.0, 120.0], [0.0, 0.0, 1.0]])
+    r, theta1 = 0.005, np.deg2rad(60.0)
+    yc, zc = (99.5 - 120.0) / 600.0 * 0.5, 0.5 + r  # tangent to A on row 99.5
+    a = Plane([0.0, 0.0, 0.5], [0.0, 0.0, -1.0])
+    nc = np.array([0.0, np.sin(theta1), -np.cos(theta1)])
+    c = Plane([0.0, yc + r * np.sin(theta1), zc - r * np.cos(theta1)], nc)
+    inst = np.zeros((240, 320), np.int32)
+    inst[60:100, 100:220], inst[100:105, 100:220], inst[105:141, 100:220] = 1, 2, 3
+    vs, us = np.nonzero(inst > 0)
+    rays = pixel_rays(np.stack([us, vs], 1).astype(float), K)
+    depth = np.zeros(inst.shape)
+    for k, p in ((1, a), (3, c)):
+        sel = inst[vs, us] == k
+        n = np.asarray(p.axis_vector, float)
+        depth[vs[sel], us[sel]] = float(n @ np.asarray(p.origin, float)) / (rays[sel] @ n)
+    sel = inst[vs, us] == 2  # the front crossing of each ray with the cylinder (y - yc)^2 + (z - zc)^2 = r^2
+    dy, dz = rays[sel, 1], rays[sel, 2]  # rays scaled to z = 1: depth is the ray parameter
+    qa, qb, qc = dy**2 + dz**2, -2.0 * (dy * yc + dz * zc), yc**2 + zc**2 - r**2
+    depth[vs[sel], us[sel]] = (-qb - np.sqrt(qb**2 - 4.0 * qa * qc)) / (2.0 * qa)
+    rng = np.random.default_rng(seed)
+    depth[inst > 0] += rng.normal(0.0, noise_m, int((inst > 0).sum()))
+    return K, inst, depth, a, c, (yc, zc), r
+
+
+def test_small_curved_face_keeps_its_labelled_type() -> None:
+    # An unfitted 5-row fillet labelled cylinder (axis class U) between two fitted planes: it becomes a cylinder on
+    # the planes' line of intersection (the x axis; within 2 degrees, radius within 1 mm), not a free plane whose
+    # normal is 90 degrees off the true axis (VBRepConfig.fallback_curved off: the old plane).
+    from types import SimpleNamespace
+
+    from v2c.labels import label_of
+    from v2c.primitives import Cylinder, Plane
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.faces import face_geoms
+
+    K, inst, depth, a, c, (yc, zc), r = _fillet_scene(2e-4, seed=4)
+    frame = np.array([[0.8, 0.6, 0.0], [-0.6, 0.8, 0.0], [0.0, 0.0, 1.0]])  # x is no frame axis
+    fit = SimpleNamespace(
+        primitives={1: a, 3: c}, residuals={1: 0.0, 3: 0.0}, axis_labels={1: None, 3: None}, frame=frame
+    )
+    labels = [0, label_of("plane", "U"), label_of("cylinder", "U"), label_of("plane", "U")]
+    seg = SimpleNamespace(instances=inst, labels=np.array(labels, np.uint8))
+    faces, _ = face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig(), {})
+    cyl = faces[2].prim
+    assert isinstance(cyl, Cylinder) and faces[2].extra.get("fallback")
+    assert np.degrees(np.arccos(min(1.0, abs(float(cyl.axis_vector[0]))))) < 2.0
+    assert abs(cyl.radius - r) < 1e-3
+    off = np.asarray(cyl.origin, float)[1:] - np.array([yc, zc])  # the axis line: within 1 mm
+    assert np.hypot(*off) < 1e-3
+    old, _ = face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig(fallback_curved=False), {})
+    assert isinstance(old[2].prim, Plane)
+
+
+def test_cone_and_torus_on_a_given_axis_line() -> None:
+    # A 45-degree chamfer and a 2 mm rounded rim at the mouth of a 10 mm hole, 0.1 mm noise, on 60 degrees of arc:
+    # fitted on the hole's axis line they come back within 1.5 degrees and 0.3 mm; too few points give None.
+    from v2c.primitives import Cone, Torus
+    from v2c.vbrep.pointfit import fit_axis_line_cone_points, fit_axis_line_torus_points
+
+    rng = np.random.default_rng(5)
+    axis = np.array([0.0, 0.6, 0.8])
+    centre = np.array([0.01, -0.02, 0.45])
+    ang = rng.uniform(0.0, np.deg2rad(60.0), 300)
+    t1 = np.array([1.0, 0.0, 0.0])
+    t2 = np.cross(axis, t1)
+    radial = np.cos(ang)[:, None] * t1 + np.sin(ang)[:, None] * t2
+    h = rng.uniform(0.0, 0.003, 300)  # the chamfer: radius 10 + h mm at height h above the hole's mouth
+    X = centre + (0.010 + h)[:, None] * radial + h[:, None] * axis + rng.normal(0, 1e-4, (300, 3))
+    cone, rms = fit_axis_line_cone_points(X, centre + 0.05 * axis, axis)
+    assert isinstance(cone, Cone) and rms < 2e-4
+    assert abs(np.degrees(cone.half_angle) - 45.0) < 1.5
+    apex = centre - 0.010 * axis  # the cone's apex on the axis, 10 mm below the mouth, opening along the axis
+    assert np.linalg.norm(cone.origin - apex) < 3e-4 and cone.axis_vector @ axis > 0.999
+    phi = rng.uniform(0.0, np.pi / 2, 300)  # the rim: a quarter tube of 2 mm round a 12 mm circle
+    X = (
+        centre
+        + (0.012 - 0.002 * np.cos(phi))[:, None] * radial
+        + (0.002 * np.sin(phi) - 0.002)[:, None] * axis
+        + rng.normal(0, 1e-4, (300, 3))
+    )
+    torus, rms = fit_axis_line_torus_points(X, centre, axis, 10)
+    assert isinstance(torus, Torus) and rms < 2e-4
+    assert abs(torus.radius - 0.012) < 3e-4 and abs(torus.minor_radius - 0.002) < 3e-4
+    assert np.linalg.norm(torus.origin - (centre - 0.002 * axis)) < 3e-4
+    assert fit_axis_line_cone_points(X[:4], centre, axis) is None
+    assert fit_axis_line_torus_points(X[:4], centre, axis, 10) is None

@@ -116,6 +116,16 @@ class VBRepConfig:
     fallback_trim: float = 0.8  # share: the free plane and sphere fits are refitted on this share of the evidence
     #                             closest to their first fit
     fallback_fit_iters: int = 10  # Gauss-Newton iterations of the cylinder fit with a given axis
+    fallback_curved: bool = True  # an unfitted instance with a curved label gets that type on an axis its fitted
+    #                               neighbours suggest, within fallback_rms (`faces.curved_fallback`), in place of
+    #                               its free plane (corpus training split, oracle: all 43 type errors were free
+    #                               planes on fillets, rounded rims, chamfers and ball ends of 10-70 pixels)
+    fallback_axis_cross_deg: float = 10.0  # degrees: two neighbouring planes this far apart or more suggest the
+    #                                        axis along their line of intersection (a blend between them)
+    fallback_curved_sigma: float = 2.0  # ratio: ... and its RMS within this many depth-noise sigmas
+    #                                     (sigma_depth_coeff_per_m z^2 at the evidence's median depth). Chosen on
+    #                                     the validation sets: without it a knob flute of seed 9000 took a wrong
+    #                                     axis (oracle alignment 0.0049 -> 0.0120); corpus-val gains are the same
 
     # --- meshes
     mesh_stride_px: int = 1  # pixels: spacing of the back-projected pixel grid of each face mesh

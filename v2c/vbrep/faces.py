@@ -4,7 +4,10 @@ A fitted primitive with valid parameters is taken as it is; one with invalid par
 rejected, and a curved one is replaced by a least-squares sphere through its depth points when that fits. An
 instance left without a surface (at least ``fallback_min_px`` pixels) gets a fallback from its evidence (its own
 depth points and its boundaries lifted onto fitted neighbours, `fallback_plane_points`): the plane or cylinder
-its label's axis class gives (`labelled_fallback`), else a free plane when at least two sources fix it. Each
+its label's axis class gives (`labelled_fallback`), else a free plane when at least two sources fix it; where a
+free plane would be drawn for a curved label, that type on an axis its fitted neighbours suggest takes its place
+where it fits (`curved_fallback`: a small fillet, rounded rim, chamfer or ball end that had too few points for
+RANSAC). Each
 surface's sheet (boss or hole) is chosen from the depth points (`v2c.vbrep.ambiguity`).
 """
 
@@ -17,13 +20,16 @@ from scipy.ndimage import distance_transform_edt
 
 from v2c.camera import pixel_rays
 from v2c.labels import type_axis_of
-from v2c.primitives import Cylinder, Plane
+from v2c.primitives import Cone, Cylinder, Plane, Sphere, Torus
+from v2c.primitives.directions import unit
 from v2c.segment.graph import EdgeGraph, build_edge_graph
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import FaceGeom
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.pointfit import (
     fit_axis_cylinder_points,
+    fit_axis_line_cone_points,
+    fit_axis_line_torus_points,
     fit_axis_plane_points,
     fit_plane_normal_across,
     fit_plane_points,
@@ -77,6 +83,111 @@ def labelled_fallback(
     if got is None or got[1] > max_rms:
         return None
     return got[0], got[1], ax.value
+
+
+def _neighbours(inst: int, inst_map: np.ndarray) -> list[int]:
+    """The instances (ids > 0, not ``inst``) touching instance ``inst`` (4-neighbour pixel pairs), in id order."""
+    m = inst_map == inst
+    grown = m.copy()
+    grown[1:] |= m[:-1]
+    grown[:-1] |= m[1:]
+    grown[:, 1:] |= m[:, :-1]
+    grown[:, :-1] |= m[:, 1:]
+    ids = np.unique(inst_map[grown & ~m])
+    return [int(j) for j in ids if j > 0 and j != inst]
+
+
+def _axis_candidates(
+    nbs: list[FaceGeom], frame: np.ndarray, axis_class: str | None, min_cross_deg: float
+) -> tuple[list[tuple[np.ndarray, str | None]], list[tuple[np.ndarray, np.ndarray]]]:
+    """Axis directions a small curved face may have (unit vectors, each with its frame axis name or None): the
+    part frame's axis its label names (X / Y / Z; none for U, which says the axis is none of them), each
+    neighbouring plane's normal (a hole wall or boss through that plane), the cross product of two neighbouring
+    planes' normals at least ``min_cross_deg`` apart (a fillet or chamfer between them), each curved neighbour's
+    axis (a step on a shaft, the next flute of a knob); and the axis lines (point, direction) of the curved
+    neighbours (a rounded rim or chamfer coaxial with its hole)."""
+    dirs: list[tuple[np.ndarray, str | None]] = []
+    if axis_class in _FRAME_ROW:
+        dirs.append((np.asarray(frame[_FRAME_ROW[axis_class]], float), axis_class))
+    planes = [np.asarray(f.prim.axis_vector, float) for f in nbs if isinstance(f.prim, Plane)]
+    dirs += [(n, None) for n in planes]
+    for i in range(len(planes)):  # loop over pairs of neighbouring planes
+        for j in range(i + 1, len(planes)):
+            c = np.cross(planes[i], planes[j])
+            if np.linalg.norm(c) >= np.sin(np.deg2rad(min_cross_deg)):
+                dirs.append((unit(c), None))
+    lines = [
+        (np.asarray(f.prim.origin, float), np.asarray(f.prim.axis_vector, float))
+        for f in nbs
+        if isinstance(f.prim, (Cylinder, Cone, Torus))
+    ]
+    dirs += [(a, None) for _, a in lines]
+    return dirs, lines
+
+
+def curved_fallback(
+    inst: int,
+    seg: Segmentation,
+    fit: FitResult,
+    faces: dict[int, FaceGeom],
+    inst_map: np.ndarray,
+    X: np.ndarray,
+    scale: float,
+    cfg: VBRepConfig,
+) -> tuple[Primitive, float, str | None] | None:
+    """An unfitted instance labelled with a curved type (cylinder, cone, sphere, torus; any axis class), called
+    where a free plane through its evidence would be drawn: that type through its evidence X (N, 3), the best
+    (least RMS) over the axes its fitted neighbours and its label's axis class suggest (`_axis_candidates`): a
+    cylinder on any candidate direction, a cone or torus on a curved neighbour's axis line, a free sphere; its
+    size at most the part size and its RMS within fallback_rms and within fallback_curved_sigma depth-noise
+    sigmas (sigma_depth_coeff_per_m z^2 at the evidence's median depth: a 2 mm knob flute fitted on a
+    neighbour's unrelated axis missed its evidence by 2.4 sigmas), else None. A small fillet, rounded rim,
+    chamfer or ball end of a real part has too few points for RANSAC, and the free plane in its place has its
+    normal across a fillet's axis, the worst axis there is; where several candidate axes fit alike (20-40 points
+    of a small fillet rarely tell them apart), the least RMS is still the better guess. Returns (surface, RMS
+    metres, frame axis name or None)."""
+    labels = np.asarray(seg.labels)
+    if not cfg.fallback_curved or inst >= len(labels) or not 1 <= int(labels[inst]) <= 17:
+        return None
+    ptype, ax = type_axis_of(int(labels[inst]))
+    if ptype.value == "plane":
+        return None
+    nbs = [faces[j] for j in _neighbours(inst, inst_map) if j in faces]
+    dirs, lines = _axis_candidates(
+        nbs, np.asarray(fit.frame, float), None if ax is None else ax.value, cfg.fallback_axis_cross_deg
+    )
+    got: list[tuple[Primitive, float, str | None]] = []
+    if ptype.value == "sphere":
+        sp = fit_sphere_points(X, cfg.fallback_trim)
+        if sp is not None:
+            got.append((sp[0], sp[1], None))
+    elif ptype.value == "cylinder":
+        for a, name in dirs:  # loop over candidate axis directions
+            cy = fit_axis_cylinder_points(X, a, cfg.fallback_fit_iters)
+            if cy is not None:
+                got.append((cy[0], cy[1], name))
+    else:
+        for c, a in lines:  # loop over the curved neighbours' axis lines
+            if ptype.value == "cone":
+                cu = fit_axis_line_cone_points(X, c, a)
+            else:
+                cu = fit_axis_line_torus_points(X, c, a, cfg.fallback_fit_iters)
+            if cu is not None:
+                got.append((cu[0], cu[1], None))
+    sigma = cfg.sigma_depth_coeff_per_m * float(np.median(X[:, 2])) ** 2
+    bound = min(cfg.fallback_rms * scale, cfg.fallback_curved_sigma * sigma)
+    ok = [g for g in got if g[1] <= bound and _extent(g[0]) <= scale]
+    return min(ok, key=lambda g: g[1]) if ok else None
+
+
+def _extent(prim: Primitive) -> float:
+    """A curved surface's size (metres): its radius (a torus: major plus minor; a cone: 0, bounded by its
+    evidence)."""
+    if isinstance(prim, Torus):
+        return float(prim.radius + prim.minor_radius)
+    if isinstance(prim, (Cylinder, Sphere)):
+        return float(prim.radius)
+    return 0.0
 
 
 def fallback_plane_points(
@@ -215,8 +326,12 @@ def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float
             and flat >= cfg.fallback_flatness
             and not fs.coincides(plane, scale)
             and _facing_view(plane, evidence, cfg.fallback_min_view_deg)
-        ):
-            fs.add(int(inst), plane, rms, None, {"fallback": True})
+        ):  # the evidence fixes a surface here; a curved label's own type replaces the plane where it fits
+            cur = curved_fallback(int(inst), seg, fit, fs.faces, fs.inst_map, evidence, scale, cfg)
+            if cur is not None:
+                fs.add(int(inst), cur[0], cur[1], cur[2], {"fallback": True})
+            else:
+                fs.add(int(inst), plane, rms, None, {"fallback": True})
 
 
 def face_geoms(

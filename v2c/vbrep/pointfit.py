@@ -2,7 +2,9 @@
 
 `measured_points` back-projects a mask's depth readings; the fits take (N, 3) camera-frame points (metres) and
 return the surface with its RMS distance (metres), or None when the points are too few or the fit degenerate:
-free plane and sphere (trimmed refits), and the plane or cylinder whose axis the part frame gives.
+free plane and sphere (trimmed refits), the plane or cylinder whose axis direction is given (the part frame's, or
+a neighbour's), and the cone or torus whose axis line is given (a neighbour's: a chamfer or a rounded rim coaxial
+with the hole or shaft it edges).
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ import numpy as np
 
 from v2c.camera import pixel_rays
 from v2c.geometry import circle_2d
-from v2c.primitives import Cylinder, Plane, Sphere
+from v2c.primitives import Cone, Cylinder, Plane, Sphere, Torus
+from v2c.primitives.base import radial_frame
 from v2c.primitives.directions import tangent_basis
 
 
@@ -61,6 +64,24 @@ def fit_sphere_points(X: np.ndarray, trim: float) -> tuple[Sphere, float] | None
     return Sphere(c, float(np.sqrt(r2))), float(np.sqrt(np.mean(d**2)))
 
 
+def _geometric_circle(q: np.ndarray, iters: int) -> tuple[np.ndarray, float] | None:
+    """Circle through 2D points q (N, 2): the algebraic fit (`v2c.geometry.circle_2d`) refined by ``iters``
+    Gauss-Newton steps on the geometric distance (the algebraic fit shrinks short noisy arcs). Returns (centre (2,),
+    radius) or None where degenerate."""
+    c, r = circle_2d(q)
+    if not (np.all(np.isfinite(c)) and r > 0):
+        return None
+    for _ in range(iters):  # geometric (Gauss-Newton) refinement
+        v = q - c
+        dist = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+        J = np.concatenate([-v / dist[:, None], -np.ones((len(q), 1))], 1)
+        step = np.linalg.lstsq(J, -(dist - r), rcond=None)[0]
+        c, r = c + step[:2], r + float(step[2])
+        if not np.isfinite(r) or r <= 0:
+            return None
+    return c, r
+
+
 def fit_axis_cylinder_points(X: np.ndarray, axis: np.ndarray, iters: int) -> tuple[Cylinder, float] | None:
     """Least-squares cylinder with a given unit axis through (N, 3) points: an algebraic circle fit of the points
     projected on the plane normal to the axis (`v2c.geometry.circle_2d`), refined by ``iters`` Gauss-Newton steps on
@@ -71,17 +92,10 @@ def fit_axis_cylinder_points(X: np.ndarray, axis: np.ndarray, iters: int) -> tup
     a = axis / np.linalg.norm(axis)
     t1, t2 = tangent_basis(a)
     q = np.stack([X @ t1, X @ t2], 1)
-    c, r = circle_2d(q)
-    if not (np.all(np.isfinite(c)) and r > 0):
+    got = _geometric_circle(q, iters)
+    if got is None:
         return None
-    for _ in range(iters):  # geometric (Gauss-Newton) refinement: the algebraic fit shrinks short noisy arcs
-        v = q - c
-        dist = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
-        J = np.concatenate([-v / dist[:, None], -np.ones((len(q), 1))], 1)
-        step = np.linalg.lstsq(J, -(dist - r), rcond=None)[0]
-        c, r = c + step[:2], r + float(step[2])
-        if not np.isfinite(r) or r <= 0:
-            return None
+    c, r = got
     d = np.linalg.norm(q - c, axis=1) - r
     origin = c[0] * t1 + c[1] * t2 + float(np.mean(X @ a)) * a
     return Cylinder(origin, a, r), float(np.sqrt(np.mean(d**2)))
@@ -108,3 +122,43 @@ def fit_plane_normal_across(X: np.ndarray, axis: np.ndarray) -> tuple[Plane, flo
     _, _, vt = np.linalg.svd(q - c, full_matrices=False)
     n = vt[1, 0] * t1 + vt[1, 1] * t2
     return Plane(X.mean(axis=0), n), float(np.std(X @ n))
+
+
+def fit_axis_line_cone_points(X: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[Cone, float] | None:
+    """Least-squares cone on a given axis line (``point``, unit ``axis``) through (N, 3) points: the radius
+    rho as a linear function of the height h along the axis (a line in the (h, rho) half-plane). Returns the cone
+    (apex where that line meets the axis, axis towards growing radius) and its RMS distance (metres); None with
+    fewer than 5 points, a degenerate fit or a half-angle within 1 degree of 0 or 90 (a cylinder or a plane)."""
+    if len(X) < 5:
+        return None
+    a = axis / np.linalg.norm(axis)
+    h, rho, _ = radial_frame(X - point, a)
+    A = np.stack([h, np.ones_like(h)], 1)
+    if np.linalg.matrix_rank(A) < 2:
+        return None
+    k, r0 = np.linalg.lstsq(A, rho, rcond=None)[0]
+    half = float(np.arctan(abs(k)))
+    if not (np.isfinite(half) and np.deg2rad(1.0) < half < np.deg2rad(89.0)):
+        return None
+    apex = point + (-r0 / k) * a
+    cone = Cone(apex, a if k > 0 else -a, half)
+    return cone, float(np.sqrt(np.mean(cone.signed_distance(X) ** 2)))
+
+
+def fit_axis_line_torus_points(
+    X: np.ndarray, point: np.ndarray, axis: np.ndarray, iters: int
+) -> tuple[Torus, float] | None:
+    """Least-squares torus on a given axis line (``point``, unit ``axis``) through (N, 3) points: its tube's
+    cross-section the circle through the points' (rho, h) cloud (`_geometric_circle`, ``iters`` Gauss-Newton
+    steps). Returns the torus and its RMS distance (metres); None with fewer than 5 points or a degenerate fit (a
+    tube centre on or across the axis)."""
+    if len(X) < 5:
+        return None
+    a = axis / np.linalg.norm(axis)
+    h, rho, _ = radial_frame(X - point, a)
+    got = _geometric_circle(np.stack([rho, h], 1), iters)
+    if got is None or not 0 < got[1] < got[0][0]:
+        return None
+    c, r = got
+    torus = Torus(point + c[1] * a, a, float(c[0]), float(r))
+    return torus, float(np.sqrt(np.mean(torus.signed_distance(X) ** 2)))
