@@ -53,12 +53,6 @@ def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
     return float(_triangle_areas(vertices, triangles).sum())
 
 
-def _median_triangle_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
-    """Median area of the triangles of a mesh (vertices (N, 3), triangles (M, 3)); 0 without triangles."""
-    a = _triangle_areas(vertices, triangles)
-    return float(np.median(a)) if len(a) else 0.0
-
-
 def _drop_specks(polys: list[shapely.Polygon], speck_area: float, budget: float) -> list[shapely.Polygon]:
     """``polys`` without its specks (pieces under ``speck_area``), smallest first, as long as the dropped area
     stays within ``budget`` (the same units squared): a speck beside a large face goes, an island that holds a
@@ -292,13 +286,14 @@ class OutlineBuilder:
         """The outline faces of ``f`` on surface ``s`` (empty when none can be built)."""
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         tris = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
-        total = mesh_area(pts, tris)
+        areas = _triangle_areas(pts, tris)
+        total = float(areas.sum())
         if total <= 0:
             return []
         min_area = self.min_piece_rel * total
         # A first pass at the cap finds the pieces; each is then simplified within its own area budget.
         polys, scale = outline_polygons(s, pts, tris, 0.0, min_area, self.max_stretch)
-        speck = self.min_piece_tris * _median_triangle_area(pts, tris)
+        speck = self.min_piece_tris * float(np.median(areas))
         polys = _drop_specks(polys, speck, self.speck_budget_rel * total)
         cands = edge_candidates(self.vb, self.fmap, f.id)
         out = []

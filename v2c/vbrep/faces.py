@@ -23,6 +23,7 @@ from v2c.labels import type_axis_of
 from v2c.primitives import Cone, Cylinder, Plane, Sphere, Torus
 from v2c.primitives.directions import unit
 from v2c.segment.graph import EdgeGraph, build_edge_graph
+from v2c.segment.refine import touching_pairs
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import FaceGeom
 from v2c.vbrep.config import VBRepConfig
@@ -85,18 +86,6 @@ def labelled_fallback(
     return got[0], got[1], ax.value
 
 
-def _neighbours(inst: int, inst_map: np.ndarray) -> list[int]:
-    """The instances (ids > 0, not ``inst``) touching instance ``inst`` (4-neighbour pixel pairs), in id order."""
-    m = inst_map == inst
-    grown = m.copy()
-    grown[1:] |= m[:-1]
-    grown[:-1] |= m[1:]
-    grown[:, 1:] |= m[:, :-1]
-    grown[:, :-1] |= m[:, 1:]
-    ids = np.unique(inst_map[grown & ~m])
-    return [int(j) for j in ids if j > 0 and j != inst]
-
-
 def _axis_candidates(
     nbs: list[FaceGeom], frame: np.ndarray, axis_class: str | None, min_cross_deg: float
 ) -> tuple[list[tuple[np.ndarray, str | None]], list[tuple[np.ndarray, np.ndarray]]]:
@@ -130,13 +119,14 @@ def curved_fallback(
     seg: Segmentation,
     fit: FitResult,
     faces: dict[int, FaceGeom],
-    inst_map: np.ndarray,
+    neighbours: list[int],
     X: np.ndarray,
     scale: float,
     cfg: VBRepConfig,
 ) -> tuple[Primitive, float, str | None] | None:
     """An unfitted instance labelled with a curved type (cylinder, cone, sphere, torus; any axis class), called
-    where a free plane through its evidence would be drawn: that type through its evidence X (N, 3), the best
+    where a free plane through its evidence would be drawn (``neighbours``: the ids of the instances touching it,
+    ascending): that type through its evidence X (N, 3), the best
     (least RMS) over the axes its fitted neighbours and its label's axis class suggest (`_axis_candidates`): a
     cylinder on any candidate direction, a cone or torus on a curved neighbour's axis line, a free sphere; its
     size at most the part size and its RMS within fallback_rms and within fallback_curved_sigma depth-noise
@@ -152,7 +142,7 @@ def curved_fallback(
     ptype, ax = type_axis_of(int(labels[inst]))
     if ptype.value == "plane":
         return None
-    nbs = [faces[j] for j in _neighbours(inst, inst_map) if j in faces]
+    nbs = [faces[j] for j in neighbours if j in faces]
     dirs, lines = _axis_candidates(
         nbs, np.asarray(fit.frame, float), None if ax is None else ax.value, cfg.fallback_axis_cross_deg
     )
@@ -303,6 +293,7 @@ def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float
     fixes one (module docstring)."""
     cfg = fs.cfg
     counts = np.bincount(fs.inst_map.ravel())
+    pairs: np.ndarray | None = None  # the touching instances (`touching_pairs`), found once when first needed
     for inst in np.flatnonzero(counts >= cfg.fallback_min_px):
         if inst == 0 or int(inst) in fs.faces:
             continue
@@ -327,7 +318,11 @@ def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float
             and not fs.coincides(plane, scale)
             and _facing_view(plane, evidence, cfg.fallback_min_view_deg)
         ):  # the evidence fixes a surface here; a curved label's own type replaces the plane where it fits
-            cur = curved_fallback(int(inst), seg, fit, fs.faces, fs.inst_map, evidence, scale, cfg)
+            if pairs is None:
+                pairs = touching_pairs(fs.inst_map)
+            nbs = np.unique(pairs[(pairs == inst).any(axis=1)])
+            nbs = [int(j) for j in nbs if j != inst]
+            cur = curved_fallback(int(inst), seg, fit, fs.faces, nbs, evidence, scale, cfg)
             if cur is not None:
                 fs.add(int(inst), cur[0], cur[1], cur[2], {"fallback": True})
             else:
