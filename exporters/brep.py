@@ -42,6 +42,7 @@ from OCP.BRepGProp import BRepGProp
 from OCP.BRepMesh import BRepMesh_IncrementalMesh
 from OCP.gp import gp_Trsf, gp_Vec
 from OCP.GProp import GProp_GProps
+from OCP.TopAbs import TopAbs_REVERSED
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Shell
 
@@ -133,6 +134,22 @@ def meshes(face: TopoDS_Face, deflection: float, angle_rad: float) -> bool:
     return tri is not None and tri.NbTriangles() > 0
 
 
+def face_triangulation(face: TopoDS_Face, deflection: float, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """OCCT's triangulation of ``face`` (meshed in place at this linear deflection, its units, and angle): vertices
+    (N, 3) and triangles (M, 3), wound along the face's orientation; empty when the mesher leaves it bare."""
+    BRepMesh_IncrementalMesh(face, deflection, False, angle_rad, True)
+    loc = TopLoc_Location()
+    tri = BRep_Tool.Triangulation_s(face, loc)
+    if tri is None:
+        return np.zeros((0, 3)), np.zeros((0, 3), int)
+    trsf = loc.Transformation()
+    pts = np.array([tri.Node(i).Transformed(trsf).Coord() for i in range(1, tri.NbNodes() + 1)])
+    tris = np.array([tri.Triangle(i).Get() for i in range(1, tri.NbTriangles() + 1)], int) - 1
+    if face.Orientation() == TopAbs_REVERSED:
+        tris = tris[:, ::-1]
+    return pts, tris
+
+
 def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None) -> bool:
     """Whether a shape lies inside ``box`` (lo, hi), mm: the cheap, loose bounding box first (it contains the
     exact one), the exact one only when the loose one reaches outside."""
@@ -175,6 +192,7 @@ def build_brep(
         max_stretch=cfg.outline_max_stretch,
         min_piece_tris=cfg.outline_min_piece_tris,
         speck_budget_rel=cfg.outline_speck_budget_rel,
+        hole_budget_rel=cfg.outline_hole_budget_rel,
     )
     out = BuiltBRep(shape=TopoDS_Compound(), fmap=fmap, box=part_box(vbrep, fmap, cfg.box_margin_rel))
     faces: dict[int, TopoDS_Face] = {}

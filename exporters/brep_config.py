@@ -65,8 +65,18 @@ class BrepConfig:
     # meshes; another not at 0.005), and a viewer may mesh at any of them
     mesh_check_scales: tuple[float, ...] = (1.0, 2.0, 5.0)
     roundtrip_tol_rel: float = 0.02  # a face whose area read back from the file moves more: rewritten (outline)
+    # ... as is a face that OCCT's mesher, on the face read back at the read-back's deflection and angle
+    # (`ReadbackConfig`: these fractions of the part size, radians), draws short of 1 - roundtrip_tol_rel of its
+    # area: the in-memory check above passed it, yet the file's face meshed bare (corpus validation, oracle: 8 of
+    # 535 faces, two planes of 6,350 and 1,392 mm² drawn with no triangle at all)
+    roundtrip_mesh_deflection_rel: float = 0.002
+    roundtrip_mesh_angle_rad: float = 0.3
     outline_tol_area_rel: float = 0.005  # outline simplification moves a piece's area by at most this fraction
     outline_min_piece_rel: float = 0.002  # outline pieces and holes under this share of the face's area: dropped
+    # (holes smallest first, while together they hold at most this share of it: a plane of corpus validation
+    # with many pixel holes each under the share read back 1.8 % larger than its mesh from them alone; with the
+    # simplification's 0.5 % and the specks' 1 % it keeps a face within the 2 % of `area_tol_rel`)
+    outline_hole_budget_rel: float = 0.005
     # Outline pieces under this many of the face's median mesh triangles are specks (the mesh is built on the
     # pixel grid, two triangles a pixel: a piece of 1-4 pixels is not a face; real frame ycb_video_000004 with
     # its ROI: the tuna can's outline faces came with pieces of 0.6-3.6 mm² beside faces of 250-640 mm², each a

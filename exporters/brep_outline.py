@@ -25,7 +25,7 @@ from OCP.gp import gp_Pnt, gp_Pnt2d
 from OCP.TopoDS import TopoDS_Edge, TopoDS_Face, TopoDS_Vertex, TopoDS_Wire
 from scipy.spatial import cKDTree
 
-from exporters.occ_surfaces import AnalyticSurface
+from exporters.occ_surfaces import TWO_PI, AnalyticSurface
 
 if TYPE_CHECKING:
     from exporters.frames import FrameMap
@@ -131,6 +131,33 @@ def _union_from_boundary(
     return union
 
 
+def _unwrap_triangles(s: AnalyticSurface, uv: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v) vertices and triangles with every triangle whole in the periodic parameters: a triangle that
+    straddles the seam (its corners a period apart, ``uv`` wrapped within pi of the surface's centre) gets its
+    corners within half a period of its first one, shifted by whole periods so that its centroid lies within pi
+    of the centre; such corners become vertices of their own. Before, these triangles were dropped, and a torus
+    blend whose tube the seam crossed lost up to a fifth of its area (corpus validation, oracle)."""
+    periodic = [(0, s.u_center)] if s.u_periodic else []
+    if s.v_periodic:
+        periodic.append((1, s.v_center))
+    if not periodic or len(tris) == 0:
+        return uv, tris
+    corners = uv[tris]  # (M, 3, 2)
+    out = corners.copy()
+    for k, centre in periodic:  # loop over periodic parameters
+        rel = out[:, :, k] - out[:, :1, k]
+        out[:, :, k] = out[:, :1, k] + rel - TWO_PI * np.round(rel / TWO_PI)
+        shift = TWO_PI * np.round((out[:, :, k].mean(axis=1) - centre) / TWO_PI)
+        out[:, :, k] -= shift[:, None]
+    moved = np.any(out != corners, axis=(1, 2))
+    if not moved.any():
+        return uv, tris
+    extra = out[moved].reshape(-1, 2)
+    new_tris = tris.copy()
+    new_tris[moved] = len(uv) + np.arange(len(extra)).reshape(-1, 3)
+    return np.concatenate([uv, extra]), new_tris
+
+
 def outline_polygons(
     s: AnalyticSurface,
     points: np.ndarray,
@@ -138,9 +165,11 @@ def outline_polygons(
     tol: float,
     min_area: float,
     max_stretch: float = 4.0,
+    hole_budget: float = np.inf,
 ) -> tuple[list[shapely.Polygon], np.ndarray]:
     """The union of a mesh's triangles in the surface's scaled (u, v) (millimetres), simplified within ``tol``
-    mm, as polygons (pieces and holes under ``min_area`` mm² dropped); and the (u, v) -> scaled factors (2,).
+    mm, as polygons (pieces under ``min_area`` mm² dropped, and holes under it, smallest first, while together
+    they hold at most ``hole_budget`` mm²); and the (u, v) -> scaled factors (2,).
 
     points: (N, 3) mesh vertices in millimetres (output frame); triangles: (M, 3) indices.
     """
@@ -148,30 +177,44 @@ def outline_polygons(
     if not np.all(np.isfinite(uv)):
         return [], np.ones(2)
     scale = _metric_scale(s, np.median(uv, axis=0))
-    tri = (uv * scale)[np.asarray(triangles, int).reshape(-1, 3)]
+    uv, tris = _unwrap_triangles(s, uv, np.asarray(triangles, int).reshape(-1, 3))
+    tri = (uv * scale)[tris]
     area = 0.5 * np.abs(
         (tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1])
         - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0])
     )
-    # a triangle much larger in (u, v) than in space straddles the seam of a periodic parameter or two sheets
-    # of the surface (a torus patch lifted onto both sides of its tube): it is no part of the face's outline
+    # a triangle still much larger in (u, v) than in space spans two sheets of the surface (a torus patch lifted
+    # onto both sides of its tube): it is no part of the face's outline
     t3 = np.asarray(points, float)[np.asarray(triangles, int).reshape(-1, 3)]
     area3d = 0.5 * np.linalg.norm(np.cross(t3[:, 1] - t3[:, 0], t3[:, 2] - t3[:, 0]), axis=1)
     keep = (area > 1e-12) & (area <= max_stretch * area3d + 1e-9)
     if not keep.any():
         return [], scale
-    tris = np.asarray(triangles, int).reshape(-1, 3)[keep]
+    tris = tris[keep]
     union = _union_from_boundary(uv * scale, tris, float(area[keep].sum()))
     if union is None:  # triangles overlap in (u, v) (a folded mesh): unite them one by one (slower, exact)
         tri = tri[keep]
         union = shapely.union_all(shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1)))
     union = shapely.simplify(union, tol, preserve_topology=True)
-    out = []
-    for poly in getattr(union, "geoms", [union]):
-        if not isinstance(poly, shapely.Polygon) or poly.is_empty or poly.area < min_area:
-            continue
-        holes = [r for r in poly.interiors if shapely.Polygon(r).area >= min_area]
-        out.append(shapely.Polygon(poly.exterior, holes))
+    polys = [
+        p
+        for p in getattr(union, "geoms", [union])
+        if isinstance(p, shapely.Polygon) and not p.is_empty and p.area >= min_area
+    ]
+    holes = sorted(
+        ((shapely.Polygon(r).area, k, j) for k, p in enumerate(polys) for j, r in enumerate(p.interiors)),
+        key=lambda t: t[0],
+    )
+    dropped, drop = 0.0, set()
+    for a, k, j in holes:  # loop over holes, smallest first
+        if a >= min_area or dropped + a > hole_budget:
+            break
+        dropped += a
+        drop.add((k, j))
+    out = [
+        shapely.Polygon(p.exterior, [r for j, r in enumerate(p.interiors) if (k, j) not in drop])
+        for k, p in enumerate(polys)
+    ]
     return out, scale
 
 
@@ -226,8 +269,8 @@ def _simplify_keeping_area(
 def _separate_rings(poly: shapely.Geometry, gap: float, min_area: float) -> list[shapely.Polygon]:
     """Polygons whose rings do not touch, as OCCT wants a face's wires: a hole touching the outer ring (or
     another hole) at a point is opened by shrinking the polygon by ``gap`` (a sharp-cornered inward offset:
-    the pinch becomes a notch or splits the piece); a hole still touching after that is dropped. Pieces and
-    holes under ``min_area`` are dropped."""
+    the pinch becomes a notch or splits the piece); a hole still touching after that is dropped. Pieces under
+    ``min_area`` are dropped (holes were chosen before, `outline_polygons`)."""
     shrunk = shapely.buffer(poly, -gap, join_style="mitre", mitre_limit=10.0)
     out = []
     for part in getattr(shrunk, "geoms", [shrunk]):
@@ -236,7 +279,7 @@ def _separate_rings(poly: shapely.Geometry, gap: float, min_area: float) -> list
         holes = []
         for ring in part.interiors:
             hole = shapely.Polygon(ring)
-            if hole.area < min_area or part.exterior.distance(ring) < gap:
+            if part.exterior.distance(ring) < gap:
                 continue
             if any(shapely.Polygon(h).distance(hole) < gap for h in holes):
                 continue
@@ -245,12 +288,27 @@ def _separate_rings(poly: shapely.Geometry, gap: float, min_area: float) -> list
     return out
 
 
+def _distinct(ring: np.ndarray, tol: float) -> np.ndarray:
+    """A closed ring (K, 2), first point repeated last, without the points within ``tol`` of the point kept
+    before them: shapely's inward offset can leave two points 1e-15 apart, a zero-length edge that fails the
+    whole face (corpus validation: a 13,541 mm² plane written with nothing)."""
+    keep = [0]
+    for k in range(1, len(ring) - 1):  # loop over the ring's points but the repeated last
+        if np.linalg.norm(ring[k] - ring[keep[-1]]) > tol:
+            keep.append(k)
+    while len(keep) > 1 and np.linalg.norm(ring[keep[-1]] - ring[0]) <= tol:
+        keep.pop()
+    out = ring[keep]
+    return np.concatenate([out, out[:1]])
+
+
 class OutlineBuilder:
     """Builds the outline faces of one VB-Rep (output frame ``fmap``, millimetres).
 
     tol: simplification tolerance (mm); tol_area_rel: it is halved until simplification moves a piece's area
     by at most this fraction;
-    min_piece_rel: pieces and holes smaller than this fraction of the face's mesh area are dropped;
+    min_piece_rel: pieces smaller than this fraction of the face's mesh area are dropped, and holes smaller than
+    it while together they hold at most ``hole_budget_rel`` of that area;
     min_piece_tris, speck_budget_rel: pieces smaller than this many of its median mesh triangles are specks,
     dropped smallest first while together they hold at most this fraction of the face's mesh area;
     precision: OCCT face/vertex precision (mm); rings of one face are kept ``gap_factor`` precisions apart;
@@ -269,6 +327,7 @@ class OutlineBuilder:
         max_stretch: float = 4.0,
         min_piece_tris: float = 0.0,
         speck_budget_rel: float = 0.0,
+        hole_budget_rel: float = np.inf,
     ) -> None:
         self.vb = vbrep
         self.fmap = fmap
@@ -280,6 +339,7 @@ class OutlineBuilder:
         self.max_stretch = max_stretch
         self.min_piece_tris = min_piece_tris
         self.speck_budget_rel = speck_budget_rel
+        self.hole_budget_rel = hole_budget_rel
         self.bb = BRep_Builder()
 
     def build(self, f: VFace, s: AnalyticSurface) -> list[OutlinePiece]:
@@ -292,7 +352,7 @@ class OutlineBuilder:
             return []
         min_area = self.min_piece_rel * total
         # A first pass at the cap finds the pieces; each is then simplified within its own area budget.
-        polys, scale = outline_polygons(s, pts, tris, 0.0, min_area, self.max_stretch)
+        polys, scale = outline_polygons(s, pts, tris, 0.0, min_area, self.max_stretch, self.hole_budget_rel * total)
         speck = self.min_piece_tris * float(np.median(areas))
         polys = _drop_specks(polys, speck, self.speck_budget_rel * total)
         cands = edge_candidates(self.vb, self.fmap, f.id)
@@ -345,8 +405,8 @@ class OutlineBuilder:
     def _face(
         self, s: AnalyticSurface, poly: shapely.Polygon, scale: np.ndarray, cands: list[tuple[int, np.ndarray]]
     ) -> OutlinePiece | None:
-        rings = [(np.asarray(poly.exterior.coords) / scale, True)]
-        rings += [(np.asarray(r.coords) / scale, False) for r in poly.interiors]
+        rings = [(_distinct(np.asarray(poly.exterior.coords), self.precision) / scale, True)]
+        rings += [(_distinct(np.asarray(r.coords), self.precision) / scale, False) for r in poly.interiors]
         face = TopoDS_Face()
         self.bb.MakeFace(face, s.geom, self.precision)
         piece = OutlinePiece(face)

@@ -13,14 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
-from OCP.BRepMesh import BRepMesh_IncrementalMesh
-from OCP.TopAbs import TopAbs_REVERSED
-from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS
 
-from exporters.brep import bounding_box, face_area
+from exporters.brep import bounding_box, face_area, face_triangulation
 from exporters.brep_outline import mesh_area
 from exporters.frames import FrameMap
 from exporters.step import faces_by_id, parse_edge_name, quiet_occt
@@ -32,12 +28,14 @@ from v2c.vbrep.model import VBRep, VEdge, VFace
 class ReadbackConfig:
     """area_tol_rel: a face counts as written whole when its area in the file is within this fraction of its
     VB-Rep mesh area; box_tol_rel: the file's bounding box counts as the reconstruction's when each extent is
-    within this fraction of the reconstruction's largest extent; deflection_rel: tessellation deflection of the
-    drawn faces, as a fraction of the part size; edge_samples: points per drawn edge."""
+    within this fraction of the reconstruction's largest extent; deflection_rel, angle_rad: tessellation
+    deflection of the drawn faces, as a fraction of the part size, and angle (radians; `BrepConfig`'s round trip
+    meshes at the same); edge_samples: points per drawn edge."""
 
     area_tol_rel: float = 0.02
     box_tol_rel: float = 0.10
     deflection_rel: float = 0.002
+    angle_rad: float = 0.3
     edge_samples: int = 24
 
 
@@ -136,20 +134,6 @@ def _inverse_points(fmap: FrameMap, p: np.ndarray) -> np.ndarray:
     return np.asarray(p, float) @ fmap.rotation / fmap.scale + fmap.origin
 
 
-def _face_mesh(face: TopoDS.Face, deflection: float) -> tuple[np.ndarray, np.ndarray]:
-    BRepMesh_IncrementalMesh(face, deflection, False, 0.3, True)
-    loc = TopLoc_Location()
-    tri = BRep_Tool.Triangulation_s(face, loc)
-    if tri is None:
-        return np.zeros((0, 3)), np.zeros((0, 3), int)
-    trsf = loc.Transformation()
-    pts = np.array([tri.Node(i).Transformed(trsf).Coord() for i in range(1, tri.NbNodes() + 1)])
-    tris = np.array([tri.Triangle(i).Get() for i in range(1, tri.NbTriangles() + 1)], int) - 1
-    if face.Orientation() == TopAbs_REVERSED:
-        tris = tris[:, ::-1]
-    return pts, tris
-
-
 def _edge_points(edge: TopoDS.Edge, n: int) -> np.ndarray:
     c = BRepAdaptor_Curve(edge)
     ts = np.linspace(c.FirstParameter(), c.LastParameter(), n)
@@ -172,7 +156,8 @@ def check_written(
     size = max(fmap.length(vbrep.scale), 1.0)
     by_id = faces_by_id(rs.faces)
     written = {fid: sum(face_area(f) for f in fs) for fid, fs in by_id.items()}
-    meshes = {fid: [_face_mesh(f, cfg.deflection_rel * size) for f in fs] for fid, fs in by_id.items()}
+    deflection = cfg.deflection_rel * size
+    meshes = {fid: [face_triangulation(f, deflection, cfg.angle_rad) for f in fs] for fid, fs in by_id.items()}
     recon_pts = []
     for f in vbrep.faces:
         pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))

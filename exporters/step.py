@@ -47,10 +47,10 @@ from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
-from exporters.brep import BuiltBRep, bounding_box, build_brep, face_area, translate_built
+from exporters.brep import BuiltBRep, bounding_box, build_brep, face_area, face_triangulation, translate_built
 from exporters.brep_config import BrepConfig
 from exporters.brep_faces import edges_of
-from exporters.brep_outline import edge_candidates, nearest_edge_ids
+from exporters.brep_outline import edge_candidates, mesh_area, nearest_edge_ids
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, ReadSubShape, SubShapeAttrs, read_xcaf_step, write_xcaf_step
 from v2c.errors import V2cError
@@ -262,10 +262,17 @@ def write(
             tmp, built.shape, product or path.stem, _attributes(vbrep, built), originating_system=v2c_origin()
         )
         # The file must hold what was built: OCCT's reader heals faces (and may split one, losing its name).
-        # Faces the round trip changed are written again from their mesh outline.
-        areas = written_face_areas(tmp)
+        # Faces the round trip changed, or left for OCCT's mesher to draw short, are written again from their mesh
+        # outline (faces already bounded by it are not meshed here: they would be written the same way again).
+        deflection = cfg.roundtrip_mesh_deflection_rel * max(built.fmap.length(vbrep.scale), 1.0)
+        loops = frozenset(built.built_area) - frozenset(built.fallback_faces)
+        areas, drawn = written_face_areas(tmp, deflection, cfg.roundtrip_mesh_angle_rad, loops)
+        tol = cfg.roundtrip_tol_rel
         changed = frozenset(
-            fid for fid, a in built.built_area.items() if abs(areas.get(fid, 0.0) - a) > cfg.roundtrip_tol_rel * a
+            fid
+            for fid, a in built.built_area.items()
+            if abs(areas.get(fid, 0.0) - a) > tol * a
+            or (fid in loops and drawn.get(fid, 0.0) < (1 - tol) * areas.get(fid, 0.0))
         )
         if changed:
             built = build(vbrep, frame, cfg, force_outline=changed)
@@ -307,9 +314,20 @@ def faces_by_id(faces: list[ReadSubShape]) -> dict[int, list[TopoDS_Face]]:
     return out
 
 
-def written_face_areas(path: str | Path) -> dict[int, float]:
-    """VFace id -> the area (mm²) of the faces named after it in a STEP written by `write` (all pieces)."""
-    return {fid: sum(face_area(f) for f in fs) for fid, fs in faces_by_id(read_xcaf_step(path).faces).items()}
+def written_face_areas(
+    path: str | Path, deflection: float, angle_rad: float, meshed: frozenset[int] | None = None
+) -> tuple[dict[int, float], dict[int, float]]:
+    """VFace id -> the area (mm²) of the faces named after it in a STEP written by `write` (all pieces), and
+    VFace id -> the area of their triangulation by OCCT's mesher at ``deflection`` (mm) and ``angle_rad``, for
+    the ids in ``meshed`` (all when None)."""
+    by_id = faces_by_id(read_xcaf_step(path).faces)
+    areas = {fid: sum(face_area(f) for f in fs) for fid, fs in by_id.items()}
+    drawn = {
+        fid: sum(mesh_area(*face_triangulation(f, deflection, angle_rad)) for f in fs)
+        for fid, fs in by_id.items()
+        if meshed is None or fid in meshed
+    }
+    return areas, drawn
 
 
 def _edge_type(text: str | None) -> EdgeType | None:

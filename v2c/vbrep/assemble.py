@@ -20,7 +20,7 @@ from v2c.vbrep.confidence import edge_confidence, face_confidence
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.context import ExtractContext
 from v2c.vbrep.loop_mesh import loop_mesh, loop_polygon
-from v2c.vbrep.mesh import face_mesh
+from v2c.vbrep.mesh import face_mesh, refine_curved
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VFace, VVertex
 from v2c.vbrep.pointfit import measured_points
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, build_loops
@@ -239,6 +239,15 @@ def _vfaces(
                 mv = mt = None
         if mv is None:
             mv, mt = face_mesh(fg.prim, fg.sheet, region, *args)
+        if cfg.mesh_chord_angle_rad > 0:
+            mv, mt = refine_curved(
+                fg.prim,
+                mv,
+                mt,
+                cfg.mesh_chord_angle_rad,
+                cfg.mesh_refine_levels,
+                cfg.mesh_refine_max_triangles,
+            )
         fsig = face_sigma_m(covs[inst], face_pts[inst]) if covs[inst] is not None else float("nan")
         vfaces.append(
             VFace(

@@ -130,6 +130,14 @@ class VBRepConfig:
     # --- meshes
     mesh_stride_px: int = 1  # pixels: spacing of the back-projected pixel grid of each face mesh
     mesh_max_edge: float = 0.2  # scale units: triangles with a longer side (jumps between crossings) are dropped
+    mesh_chord_angle_rad: float = 0.25  # radians: a curved face's (not a torus's) mesh edge lying off the surface
+    #                                     like a chord subtending more than this at the
+    #                                     surface's smaller curvature radius is split onto the surface
+    #                                     (`mesh.refine_curved`; flat facets then lose at most this^2 / 24 = 0.26 %
+    #                                     of the surface's area; a 1.7 mm hole wall meshed on the pixel grid lost
+    #                                     6 %, and its STEP face read back 6 % larger than the VB-Rep; 0: off)
+    mesh_refine_levels: int = 4  # ... at most this many times (each halves the split edges)
+    mesh_refine_max_triangles: int = 400_000  # ... while the face's mesh stays under this many triangles
     mesh_bound_pad: float = 0.05  # scale units: triangles with a corner outside the part's box (its observed points'
     #                               0.5-99.5 percentiles per axis) padded by this are dropped (a wrong surface seen
     #                               nearly edge-on runs off past the part; a cylinder or cone may reach one part

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from v2c.camera import pixel_rays
+from v2c.primitives import Cone, Cylinder, Sphere, Torus
 from v2c.primitives.base import Primitive
 from v2c.vbrep.raycast import as_primitive, intersect, sheet_depth
 
@@ -189,3 +190,84 @@ def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int, rng: np.
     flip = r1 + r2 > 1
     r1, r2 = np.where(flip, 1 - r1, r1), np.where(flip, 1 - r2, r2)
     return p0[t] + r1[:, None] * (p1[t] - p0[t]) + r2[:, None] * (p2[t] - p0[t])
+
+
+def curvature_radius(prim: Primitive, points: np.ndarray) -> np.ndarray:
+    """(N,) the smaller principal radius of curvature (metres) of ``prim`` at surface points (N, 3): a
+    cylinder's or sphere's radius, a torus's tube radius, a cone's circle radius over the cosine of its half
+    angle; infinite on a plane."""
+    n = len(points)
+    if isinstance(prim, (Cylinder, Sphere)):
+        return np.full(n, abs(prim.radius))
+    if isinstance(prim, Torus):
+        return np.full(n, abs(prim.minor_radius))
+    if isinstance(prim, Cone):
+        d = points - prim.origin
+        rho = np.linalg.norm(d - np.outer(d @ prim.axis, prim.axis), axis=1)
+        return rho / np.cos(prim.half_angle)
+    return np.full(n, np.inf)
+
+
+def refine_curved(
+    prim: Primitive,
+    verts: np.ndarray,
+    tri: np.ndarray,
+    chord_angle: float,
+    levels: int,
+    max_triangles: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A face mesh on a curved surface with every edge that lies off the surface like a chord subtending more
+    than ``chord_angle`` radians at its smaller curvature radius (by its sagitta) split at its midpoint, moved
+    onto the surface (its closest point), up to
+    ``levels`` times and while the mesh stays under ``max_triangles``. The splits are per edge, so neighbouring
+    triangles still share their corners (each triangle becomes 2, 3 or 4 with its winding). A pixel-grid mesh of
+    a small curved face is coarse across its curvature (a hole wall of 1.7 mm radius seen 4 pixels wide: 5 flat
+    facets on a half cylinder, its area 6 % short of the surface's); its flat triangles now stay within
+    ``chord_angle``^2 / 24 of the surface's area. A torus is left as it is: where its fitted tube is thinner
+    than the face seen, its pixel mesh runs onto both sheets of the tube, and splitting the edges between them
+    grows the mesh there (corpus validation, oracle: four torus blends read back at 0.74-0.95 of their refined
+    meshes' area, against 0.99-1.00 unrefined)."""
+    p = as_primitive(prim)
+    if isinstance(p, Torus):
+        return verts, tri
+    for _ in range(levels):  # loop over refinement levels
+        if len(tri) == 0 or 4 * len(tri) > max_triangles:
+            break
+        e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+        uniq, inv = np.unique(e, axis=0, return_inverse=True)
+        inv = inv.reshape(3, -1).T  # (M, 3) edge ids of each triangle: ab, bc, ca
+        mid = verts[uniq].mean(axis=1)
+        # the edge's sagitta (its midpoint's distance to the surface) against that of a chord of chord_angle
+        # across the curvature: an edge along a straight line of the surface (a cylinder's axis) is never split
+        split = np.abs(p.signed_distance(mid)) > (1 - np.cos(chord_angle / 2)) * curvature_radius(p, mid)
+        if not split.any():
+            break
+        new = np.full(len(uniq), -1, np.int64)
+        new[split] = len(verts) + np.arange(split.sum())
+        q = mid[split]
+        for _ in range(_CLOSEST_STEPS):
+            q = p.closest_point(q)
+        verts = np.concatenate([verts, q])
+        tri = _split_triangles(tri, new[inv])
+    return verts, tri
+
+
+def _split_triangles(tri: np.ndarray, mids: np.ndarray) -> np.ndarray:
+    """Triangles (M, 3) a, b, c with the new vertex on each of their edges ab, bc, ca (M, 3; -1: not split)
+    replaced by their parts, wound as they were."""
+    out = [tri[(mids < 0).all(axis=1)]]
+    k = (mids >= 0).sum(axis=1)
+    for r in range(3):  # rotations: the single split edge, or the unsplit one of two, moved to a fixed place
+        t = np.roll(tri, -r, axis=1)
+        m = np.roll(mids, -r, axis=1)
+        a, b, c = t[:, 0], t[:, 1], t[:, 2]
+        ab, bc, ca = m[:, 0], m[:, 1], m[:, 2]
+        one = (k == 1) & (ab >= 0)
+        out += [np.stack([a, ab, c], 1)[one], np.stack([ab, b, c], 1)[one]]
+        two = (k == 2) & (ca < 0)
+        out += [np.stack([a, ab, bc], 1)[two], np.stack([ab, b, bc], 1)[two], np.stack([a, bc, c], 1)[two]]
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    ab, bc, ca = mids[:, 0], mids[:, 1], mids[:, 2]
+    three = k == 3
+    out += [np.stack(x, 1)[three] for x in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
+    return np.concatenate(out).astype(np.int64)
