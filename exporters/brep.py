@@ -150,17 +150,33 @@ def face_triangulation(face: TopoDS_Face, deflection: float, angle_rad: float) -
     return pts, tris
 
 
-def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None) -> bool:
+def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None, deflection_rel: float = 1e-3) -> bool:
     """Whether a shape lies inside ``box`` (lo, hi), mm: the cheap, loose bounding box first (it contains the
-    exact one), the exact one only when the loose one reaches outside."""
+    exact one), then the optimal one, then the box of a triangulation of a copy at ``deflection_rel`` of the box's
+    largest extent, padded by that deflection. OCCT's optimal box of a curved face spans its surface over the
+    rectangle of its (u, v) bounds: a torus blend wrapped 300 degrees round its axis (in-family validation seed
+    9000, scan 2) got a box 18 mm past its own mesh, beyond the part's box, and the 5,715 mm² face was not
+    written."""
     if box is None:
         return True
+
+    def within(b: Bnd_Box, pad: float = 0.0) -> bool:
+        lo, hi = np.array(b.CornerMin().Coord()) - pad, np.array(b.CornerMax().Coord()) + pad
+        return bool(np.all(lo >= box[0]) and np.all(hi <= box[1]))
+
     loose = Bnd_Box()
     BRepBndLib.Add_s(shape, loose, False)
-    if np.all(np.array(loose.CornerMin().Coord()) >= box[0]) and np.all(np.array(loose.CornerMax().Coord()) <= box[1]):
+    if within(loose):
         return True
     lo, hi = bounding_box(shape)
-    return bool(np.all(lo >= box[0]) and np.all(hi <= box[1]))
+    if np.all(lo >= box[0]) and np.all(hi <= box[1]):
+        return True
+    deflection = deflection_rel * float(np.max(box[1] - box[0]))
+    copy = BRepBuilderAPI_Copy(shape, True, False).Shape()
+    BRepMesh_IncrementalMesh(copy, deflection, False, 0.2, True)
+    meshed = Bnd_Box()
+    BRepBndLib.Add_s(copy, meshed, True)
+    return not meshed.IsVoid() and within(meshed, deflection)
 
 
 def _add_shell(bb: BRep_Builder, compound: TopoDS_Compound, faces: list[TopoDS_Face]) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import shapely
 
 from exporters import step
 from exporters.brep_config import BrepConfig
@@ -208,3 +209,42 @@ def test_outline_rings_lose_points_closer_than_the_precision() -> None:
     ring = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1e-15], [1.0, 1.0], [0.0, 1.0], [0.0, 1e-16], [0.0, 0.0]])
     out = _distinct(ring, 1e-4)
     assert out.tolist() == [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]]
+
+
+def test_a_torus_face_wrapped_round_its_axis_is_inside_its_own_box() -> None:
+    """A torus blend (ring 50 mm, tube 14 mm) bounded by a slanted band of its (u, v) parameters wrapped 300
+    degrees round the axis: OCCT's optimal bounding box spans the surface over the band's (u, v) rectangle and
+    reaches past the face, so the part-box check refused the face (a 5,715 mm² blend of in-family validation scan
+    2 was not written). `_inside` then measures a fine triangulation: the face is inside the box of its own points
+    padded by 1 mm, and outside a box cut 3 mm short of them."""
+    from exporters.brep import _inside, bounding_box
+    from exporters.brep_outline import OutlineBuilder
+    from exporters.frames import FrameMap
+    from exporters.occ_surfaces import make_surface
+
+    cam = FrameMap(np.eye(3), np.zeros(3))
+    prim = {
+        "type": "torus",
+        "params": {"origin": [0.0, 0.0, 0.5], "axis": [0.0, 0.0, 1.0], "radius": 0.05, "minor_radius": 0.014},
+    }
+    u = np.linspace(0.3, 0.3 + np.radians(300), 61)
+    low = np.stack([u, 0.2 + 0.3 * (u - u[0])], 1)  # a band slanted in v as it goes round
+    band = np.concatenate([low, low[::-1] + [0.0, 0.4]])
+    surf = make_surface(prim, cam, np.array([[0.064, 0.0, 0.5]]))
+    band = band - band.mean(axis=0) + [surf.u_center, surf.v_center]  # inside the surface's seam-free window
+    ob = OutlineBuilder(box_corner(), cam, 0.5, 0.005, 0.002, 1e-4)
+    piece = ob._face(surf, shapely.Polygon(band), np.ones(2), [])
+    assert piece is not None
+    # the face's own points (a fine (u, v) sampling of the band) and their box
+    g = np.stack(
+        np.meshgrid(
+            np.linspace(band[:, 0].min(), band[:, 0].max(), 300), np.linspace(band[:, 1].min(), band[:, 1].max(), 300)
+        ),
+        -1,
+    ).reshape(-1, 2)
+    pts = surf.evaluate(g[shapely.contains_xy(shapely.Polygon(band), g[:, 0], g[:, 1])])
+    lo, hi = pts.min(0), pts.max(0)
+    olo, ohi = bounding_box(piece.face)
+    assert (olo < lo - 1.0).any() or (ohi > hi + 1.0).any()  # OCCT's box reaches more than 1 mm past the face
+    assert _inside(piece.face, (lo - 1.0, hi + 1.0))
+    assert not _inside(piece.face, (lo + 3.0, hi - 3.0))
