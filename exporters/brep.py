@@ -160,23 +160,25 @@ def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None, defl
     if box is None:
         return True
 
-    def within(b: Bnd_Box, pad: float = 0.0) -> bool:
-        lo, hi = np.array(b.CornerMin().Coord()) - pad, np.array(b.CornerMax().Coord()) + pad
+    def within(lo: np.ndarray, hi: np.ndarray) -> bool:
         return bool(np.all(lo >= box[0]) and np.all(hi <= box[1]))
+
+    def corners(b: Bnd_Box) -> tuple[np.ndarray, np.ndarray]:
+        return np.array(b.CornerMin().Coord()), np.array(b.CornerMax().Coord())
 
     loose = Bnd_Box()
     BRepBndLib.Add_s(shape, loose, False)
-    if within(loose):
-        return True
-    lo, hi = bounding_box(shape)
-    if np.all(lo >= box[0]) and np.all(hi <= box[1]):
+    if within(*corners(loose)) or within(*bounding_box(shape)):
         return True
     deflection = deflection_rel * float(np.max(box[1] - box[0]))
     copy = BRepBuilderAPI_Copy(shape, True, False).Shape()
     BRepMesh_IncrementalMesh(copy, deflection, False, 0.2, True)
     meshed = Bnd_Box()
     BRepBndLib.Add_s(copy, meshed, True)
-    return not meshed.IsVoid() and within(meshed, deflection)
+    if meshed.IsVoid():
+        return False
+    lo, hi = corners(meshed)
+    return within(lo - deflection, hi + deflection)
 
 
 def _add_shell(bb: BRep_Builder, compound: TopoDS_Compound, faces: list[TopoDS_Face]) -> None:

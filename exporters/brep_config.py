@@ -65,10 +65,10 @@ class BrepConfig:
     # meshes; another not at 0.005), and a viewer may mesh at any of them
     mesh_check_scales: tuple[float, ...] = (1.0, 2.0, 5.0)
     roundtrip_tol_rel: float = 0.02  # a face whose area read back from the file moves more: rewritten (outline)
-    # ... as is a face that OCCT's mesher, on the face read back at the read-back's deflection and angle
-    # (`ReadbackConfig`: these fractions of the part size, radians), draws short of 1 - roundtrip_tol_rel of its
-    # area: the in-memory check above passed it, yet the file's face meshed bare (corpus validation, oracle: 8 of
-    # 535 faces, two planes of 6,350 and 1,392 mm² drawn with no triangle at all)
+    # ... as is a face that OCCT's mesher, on the face read back at this deflection (a fraction of the part size)
+    # and angle (radians), draws short of 1 - roundtrip_tol_rel of its area: the in-memory check above passed it,
+    # yet the file's face meshed bare (corpus validation, oracle: 8 of 535 faces, two planes of 6,350 and
+    # 1,392 mm² drawn with no triangle at all). `ReadbackConfig` meshes at the same.
     roundtrip_mesh_deflection_rel: float = 0.002
     roundtrip_mesh_angle_rad: float = 0.3
     outline_tol_area_rel: float = 0.005  # outline simplification moves a piece's area by at most this fraction

@@ -53,18 +53,25 @@ def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
     return float(_triangle_areas(vertices, triangles).sum())
 
 
-def _drop_specks(polys: list[shapely.Polygon], speck_area: float, budget: float) -> list[shapely.Polygon]:
-    """``polys`` without its specks (pieces under ``speck_area``), smallest first, as long as the dropped area
-    stays within ``budget`` (the same units squared): a speck beside a large face goes, an island that holds a
-    visible share of a small face stays."""
+def _smallest_within(areas: list[float], below: float, budget: float, keep: int = 0) -> set[int]:
+    """Indices of ``areas`` to drop: those under ``below``, smallest first, as long as together they stay within
+    ``budget`` (the same units squared) and at least ``keep`` are left."""
     dropped = 0.0
-    drop = set()
-    for k in sorted(range(len(polys)), key=lambda k: polys[k].area):  # loop over pieces, smallest first
-        a = polys[k].area
-        if a >= speck_area or dropped + a > budget or len(drop) == len(polys) - 1:
+    drop: set[int] = set()
+    for k in sorted(range(len(areas)), key=lambda k: areas[k]):  # loop over the areas, smallest first
+        a = areas[k]
+        if a >= below or dropped + a > budget or len(drop) == len(areas) - keep:
             break
         dropped += a
         drop.add(k)
+    return drop
+
+
+def _drop_specks(polys: list[shapely.Polygon], speck_area: float, budget: float) -> list[shapely.Polygon]:
+    """``polys`` without its specks (pieces under ``speck_area``), smallest first, as long as the dropped area
+    stays within ``budget`` (the same units squared) and one piece is left: a speck beside a large face goes, an
+    island that holds a visible share of a small face stays."""
+    drop = _smallest_within([p.area for p in polys], speck_area, budget, keep=1)
     return [p for k, p in enumerate(polys) if k not in drop]
 
 
@@ -201,18 +208,11 @@ def outline_polygons(
         for p in getattr(union, "geoms", [union])
         if isinstance(p, shapely.Polygon) and not p.is_empty and p.area >= min_area
     ]
-    holes = sorted(
-        ((shapely.Polygon(r).area, k, j) for k, p in enumerate(polys) for j, r in enumerate(p.interiors)),
-        key=lambda t: t[0],
-    )
-    dropped, drop = 0.0, set()
-    for a, k, j in holes:  # loop over holes, smallest first
-        if a >= min_area or dropped + a > hole_budget:
-            break
-        dropped += a
-        drop.add((k, j))
+    holes = [(k, j) for k, p in enumerate(polys) for j in range(len(p.interiors))]
+    drop = _smallest_within([shapely.Polygon(polys[k].interiors[j]).area for k, j in holes], min_area, hole_budget)
+    dropped = {holes[i] for i in drop}
     out = [
-        shapely.Polygon(p.exterior, [r for j, r in enumerate(p.interiors) if (k, j) not in drop])
+        shapely.Polygon(p.exterior, [r for j, r in enumerate(p.interiors) if (k, j) not in dropped])
         for k, p in enumerate(polys)
     ]
     return out, scale

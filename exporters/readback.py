@@ -17,6 +17,7 @@ from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.TopoDS import TopoDS
 
 from exporters.brep import bounding_box, face_area, face_triangulation
+from exporters.brep_config import BrepConfig
 from exporters.brep_outline import mesh_area
 from exporters.frames import FrameMap
 from exporters.step import faces_by_id, parse_edge_name, quiet_occt
@@ -29,13 +30,14 @@ class ReadbackConfig:
     """area_tol_rel: a face counts as written whole when its area in the file is within this fraction of its
     VB-Rep mesh area; box_tol_rel: the file's bounding box counts as the reconstruction's when each extent is
     within this fraction of the reconstruction's largest extent; deflection_rel, angle_rad: tessellation
-    deflection of the drawn faces, as a fraction of the part size, and angle (radians; `BrepConfig`'s round trip
-    meshes at the same); edge_samples: points per drawn edge."""
+    deflection of the drawn faces, as a fraction of the part size, and angle (radians): the STEP writer's round
+    trip's (`BrepConfig.roundtrip_mesh_*`), so a face it let through is drawn whole here; edge_samples: points
+    per drawn edge."""
 
     area_tol_rel: float = 0.02
     box_tol_rel: float = 0.10
-    deflection_rel: float = 0.002
-    angle_rad: float = 0.3
+    deflection_rel: float = BrepConfig.roundtrip_mesh_deflection_rel
+    angle_rad: float = BrepConfig.roundtrip_mesh_angle_rad
     edge_samples: int = 24
 
 
