@@ -188,3 +188,40 @@ def test_a_small_hole_wall_is_meshed_to_its_surface_area():
     big = from_dict({"type": "cylinder", "params": {"origin": [0.0, 0.0, 0.8], "axis": [0.0, 1.0, 0.0], "radius": r}})
     v3, t3 = refine_curved(big, verts, tris, 0.25, 4, 400_000)
     assert len(t3) == len(tris) and np.array_equal(v3, verts)
+
+
+def _grid_patch(x0: float, y0: float, z: float, n: int, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """A flat (n x n)-vertex grid at depth z (metres) with two triangles per cell."""
+    xs, ys = np.meshgrid(x0 + step * np.arange(n), y0 + step * np.arange(n))
+    v = np.stack([xs.ravel(), ys.ravel(), np.full(n * n, z)], 1)
+    i = np.arange(n * n).reshape(n, n)[:-1, :-1].ravel()
+    t = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)])
+    return v, t
+
+
+def test_a_small_mesh_island_far_behind_the_measured_part_is_dropped():
+    # A 40 x 40 mm face at 0.6 m (its measured points are its own vertices) with two small pieces: one 0.26 m
+    # behind the part, where rays through a curved face's near sheet met its far one (corpus validation: a
+    # 0.3 mm² island that set the reconstruction's box), and one seen past an occluder, on measured points.
+    from scipy.spatial import cKDTree
+
+    from v2c.vbrep.mesh import drop_stray_islands
+
+    main_v, main_t = _grid_patch(0.0, 0.0, 0.60, 41, 0.001)
+    far_v, far_t = _grid_patch(0.01, 0.01, 0.86, 3, 0.001)
+    near_v, near_t = _grid_patch(0.05, 0.0, 0.60, 3, 0.001)
+    measured = cKDTree(np.concatenate([main_v, near_v]))
+    verts = np.concatenate([main_v, far_v, near_v])
+    tri = np.concatenate([main_t, far_t + len(main_v), near_t + len(main_v) + len(far_v)])
+    out_v, out_t = drop_stray_islands(verts, tri, measured, max_share=0.01, max_dist=0.05 * 0.04)
+    assert len(out_t) == len(main_t) + len(near_t)
+    assert out_v[:, 2].max() == 0.60  # the far piece is gone, the occluded one kept
+    assert np.isclose(out_v[out_t].reshape(-1, 3)[:, 0].max(), 0.052)
+    # a piece that is a visible share of the face stays wherever it lies (a wrong surface is not this step's call)
+    big_v, big_t = _grid_patch(0.01, 0.01, 0.86, 8, 0.001)
+    verts = np.concatenate([main_v, big_v])
+    tri = np.concatenate([main_t, big_t + len(main_v)])
+    kept_v, kept_t = drop_stray_islands(verts, tri, measured, max_share=0.01, max_dist=0.05 * 0.04)
+    assert len(kept_t) == len(tri) and len(kept_v) == len(verts)
+    # without measured points nothing is dropped
+    assert len(drop_stray_islands(verts, tri, None, 0.01, 0.002)[1]) == len(tri)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 
 from v2c.camera import project
 from v2c.primitives import Plane
@@ -20,7 +21,7 @@ from v2c.vbrep.confidence import edge_confidence, face_confidence
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.context import ExtractContext
 from v2c.vbrep.loop_mesh import loop_mesh, loop_polygon
-from v2c.vbrep.mesh import face_mesh, refine_curved
+from v2c.vbrep.mesh import drop_stray_islands, face_mesh, refine_curved
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VFace, VVertex
 from v2c.vbrep.pointfit import measured_points
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, build_loops
@@ -168,13 +169,12 @@ def _vedges(
     return edges
 
 
-def _part_box(ctx: ExtractContext) -> tuple[np.ndarray, np.ndarray] | None:
-    """The part's box (camera frame, metres): what its observed points span (mesh_bound_percentile), unpadded;
-    None when mesh_bound_pad is negative or nothing was observed."""
+def _part_box(ctx: ExtractContext, q: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The part's box (camera frame, metres): what its observed points ``q`` (N, 3) span (mesh_bound_percentile),
+    unpadded; None when mesh_bound_pad is negative or nothing was observed."""
     cfg = ctx.cfg
     if cfg.mesh_bound_pad < 0:
         return None
-    q = measured_points(ctx.face_map > 0, ctx.depth, ctx.K)
     if not len(q):
         return None
     return (
@@ -210,7 +210,9 @@ def _vfaces(
     image region gets the mesh of that region (`v2c.vbrep.loop_mesh`: the trimmed face; noted in
     ``ctx.stats["loop_meshes"]``), any other the mesh of its pixel region."""
     cfg, scale = ctx.cfg, ctx.scale
-    bounds = _part_box(ctx)
+    part_pts = measured_points(ctx.face_map > 0, ctx.depth, ctx.K)
+    bounds = _part_box(ctx, part_pts)
+    measured = cKDTree(part_pts) if len(part_pts) and cfg.mesh_island_max_share > 0 else None
     vfaces = []
     from_loops = []
     for inst in inst_ids:
@@ -248,6 +250,7 @@ def _vfaces(
                 cfg.mesh_refine_levels,
                 cfg.mesh_refine_max_triangles,
             )
+        mv, mt = drop_stray_islands(mv, mt, measured, cfg.mesh_island_max_share, cfg.mesh_island_max_dist * scale)
         fsig = face_sigma_m(covs[inst], face_pts[inst]) if covs[inst] is not None else float("nan")
         vfaces.append(
             VFace(

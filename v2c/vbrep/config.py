@@ -138,6 +138,12 @@ class VBRepConfig:
     #                                     6 %, and its STEP face read back 6 % larger than the VB-Rep; 0: off)
     mesh_refine_levels: int = 4  # ... at most this many times (each halves the split edges)
     mesh_refine_max_triangles: int = 400_000  # ... while the face's mesh stays under this many triangles
+    mesh_island_max_share: float = 0.01  # fraction: a piece of a face's mesh (not its largest) with at most this
+    #                                      share of the mesh's area ...
+    mesh_island_max_dist: float = 0.05  # scale units: ... whose vertices lie farther than this (median) from every
+    #                                     measured point of the part is dropped (`mesh.drop_stray_islands`: rays
+    #                                     that pass a curved face's near sheet meet its far one; 0.05 part sizes is
+    #                                     issue 16's bound on a face's distance from the measured part)
     mesh_bound_pad: float = 0.05  # scale units: triangles with a corner outside the part's box (its observed points'
     #                               0.5-99.5 percentiles per axis) padded by this are dropped (a wrong surface seen
     #                               nearly edge-on runs off past the part; a cylinder or cone may reach one part
