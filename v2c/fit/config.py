@@ -95,3 +95,13 @@ class FitConfig(RansacConfig):
     # times the free fit's plus one depth-noise sigma (ratio)
     tangent_clip_sigma: float = 3.0  # residuals are clipped at this many depth-noise sigmas in that RMS (ratio)
     tangent_max_nfev: int = 50  # function evaluations of one constrained fit (count)
+    torus_blend_fit: bool = True  # refit each torus as a blend tangent to a coaxial neighbouring cylinder and a
+    # plane across its axis (only the minor radius free), or to the cylinder alone, when that explains its points
+    # as well as its free fit (tangent_rms_ratio, tangent_clip_sigma; `tangency.constrain_blends`)
+    torus_blend_min_points: int = 6  # ... for a torus with at least this many points (count; a blend strip of a
+    # few pixels is where the free fit goes wrong)
+    torus_blend_min_contact_px: float = 3.0  # ... among the neighbours it shares at least this much edge-graph
+    # boundary with (pixels)
+    torus_blend_max_sigma: float = 2.0  # ... and only where the blend's truncated RMS residual is within this many
+    # depth-noise sigmas too (ratio): a learned instance labelled torus that straddles several faces fits no
+    # primitive, so "as well as its free fit" would let any blend through

@@ -17,13 +17,13 @@ from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis, start_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.result import ABLATIONS, FitResult
-from v2c.fit.tangency import constrain_blends, tangent_junctions
+from v2c.fit.tangency import adjacent_terms, constrain_blends, tangent_junctions
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
 from v2c.geometry.selection import fit_instance, noise_sigma, select_type, supported
 from v2c.labels import type_axis_of
-from v2c.primitives import Cylinder, Plane, Primitive
+from v2c.primitives import Cylinder, Plane, Primitive, Torus
 from v2c.primitives.directions import unit
 from v2c.segment.graph import build_edge_graph
 from v2c.segment.types import Segmentation
@@ -559,13 +559,21 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     # 3b. tangent (G1) junctions: blends refitted tangent to their neighbours where the evidence says so
     if ablation == "full" and config.tangent_fit and prims:
         junctions = tangent_junctions(prims, lifted.rays, lifted.s, lifted.candidates, lifted.vertex, config)
-        if junctions:
+        adjacent = (
+            adjacent_terms(graph, {i: k for k, i in enumerate(order)}, config.torus_blend_min_contact_px)
+            if config.torus_blend_fit and any(isinstance(p, Torus) for p in prims)
+            else None
+        )
+        if junctions or adjacent:
 
             def inlier_points(k: int) -> np.ndarray:
                 ip = ipts[order[k]]
                 return ip.points[_inliers(prims[k], ip, scale, config)]
 
-            prims, taken = constrain_blends(prims, junctions, inlier_points, scale, config)
+            def all_points(k: int) -> np.ndarray:
+                return ipts[order[k]].points
+
+            prims, taken = constrain_blends(prims, junctions, inlier_points, scale, config, adjacent, all_points)
             if taken:
                 log.debug("tangent refits: %s", {order[k]: m for k, m in taken.items()})
     timings["tangent"] = perf_counter() - t

@@ -37,8 +37,9 @@ from scipy.optimize import least_squares
 from v2c.fit.config import FitConfig
 from v2c.geometry.ransac import plausible
 from v2c.geometry.selection import noise_sigma
-from v2c.primitives import Cylinder, Plane, Primitive, Sphere
+from v2c.primitives import Cylinder, Plane, Primitive, Sphere, Torus
 from v2c.primitives.directions import unit
+from v2c.segment.graph import EdgeGraph
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,51 @@ def _dome(t: np.ndarray, o: np.ndarray, a: np.ndarray, r: float) -> Primitive:
     return Sphere(o + float(t[0]) * a, r)
 
 
+def _blend_torus(t: np.ndarray, o: np.ndarray, a: np.ndarray, h: float, rc: float, s_rad: float, s_ax: float) -> Primitive:
+    """Torus of minor radius t[0] on the axis (``o``, ``a``) tangent to a cylinder of radius ``rc`` on that axis
+    and to the plane at height ``h`` along it: its tube's centre circle at radius ``rc`` + ``s_rad`` t[0] and
+    height ``h`` + ``s_ax`` t[0] (signs +-1: which side of the cylinder and of the plane the tube lies on)."""
+    r = float(t[0])
+    return Torus(o + (h + s_ax * r) * a, a, rc + s_rad * r, r)
+
+
+def _coaxial_torus(t: np.ndarray, o: np.ndarray, a: np.ndarray, rc: float, s_rad: float) -> Primitive:
+    """Torus of minor radius t[1] centred t[0] along the axis (``o``, ``a``), tangent to the cylinder of radius
+    ``rc`` on that axis: major radius ``rc`` + ``s_rad`` t[1]."""
+    r = float(t[1])
+    return Torus(o + float(t[0]) * a, a, rc + s_rad * r, r)
+
+
+def _torus_models(
+    prim: Torus, neighbours: Sequence[Primitive], sin_par: float
+) -> list[tuple[str, Callable[[np.ndarray], Primitive], np.ndarray]]:
+    """The blend tori that fit ``prim``'s place among its ``neighbours``: on the axis of a cylinder parallel to
+    its own (within the parallel tolerance) and tangent to it and to a plane across that axis ("torus blend":
+    only the minor radius free), or tangent to the cylinder alone ("coaxial torus": the height along the axis
+    free too); both sides of each, started from ``prim``'s minor radius and height, most constrained first."""
+    out: list[tuple[str, Callable[[np.ndarray], Primitive], np.ndarray]] = []
+    c0, a0 = np.asarray(prim.origin, float), prim.axis
+    r0 = max(float(prim.minor_radius), 1e-6)
+    cos_par = float(np.sqrt(max(0.0, 1.0 - sin_par * sin_par)))
+    cyls = [q for q in neighbours if isinstance(q, Cylinder) and abs(q.axis @ a0) >= cos_par]
+    planes = [q for q in neighbours if isinstance(q, Plane) and abs(q.normal_vec @ a0) >= cos_par]
+    for q in cyls:  # the free fit's centre is not asked to lie on the cylinder's axis: on a small blend it is
+        # the free fit's centre that goes wrong; the fit to the points decides
+        o, a, rc = np.asarray(q.origin, float), unit(q.axis * (1.0 if q.axis @ a0 >= 0 else -1.0)), float(q.radius)
+        for p in planes:
+            h = float((np.asarray(p.origin, float) - o) @ a)
+            for s_rad in (1.0, -1.0):
+                for s_ax in (1.0, -1.0):
+                    make = partial(_blend_torus, o=o, a=a, h=h, rc=rc, s_rad=s_rad, s_ax=s_ax)
+                    out.append(("torus blend", make, np.array([r0])))
+    for q in cyls:
+        o, a, rc = np.asarray(q.origin, float), unit(q.axis * (1.0 if q.axis @ a0 >= 0 else -1.0)), float(q.radius)
+        for s_rad in (1.0, -1.0):
+            make = partial(_coaxial_torus, o=o, a=a, rc=rc, s_rad=s_rad)
+            out.append(("coaxial torus", make, np.array([float((c0 - o) @ a), r0])))
+    return out
+
+
 def _models(
     prim: Primitive, neighbours: Sequence[Primitive], sin_par: float
 ) -> list[tuple[str, Callable[[np.ndarray], Primitive], np.ndarray]]:
@@ -147,6 +193,8 @@ def _models(
             if np.linalg.norm(off) > sin_par * max(float(np.linalg.norm(c0 - o)), 1e-9) + q.radius * sin_par:
                 continue
             out.append(("dome", partial(_dome, o=o, a=a, r=float(q.radius)), np.array([float((c0 - o) @ a)])))
+    elif isinstance(prim, Torus):
+        out += _torus_models(prim, neighbours, sin_par)
     return out
 
 
@@ -155,16 +203,61 @@ def _residuals(t: np.ndarray, make: Callable[[np.ndarray], Primitive], x: np.nda
     return make(t).signed_distance(x)
 
 
+def adjacent_terms(graph: EdgeGraph, term_of: dict[int, int], min_length_px: float) -> dict[int, list[int]]:
+    """Term -> the terms it meets in the image: fitted instances (``term_of``: instance id -> term index) whose
+    shared edges of the 2D edge graph are at least ``min_length_px`` pixels long in all, whatever their normals
+    there (a small blend's boundary holds too few lifted samples for the tangency test)."""
+    length: dict[tuple[int, int], float] = defaultdict(float)
+    for e in graph.edges:
+        if len(e.instances) != 2 or not all(i in term_of for i in e.instances):
+            continue
+        a, b = sorted(term_of[i] for i in e.instances)
+        if a != b:
+            length[(a, b)] += float(np.linalg.norm(np.diff(e.polyline, axis=0), axis=1).sum())
+    out: dict[int, list[int]] = defaultdict(list)
+    for (i, j), n in sorted(length.items()):
+        if n >= min_length_px:
+            out[i].append(j)
+            out[j].append(i)
+    return dict(out)
+
+
+def _fit_model(
+    make: Callable[[np.ndarray], Primitive], t0: np.ndarray, x: np.ndarray, sigma: float, config: FitConfig
+) -> Primitive | None:
+    """The primitive ``make(t)`` whose parameters ``t`` (from ``t0``) fit points ``x`` (robust, soft L1 at the
+    noise ``sigma``); None when the solve fails."""
+    try:
+        res = least_squares(
+            partial(_residuals, make=make, x=x),
+            t0,
+            loss="soft_l1",
+            f_scale=max(sigma, 1e-9),
+            max_nfev=config.tangent_max_nfev,
+        )
+        return make(res.x)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+
+
 def constrain_blends(
     prims: Sequence[Primitive],
     junctions: Sequence[TangentJunction],
     points: Callable[[int], np.ndarray],
     scale: float,
     config: FitConfig,
+    adjacent: dict[int, list[int]] | None = None,
+    all_points: Callable[[int], np.ndarray] | None = None,
 ) -> tuple[list[Primitive], dict[int, str]]:
     """Refit each cylinder or sphere with tangent neighbours under its tangency (module docstring); ``points(i)``
-    gives the inlier points (N, 3, camera frame, metres) of term i. Returns the primitives (the input's where no
-    constrained fit is taken) and, per changed term, the model's name."""
+    gives the inlier points (N, 3, camera frame, metres) of term i. With ``adjacent`` (term -> the terms it meets,
+    `adjacent_terms`) and ``all_points`` (every point of a term), each torus is refitted as a blend of a coaxial
+    cylinder and a plane across its axis, or of the cylinder alone, on all its points, the best such model that
+    explains them as well as the free fit and within the noise (`FitConfig.torus_blend_fit`): a small torus's
+    free fit is
+    ill-posed (six parameters from a strip a few pixels wide put ring centres tens of millimetres off), so its
+    neighbours' tangency is not tested first. Returns the primitives (the input's where no constrained fit is
+    taken) and, per changed term, the model's name."""
     out = list(prims)
     taken: dict[int, str] = {}
     nbrs: dict[int, list[int]] = defaultdict(list)
@@ -184,21 +277,41 @@ def constrain_blends(
         free = _truncated_rms(prim.signed_distance(x), clip)
         limit = config.tangent_rms_ratio * free + sigma
         for name, make, t0 in _models(prim, [prims[j] for j in nbrs[i]], sin_par):
-            try:
-                res = least_squares(
-                    partial(_residuals, make=make, x=x),
-                    t0,
-                    loss="soft_l1",
-                    f_scale=max(sigma, 1e-9),
-                    max_nfev=config.tangent_max_nfev,
-                )
-                cand = make(res.x)
-            except (np.linalg.LinAlgError, ValueError):
-                continue
-            if not cand.is_finite() or not plausible(cand, scale, config):
+            cand = _fit_model(make, t0, x, sigma, config)
+            if cand is None or not cand.is_finite() or not plausible(cand, scale, config):
                 continue
             if _truncated_rms(cand.signed_distance(x), clip) <= limit:
                 out[i] = cand
                 taken[i] = name
                 break
+    if adjacent is None or all_points is None:
+        return out, taken
+    for i in sorted(adjacent):
+        prim = prims[i]
+        if not isinstance(prim, Torus):
+            continue
+        x = all_points(i)
+        if len(x) < config.torus_blend_min_points:
+            continue
+        sigma = float(np.median(noise_sigma(x, config)))
+        clip = config.tangent_clip_sigma * sigma
+        limit = min(
+            config.tangent_rms_ratio * _truncated_rms(prim.signed_distance(x), clip) + sigma,
+            config.torus_blend_max_sigma * sigma,
+        )
+        best: tuple[float, Primitive, str] | None = None
+        for name, make, t0 in _models(prim, [out[j] for j in adjacent[i]], sin_par):
+            if best is not None and best[2] != name:
+                break  # a model of a more constrained kind explains the points: the looser kinds are not tried
+            cand = _fit_model(make, t0, x, sigma, config)
+            if cand is None or not cand.is_finite() or not plausible(cand, scale, config):
+                continue
+            if cand.minor_radius >= cand.radius:  # a ring torus, as RANSAC fits them
+                continue
+            rms = _truncated_rms(cand.signed_distance(x), clip)
+            if rms <= limit and (best is None or rms < best[0]):
+                best = (rms, cand, name)
+        if best is not None:
+            out[i] = best[1]
+            taken[i] = best[2]
     return out, taken
