@@ -158,6 +158,23 @@ def _torus_models(
     return out
 
 
+def _already_blend(prim: Torus, neighbours: Sequence[Primitive], sin_par: float, tol: float) -> bool:
+    """Whether torus ``prim`` already lies on a neighbouring cylinder's axis, tangent to it: its centre within
+    ``tol`` (metres) of that cylinder's axis line and its ring radius within ``tol`` of the cylinder's radius plus
+    or minus its tube's, the axes parallel (within ``sin_par``)."""
+    c0, a0 = np.asarray(prim.origin, float), prim.axis
+    cos_par = float(np.sqrt(max(0.0, 1.0 - sin_par * sin_par)))
+    for q in neighbours:
+        if not isinstance(q, Cylinder) or abs(q.axis @ a0) < cos_par:
+            continue
+        d = c0 - np.asarray(q.origin, float)
+        if np.linalg.norm(d - (d @ q.axis) * q.axis) > tol:
+            continue
+        if min(abs(prim.radius - (q.radius + s * prim.minor_radius)) for s in (1.0, -1.0)) <= tol:
+            return True
+    return False
+
+
 def _models(
     prim: Primitive, neighbours: Sequence[Primitive], sin_par: float
 ) -> list[tuple[str, Callable[[np.ndarray], Primitive], np.ndarray]]:
@@ -253,8 +270,9 @@ def constrain_blends(
     gives the inlier points (N, 3, camera frame, metres) of term i. With ``adjacent`` (term -> the terms it meets,
     `adjacent_terms`) and ``all_points`` (every point of a term), each torus is refitted as a blend of a coaxial
     cylinder and a plane across its axis, or of the cylinder alone, on all its points, the best such model that
-    explains them as well as the free fit and within the noise (`FitConfig.torus_blend_fit`): a small torus's
-    free fit is
+    explains them as well as the free fit and within the noise (`FitConfig.torus_blend_fit`), unless its free fit
+    is such a blend already (within that noise; the points are then the better judge of its radii): a small
+    torus's free fit is
     ill-posed (six parameters from a strip a few pixels wide put ring centres tens of millimetres off), so its
     neighbours' tangency is not tested first. Returns the primitives (the input's where no constrained fit is
     taken) and, per changed term, the model's name."""
@@ -294,6 +312,8 @@ def constrain_blends(
         if len(x) < config.torus_blend_min_points:
             continue
         sigma = float(np.median(noise_sigma(x, config)))
+        if _already_blend(prim, [out[j] for j in adjacent[i]], sin_par, config.torus_blend_max_sigma * sigma):
+            continue  # its free fit is a blend of its cylinder already: the points placed it, keep it
         clip = config.tangent_clip_sigma * sigma
         limit = min(
             config.tangent_rms_ratio * _truncated_rms(prim.signed_distance(x), clip) + sigma,
