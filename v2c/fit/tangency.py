@@ -113,7 +113,9 @@ def _dome(t: np.ndarray, o: np.ndarray, a: np.ndarray, r: float) -> Primitive:
     return Sphere(o + float(t[0]) * a, r)
 
 
-def _blend_torus(t: np.ndarray, o: np.ndarray, a: np.ndarray, h: float, rc: float, s_rad: float, s_ax: float) -> Primitive:
+def _blend_torus(
+    t: np.ndarray, o: np.ndarray, a: np.ndarray, h: float, rc: float, s_rad: float, s_ax: float
+) -> Primitive:
     """Torus of minor radius t[0] on the axis (``o``, ``a``) tangent to a cylinder of radius ``rc`` on that axis
     and to the plane at height ``h`` along it: its tube's centre circle at radius ``rc`` + ``s_rad`` t[0] and
     height ``h`` + ``s_ax`` t[0] (signs +-1: which side of the cylinder and of the plane the tube lies on)."""
