@@ -122,7 +122,6 @@ def test_a_small_torus_blend_is_refitted_onto_its_boss_and_plate() -> None:
     """A 2 mm fillet at the foot of a 12 mm boss, seen as 40 points: its free fit (the kind of a corpus blend of a
     few pixels) has its ring 4 mm too large and its centre 3.6 mm off. Refitted as a blend tangent to the boss and
     the plate (only the minor radius free): both radii within 0.2 mm and the centre within 0.2 mm."""
-    from v2c.fit.tangency import adjacent_terms  # noqa: F401 - the stage's adjacency; here given directly
     from v2c.primitives import Torus
 
     rng = np.random.default_rng(RNG_SEED)

@@ -130,6 +130,24 @@ def _coaxial_torus(t: np.ndarray, o: np.ndarray, a: np.ndarray, rc: float, s_rad
     return Torus(o + float(t[0]) * a, a, rc + s_rad * r, r)
 
 
+def _parallel_cylinders(
+    prim: Torus, neighbours: Sequence[Primitive], cos_par: float
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """(point on the axis, unit axis turned along ``prim``'s, radius) of each neighbouring cylinder whose axis is
+    parallel to ``prim``'s (|cos| at least ``cos_par``)."""
+    a0 = prim.axis
+    return [
+        (np.asarray(q.origin, float), unit(q.axis * (1.0 if q.axis @ a0 >= 0 else -1.0)), float(q.radius))
+        for q in neighbours
+        if isinstance(q, Cylinder) and abs(q.axis @ a0) >= cos_par
+    ]
+
+
+def _cos_par(sin_par: float) -> float:
+    """The cosine of the parallel tolerance whose sine is ``sin_par``."""
+    return float(np.sqrt(max(0.0, 1.0 - sin_par * sin_par)))
+
+
 def _torus_models(
     prim: Torus, neighbours: Sequence[Primitive], sin_par: float
 ) -> list[tuple[str, Callable[[np.ndarray], Primitive], np.ndarray]]:
@@ -138,22 +156,21 @@ def _torus_models(
     only the minor radius free), or tangent to the cylinder alone ("coaxial torus": the height along the axis
     free too); both sides of each, started from ``prim``'s minor radius and height, most constrained first."""
     out: list[tuple[str, Callable[[np.ndarray], Primitive], np.ndarray]] = []
-    c0, a0 = np.asarray(prim.origin, float), prim.axis
+    c0 = np.asarray(prim.origin, float)
     r0 = max(float(prim.minor_radius), 1e-6)
-    cos_par = float(np.sqrt(max(0.0, 1.0 - sin_par * sin_par)))
-    cyls = [q for q in neighbours if isinstance(q, Cylinder) and abs(q.axis @ a0) >= cos_par]
-    planes = [q for q in neighbours if isinstance(q, Plane) and abs(q.normal_vec @ a0) >= cos_par]
-    for q in cyls:  # the free fit's centre is not asked to lie on the cylinder's axis: on a small blend it is
-        # the free fit's centre that goes wrong; the fit to the points decides
-        o, a, rc = np.asarray(q.origin, float), unit(q.axis * (1.0 if q.axis @ a0 >= 0 else -1.0)), float(q.radius)
+    cos_par = _cos_par(sin_par)
+    # the free fit's centre is not asked to lie on the cylinder's axis: on a small blend it is the free fit's
+    # centre that goes wrong; the fit to the points decides
+    cyls = _parallel_cylinders(prim, neighbours, cos_par)
+    planes = [q for q in neighbours if isinstance(q, Plane) and abs(q.normal_vec @ prim.axis) >= cos_par]
+    for o, a, rc in cyls:
         for p in planes:
             h = float((np.asarray(p.origin, float) - o) @ a)
             for s_rad in (1.0, -1.0):
                 for s_ax in (1.0, -1.0):
                     make = partial(_blend_torus, o=o, a=a, h=h, rc=rc, s_rad=s_rad, s_ax=s_ax)
                     out.append(("torus blend", make, np.array([r0])))
-    for q in cyls:
-        o, a, rc = np.asarray(q.origin, float), unit(q.axis * (1.0 if q.axis @ a0 >= 0 else -1.0)), float(q.radius)
+    for o, a, rc in cyls:
         for s_rad in (1.0, -1.0):
             make = partial(_coaxial_torus, o=o, a=a, rc=rc, s_rad=s_rad)
             out.append(("coaxial torus", make, np.array([float((c0 - o) @ a), r0])))
@@ -164,15 +181,12 @@ def _already_blend(prim: Torus, neighbours: Sequence[Primitive], sin_par: float,
     """Whether torus ``prim`` already lies on a neighbouring cylinder's axis, tangent to it: its centre within
     ``tol`` (metres) of that cylinder's axis line and its ring radius within ``tol`` of the cylinder's radius plus
     or minus its tube's, the axes parallel (within ``sin_par``)."""
-    c0, a0 = np.asarray(prim.origin, float), prim.axis
-    cos_par = float(np.sqrt(max(0.0, 1.0 - sin_par * sin_par)))
-    for q in neighbours:
-        if not isinstance(q, Cylinder) or abs(q.axis @ a0) < cos_par:
+    c0 = np.asarray(prim.origin, float)
+    for o, a, rc in _parallel_cylinders(prim, neighbours, _cos_par(sin_par)):
+        d = c0 - o
+        if np.linalg.norm(d - (d @ a) * a) > tol:
             continue
-        d = c0 - np.asarray(q.origin, float)
-        if np.linalg.norm(d - (d @ q.axis) * q.axis) > tol:
-            continue
-        if min(abs(prim.radius - (q.radius + s * prim.minor_radius)) for s in (1.0, -1.0)) <= tol:
+        if min(abs(prim.radius - (rc + s * prim.minor_radius)) for s in (1.0, -1.0)) <= tol:
             return True
     return False
 

@@ -174,10 +174,21 @@ def finish_mesh(
     p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
     facing_away = np.einsum("ij,ij->i", np.cross(p1 - p0, p2 - p0), p0) > 0
     tri[facing_away] = tri[facing_away][:, [0, 2, 1]]
+    return _compacted(verts, tri)
+
+
+def _compacted(verts: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices the triangles use, in order, and the triangles renumbered onto them."""
     used = np.unique(tri)
     remap = np.full(len(verts), -1, np.int64)
     remap[used] = np.arange(len(used))
     return verts[used], remap[tri]
+
+
+def triangle_areas(verts: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(M,) areas of the triangles ``tri`` (M, 3) of ``verts`` (square metres for metres)."""
+    p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
+    return 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
 
 
 def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -185,7 +196,7 @@ def sample_surface(vertices: np.ndarray, triangles: np.ndarray, n: int, rng: np.
     if len(triangles) == 0 or n <= 0:
         return np.zeros((0, 3))
     p0, p1, p2 = (vertices[triangles[:, k]] for k in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
+    area = triangle_areas(vertices, triangles)
     if area.sum() <= 0:
         return np.zeros((0, 3))
     t = rng.choice(len(triangles), n, p=area / area.sum())
@@ -277,9 +288,7 @@ def drop_stray_islands(
     k, comp = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False)
     if k < 2:
         return verts, tri
-    p0, p1, p2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
-    area = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
-    piece_area = np.bincount(comp[tri[:, 0]], weights=area, minlength=k)
+    piece_area = np.bincount(comp[tri[:, 0]], weights=triangle_areas(verts, tri), minlength=k)
     main = int(np.argmax(piece_area))
     drop = np.zeros(k, bool)
     for c in np.flatnonzero(piece_area <= max_share * piece_area.sum()):  # loop over small pieces
@@ -287,11 +296,7 @@ def drop_stray_islands(
             drop[c] = True
     if not drop.any():
         return verts, tri
-    tri = tri[~drop[comp[tri[:, 0]]]]
-    used = np.unique(tri)
-    remap = np.full(n, -1, np.int64)
-    remap[used] = np.arange(len(used))
-    return verts[used], remap[tri]
+    return _compacted(verts, tri[~drop[comp[tri[:, 0]]]])
 
 
 def _split_triangles(tri: np.ndarray, mids: np.ndarray) -> np.ndarray:
