@@ -96,9 +96,65 @@ def test_the_depth_regions_are_asked_for_only_when_a_plane_instance_is_not_one_p
 
     depth = _tilted_plane(np.random.default_rng(5))
     one = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 0.9])
-    assert not needs_regions(one, depth, K)
+    gated = VerifyConfig(gate_far_share=0.1)
+    assert not needs_regions(one, depth, K, gated)
     stepped = depth.copy()
     stepped[:, 100:] += 0.005  # a 5 mm step under the same plane label: 38 % of its points off its plane
-    assert needs_regions(one, stepped, K)
+    assert needs_regions(one, stepped, K, gated)
     assert not needs_regions(one, stepped, K, VerifyConfig(enabled=False))
-    assert needs_regions(one, depth, K, VerifyConfig(gate_far_share=0.0))  # 0: always
+    assert needs_regions(one, depth, K)  # the default, gate_far_share 0: always (the merges need the regions)
+
+
+def test_a_printed_piece_read_two_noise_sigmas_off_its_plane_joins_it() -> None:
+    depth = _tilted_plane(np.random.default_rng(6))
+    learned = np.ones((H, W), np.int32)
+    learned[40:80, 60:110] = 2  # printed art the network cut out, read 0.8 mm off the board (about 2 sigmas)
+    depth[learned == 2] += 0.0008
+    seg = _seg(learned, [0, PLANE_Z, CYL_Z], [0, 0.9, 0.45])
+    depth_seg = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 1.0], "geometric")
+    out = verify_instances(seg, depth_seg, depth, K)
+    assert out.num_instances == 1 and list(out.labels) == [0, PLANE_Z]
+    # within 1.5 sigmas only (the setting before) it stays a face of its own
+    strict = verify_instances(seg, depth_seg, depth, K, VerifyConfig(merge_sigma=1.5))
+    assert strict.num_instances == 2
+
+
+K_CAN = np.array([[600.0, 0.0, 80.0], [0.0, 600.0, 60.0], [0.0, 0.0, 1.0]])
+CAN_R, CAN_Z = 0.05, 0.55  # a can's side: radius 50 mm, axis along the image's y at 0.55 m
+
+
+def _can_side(rng: np.random.Generator) -> np.ndarray:
+    """Depth (metres) of the near side of the cylinder x^2 + (z - CAN_Z)^2 = CAN_R^2 (axis along camera y), with
+    Gaussian noise NOISE_M; 0 where a ray misses it or meets it within 10 px of its silhouette."""
+    t = (np.arange(W, dtype=float) - K_CAN[0, 2]) / K_CAN[0, 0]  # x / z of each column's rays
+    disc = CAN_Z**2 - (1 + t**2) * (CAN_Z**2 - CAN_R**2)
+    z = np.where(disc > 0, (CAN_Z - np.sqrt(np.maximum(disc, 0.0))) / (1 + t**2), 0.0)
+    half = CAN_R / CAN_Z * K_CAN[0, 0] - 10  # columns kept off the grazing silhouette
+    z[np.abs(np.arange(W) - K_CAN[0, 2]) > half] = 0.0
+    depth = np.repeat(z[None, :], H, 0)
+    return np.where(depth > 0, depth + rng.normal(0.0, NOISE_M, depth.shape), 0.0)
+
+
+def test_pieces_of_one_cylinder_merge_into_a_cylinder_and_a_sure_blend_stays_apart() -> None:
+    depth = _can_side(np.random.default_rng(7))
+    cols = np.arange(W)[None, :].repeat(H, 0)
+    on = depth > 0
+    # the network cut the can's side at its label's bands: a cone, a cylinder and a torus, all unsure
+    learned = np.where(on, 1 + (cols >= 65).astype(np.int32) + (cols >= 95).astype(np.int32), 0)
+    cone, torus = label_of("cone", "U"), label_of("torus", "U")
+    depth_seg = _seg(on.astype(np.int32), [0, CYL_Z], [0, 0.5], "geometric")  # the depth: one cylinder region
+    seg = _seg(learned, [0, cone, CYL_Z, torus], [0, 0.42, 0.56, 0.58])
+    out = verify_instances(seg, depth_seg, depth, K_CAN)
+    assert out.num_instances == 1 and np.array_equal(out.instances > 0, on)
+    assert list(out.labels) == [0, CYL_Z] and out.scores[1] >= 0.6  # a cylinder label the fit stage keeps
+    # a torus the network is sure of (a blend beside a shaft) keeps its face; the other two merge
+    sure = _seg(learned, [0, cone, CYL_Z, torus], [0, 0.42, 0.56, 0.93])
+    out = verify_instances(sure, depth_seg, depth, K_CAN)
+    assert out.num_instances == 2 and np.array_equal(out.instances == out.instances[0, 100], learned == 3)
+    # two pieces the network is sure are cylinders (a shaft's coaxial sections a small radius step apart, which
+    # one depth region spans) stay apart, and so does the unsure piece beside them
+    two = _seg(learned, [0, CYL_Z, CYL_Z, torus], [0, 0.97, 0.97, 0.4])
+    assert verify_instances(two, depth_seg, depth, K_CAN).num_instances == 3
+    # without the cylinder merge the three pieces stay
+    off = verify_instances(seg, depth_seg, depth, K_CAN, VerifyConfig(merge_cylinders=False))
+    assert off.num_instances == 3
