@@ -100,6 +100,9 @@ def test_a_face_occt_cannot_mesh_is_caught() -> None:
     built = build_brep(box_corner(), CAMERA)
     assert built.faces and all(meshes(f, 0.05, 0.2) for f in built.faces.values())
     assert not built.fallback_faces
+    # drawn whole: the triangulation of a plain face covers its exact area (within 2 %), never more than it
+    assert all(meshes(f, 0.05, 0.2, min_share=0.98) for f in built.faces.values())
+    assert not any(meshes(f, 0.05, 0.2, min_share=1.02) for f in built.faces.values())
 
 
 def test_readback_counts_faces_the_mesher_leaves_short() -> None:
