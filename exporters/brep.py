@@ -49,7 +49,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS
 from exporters.brep_config import BrepConfig
 from exporters.brep_edges import EdgeBuilder
 from exporters.brep_faces import FaceBuilder, edges_of
-from exporters.brep_outline import OutlineBuilder, mesh_area
+from exporters.brep_outline import OutlineBuilder, mesh_area, mesh_centroid
 from exporters.frames import FrameMap
 from exporters.polygons import connected_groups
 
@@ -111,19 +111,6 @@ def face_centroid(face: TopoDS_Shape) -> np.ndarray:
     props = GProp_GProps()
     BRepGProp.SurfaceProperties_s(face, props, AREA_REL_PRECISION)
     return np.array(props.CentreOfMass().Coord(), float)
-
-
-def mesh_centroid(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
-    """Area-weighted centroid (3,) of a triangle mesh, in the vertices' units; None for an empty mesh."""
-    v = np.asarray(vertices, float).reshape(-1, 3)
-    t = np.asarray(triangles, np.int64).reshape(-1, 3)
-    if not len(t):
-        return None
-    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
-    w = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    if w.sum() <= 0:
-        return None
-    return ((a + b + c) / 3.0 * w[:, None]).sum(axis=0) / w.sum()
 
 
 def part_box(vbrep: VBRep, fmap: FrameMap, margin_rel: float) -> tuple[np.ndarray, np.ndarray] | None:

@@ -50,9 +50,10 @@ class BrepConfig:
     # docs/step.md. It was 0.5 until 2026-11-28 (wild loops only), which kept 62 % of the faces within 2 %.
     area_tol_rel: float = 0.02
     # ... and when the centre of the area it bounds lies within this fraction of the square root of its mesh area
-    # from its mesh's centre: loops can bound the right area in the wrong place (real frame ycb_video_000005 with
-    # its ROI: the box's top, 12,825 of 13,046 mm², covered 11 % of its pixels within 3 mm; its mesh 98 %). Two
-    # regions whose areas agree within 2 % and that overlap have centres a few hundredths of that apart; not tuned
+    # from its mesh's centre: loops that bound the right area in the wrong place. Added while chasing the real
+    # frame ycb_video_000005 with its ROI, whose box top was in fact drawn short by OCCT's mesher (the whole-drawn
+    # check below fixed it); this check has not been seen to fire on any bench scan. Two regions whose areas agree
+    # within 2 % and that overlap have centres a few hundredths of that apart; not tuned
     placement_tol_rel: float = 0.1
     # The part's box: the span of every face's mesh (the measured, clipped part) plus this fraction of the part
     # size on every side. No face or free edge of the file lies outside it.

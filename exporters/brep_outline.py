@@ -53,6 +53,16 @@ def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
     return float(_triangle_areas(vertices, triangles).sum())
 
 
+def mesh_centroid(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
+    """Area-weighted centroid (3,) of a triangle mesh, in the vertices' units; None for a mesh of no area."""
+    w = _triangle_areas(vertices, triangles)
+    if w.sum() <= 0:
+        return None
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    t = np.asarray(triangles, int).reshape(-1, 3)
+    return (v[t].mean(axis=1) * w[:, None]).sum(axis=0) / w.sum()
+
+
 def _smallest_within(areas: list[float], below: float, budget: float, keep: int = 0) -> set[int]:
     """Indices of ``areas`` to drop: those under ``below``, smallest first, as long as together they stay within
     ``budget`` (the same units squared) and at least ``keep`` are left."""

@@ -129,10 +129,16 @@ def plane_regions(depth_seg: Segmentation, pts: np.ndarray, valid: np.ndarray, c
         if len(x) < cfg.region_min_px:
             continue
         n, d = _plane(x, cfg.trim_sigma)
-        sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-        if is_plane[g] or mad_sigma(x @ n - d) <= cfg.region_sigma * sigma:
+        if is_plane[g] or _within_noise(x, x @ n - d, cfg):
             out.append(_Region(m, n, d))
     return out
+
+
+def _within_noise(x: np.ndarray, residuals: np.ndarray, cfg: VerifyConfig) -> bool:
+    """Whether the robust sigma of ``residuals`` (metres) of points ``x`` is within region_sigma sensor sigmas
+    (noise_sigma_coeff z^2 at their median depth)."""
+    sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
+    return mad_sigma(residuals) <= cfg.region_sigma * sigma
 
 
 def cylinder_regions(
@@ -161,14 +167,13 @@ def cylinder_regions(
             continue
         x = ip.points
         n, d = _plane(x, cfg.trim_sigma)
-        sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-        if mad_sigma(x @ n - d) <= cfg.region_sigma * sigma:
+        if _within_noise(x, x @ n - d, cfg):
             continue  # flat: a plane region
         got = ransac_fit("cylinder", x, ip.normals, size, ransac, rng)
         if got is None or not isinstance(got.primitive, Cylinder):
             continue
         cyl = refine_primitive(got.primitive, x[got.inliers], size, ransac) if got.inliers.sum() >= 6 else got.primitive
-        if mad_sigma(cyl.signed_distance(x)) <= cfg.region_sigma * sigma:
+        if _within_noise(x, cyl.signed_distance(x), cfg):
             out.append(_CylinderRegion(m, cyl))
     return out
 
@@ -339,16 +344,14 @@ def merge_by_cylinder_regions(
     groups = _groups_inside(seg, cylinders, sure & ~is_cyl, pts, valid, cfg, anchors=sure & is_cyl)
     if not groups:
         return seg
-    inst = np.asarray(seg.instances, np.int32)
-    out = _relabel(seg, inst, groups, is_cyl, unkept_label=label_of("cylinder", "U"))
     # the depth showed one cylinder that explains every member within the noise: the merged instance is a
     # cylinder at least at cylinder_label_score (the fit stage then fits that type instead of searching for one
-    # that also fits the sensor's correlated error, a cone or a torus)
-    scores = np.array(out.scores, np.float32)
-    for g in groups:  # loop over merged groups: the id each one became
-        new = int(np.bincount(out.instances[inst == g[0]].ravel()).argmax())
-        scores[new] = max(float(scores[new]), cfg.cylinder_label_score)
-    return Segmentation(out.instances, out.labels, scores, out.method)
+    # that also fits the sensor's correlated error, a cone or a torus); the member it merges into keeps its score
+    scores = np.array(seg.scores, np.float32)
+    members = [i for g in groups for i in g]
+    scores[members] = np.maximum(scores[members], cfg.cylinder_label_score)
+    seg = Segmentation(seg.instances, seg.labels, scores, seg.method)
+    return _relabel(seg, np.asarray(seg.instances, np.int32), groups, is_cyl, unkept_label=label_of("cylinder", "U"))
 
 
 def needs_regions(seg: Segmentation, depth: np.ndarray, K: np.ndarray, cfg: VerifyConfig = VerifyConfig()) -> bool:
