@@ -158,3 +158,42 @@ def test_pieces_of_one_cylinder_merge_into_a_cylinder_and_a_sure_blend_stays_apa
     # without the cylinder merge the three pieces stay
     off = verify_instances(seg, depth_seg, depth, K_CAN, VerifyConfig(merge_cylinders=False))
     assert off.num_instances == 3
+
+
+def test_printed_art_the_network_calls_a_cylinder_joins_the_plane_it_lies_flat_on() -> None:
+    depth = _tilted_plane(np.random.default_rng(8))
+    learned = np.ones((H, W), np.int32)
+    learned[30:90, 50:110] = 2  # a printed band the network calls a cylinder, fairly surely, read 0.4 mm off
+    depth[learned == 2] += 0.0004
+    depth_seg = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 1.0], "geometric")
+    seg = _seg(learned, [0, PLANE_Z, CYL_Z], [0, 0.6, 0.65])
+    out = verify_instances(seg, depth_seg, depth, K)
+    assert out.num_instances == 1 and list(out.labels) == [0, PLANE_Z]
+    # a label that certain (as the fit stage's nested_label_certain) is not overruled by the depth
+    certain = _seg(learned, [0, PLANE_Z, CYL_Z], [0, 0.6, 0.92])
+    assert verify_instances(certain, depth_seg, depth, K).num_instances == 2
+    # nor is a curved face the larger one: there is no plane face for it to join
+    larger = _seg(np.where(learned == 2, 2, 1), [0, CYL_Z, PLANE_Z], [0, 0.65, 0.6])
+    assert verify_instances(larger, depth_seg, depth, K).num_instances == 2
+    # nor a patch too small for its flatness to say anything (under flat_min_px valid pixels: 10 x 10 here)
+    small = np.ones((H, W), np.int32)
+    small[50:60, 70:80] = 2
+    small_seg = _seg(small, [0, PLANE_Z, CYL_Z], [0, 0.6, 0.65])
+    assert verify_instances(small_seg, depth_seg, depth, K).num_instances == 2
+    assert verify_instances(small_seg, depth_seg, depth, K, VerifyConfig(flat_min_px=50)).num_instances == 1
+    # and the rule can be switched off
+    off = verify_instances(seg, depth_seg, depth, K, VerifyConfig(merge_flat_curved=False))
+    assert off.num_instances == 2
+
+
+def test_a_curved_strip_whose_depth_is_not_flat_keeps_its_face() -> None:
+    depth = _tilted_plane(np.random.default_rng(9))
+    learned = np.ones((H, W), np.int32)
+    learned[30:90, 50:110] = 2
+    u = np.arange(W, dtype=float)[None, :].repeat(H, 0)
+    wave = 0.0012 * np.cos((u - 50.0) / 60.0 * 2.0 * np.pi)  # a ridge and two flutes, 1.2 mm (3 sigmas): not flat
+    depth[learned == 2] += wave[learned == 2]
+    depth_seg = _seg(np.ones((H, W)), [0, PLANE_Z], [0, 1.0], "geometric")
+    seg = _seg(learned, [0, PLANE_Z, CYL_Z], [0, 0.6, 0.65])
+    out = verify_instances(seg, depth_seg, depth, K)
+    assert out.num_instances == 2 and np.array_equal(out.instances, learned)

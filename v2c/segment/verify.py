@@ -16,6 +16,13 @@ the depth says one surface, whatever is printed on it. This step uses those regi
   says one surface, so a printed edge never splits it. ``merge_sigma`` is 2.5: a real structured-light sensor
   reads printed art a millimetre or two off the board it is printed on (the sugar box's printed pieces lie 1.6-2.2
   sensor sigmas off its side's plane, median), which 1.5 kept apart;
+- **printed art labelled curved** (``merge_flat_curved``): a curved-labelled instance the network is fairly sure of
+  (score from ``merge_curved_score`` up to ``merge_certain_score``) still joins the region's largest plane-labelled
+  member when it is the smaller of the two and the region's plane explains it within the noise: median distance within
+  ``merge_sigma`` and robust residual sigma about that median within ``region_sigma`` sensor sigmas (flat, not only
+  near), and it holds at least ``flat_min_px`` valid pixels. On the real frames the network calls printed bands on box
+  sides cylinders and cones at 0.6-0.7; a true shallow cylinder or fillet has a side that bends away from the plane,
+  and a label as certain as ``merge_certain_score`` (the fit stage's ``nested_label_certain``) is not overruled;
 - **merge along cylinders** (``merge_cylinders``): the same for the depth's cylinder regions (regions the
   geometric segmenter labels cylinder or cone, not flat within the noise, that one fitted cylinder explains
   within ``region_sigma`` sensor sigmas): instances inside one and on its cylinder become one cylinder-labelled
@@ -80,6 +87,16 @@ class VerifyConfig:
     merge_cylinders: bool = True  # also merge the instances inside one cylinder region of the depth and on its
     # cylinder (`merge_by_cylinder_regions`): printed bands cut a can's side into pieces the network calls cones
     # and tori
+    merge_flat_curved: bool = True  # an instance labelled curved at merge_curved_score or more still joins a
+    # plane region's largest plane-labelled member when the region's plane explains it within the noise (robust
+    # sigma about its median within region_sigma, median within merge_sigma) and it is the smaller one
+    # (`_flat_curved_pairs`)
+    merge_certain_score: float = 0.9  # ... unless its label is at least this probable ([0, 1]; as
+    # FitConfig.nested_label_certain: a label that certain is not tested against the simpler type either)
+    flat_min_px: int = 150  # ... or it holds fewer valid pixels than this: on a small patch the depth's flatness
+    # is no evidence against the label (pixels). Chosen on validation (learned, full; 8 -> 150): in-family seed
+    # 9000 lost two true curved strips of 22 and 122 px (a fillet tangent to its plane) and gained a torus of
+    # 296 px; the corpus-val split changes on one scan either way
     cylinder_label_score: float = 0.6  # ... and the merged instance, a cylinder label, scores at least this
     # ([0, 1]; FitConfig.label_score_min: a label the fit stage keeps)
     gate_far_sigma: float = 3.0  # the depth regions are computed only when some plane-labelled instance has more
@@ -315,6 +332,51 @@ def _groups_inside(
     return [g for g in sets.groups() if len(g) > 1]
 
 
+def _flat_curved_pairs(
+    seg: Segmentation,
+    regions: list[_Region],
+    sure_curved: np.ndarray,
+    is_plane: np.ndarray,
+    pts: np.ndarray,
+    valid: np.ndarray,
+    cfg: VerifyConfig,
+) -> list[list[int]]:
+    """[anchor, curved] pairs: an instance labelled curved at a score of at least merge_curved_score (and under
+    merge_certain_score) with at least flat_min_px valid pixels that lies inside a plane region (merge_inside_share
+    of its valid pixels) whose plane explains it within the noise (robust residual sigma about their median within
+    region_sigma and median distance within merge_sigma sensor sigmas: flat, and off the plane by no more than
+    printed art reads off its board), paired with the region's largest plane-labelled member (inside and on the
+    plane as in `_groups_inside`) when that member has more valid pixels than it (module docstring: printed art the
+    network calls a cylinder)."""
+    inst = seg.instances
+    scores = np.asarray(seg.scores)
+    pairs: list[list[int]] = []
+    for r in regions:  # loop over plane regions
+        inside = np.unique(inst[r.mask])
+        anchor, anchor_px, curved = -1, 0, []
+        for i in inside[inside > 0]:  # loop over the instances it touches
+            m = (inst == i) & valid
+            n_valid = int(m.sum())
+            if n_valid < cfg.merge_min_px or (m & r.mask).sum() < cfg.merge_inside_share * n_valid:
+                continue
+            x = pts[m]
+            res = x @ r.normal - r.offset
+            sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
+            if float(np.median(np.abs(res))) > cfg.merge_sigma * sigma:
+                continue
+            if is_plane[i] and n_valid > anchor_px:
+                anchor, anchor_px = int(i), n_valid
+            elif (
+                sure_curved[i]
+                and scores[i] < cfg.merge_certain_score
+                and n_valid >= cfg.flat_min_px
+                and _within_noise(x, res - np.median(res), cfg)
+            ):
+                curved.append((int(i), n_valid))
+        pairs += [[anchor, i] for i, n in curved if anchor > 0 and n < anchor_px]
+    return pairs
+
+
 def merge_by_regions(
     seg: Segmentation, regions: list[_Region], pts: np.ndarray, valid: np.ndarray, cfg: VerifyConfig
 ) -> Segmentation:
@@ -323,6 +385,14 @@ def merge_by_regions(
     sure_curved = ~is_plane & (np.asarray(seg.scores) >= cfg.merge_curved_score)
     planes = [(r.mask, lambda x, r=r: np.abs(x @ r.normal - r.offset)) for r in regions]
     groups = _groups_inside(seg, planes, sure_curved, pts, valid, cfg)
+    if cfg.merge_flat_curved:
+        pairs = _flat_curved_pairs(seg, regions, sure_curved, is_plane, pts, valid, cfg)
+        if pairs:
+            sets = UnionFind([int(i) for i in seg.instance_ids()])
+            for g in groups + pairs:  # loop over the groups and pairs: one partition
+                for other in g[1:]:
+                    sets.union(g[0], other)
+            groups = [g for g in sets.groups() if len(g) > 1]
     if not groups:
         return seg
     return _relabel(seg, np.asarray(seg.instances, np.int32), groups, is_plane, unkept_label=label_of("plane", "U"))
