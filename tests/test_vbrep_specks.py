@@ -70,3 +70,30 @@ def test_a_speck_on_a_box_edge_leaves_the_edge_whole():
     assert np.min(np.linalg.norm(a + t[:, None] * (b - a) - [u, v], axis=1)) < 3.0  # it runs past the speck
     # both faces are meshed from their loops, which run across the speck (its pixels are covered, as the part's)
     assert {f.id for f in vb.faces if f.instance in (1, 2)} <= set(vb.meta["extract"]["loop_meshes"])
+
+
+def test_a_stray_island_of_a_face_goes_to_the_face_around_it():
+    # face 1 left, face 2 right; four pixels of face 1 stray inside face 2 (a 2 x 2 island), and a 30-pixel
+    # piece of face 1 inside face 2 too (a piece as large as island_max_px or more is the face's own)
+    from v2c.vbrep.faces import absorb_islands
+
+    inst = np.zeros((30, 40), np.int32)
+    inst[2:28, 2:20] = 1
+    inst[2:28, 20:38] = 2
+    inst[6:8, 28:30] = 1  # the island
+    inst[15:20, 25:31] = 1  # a 30 px piece
+    stats: dict = {}
+    out = absorb_islands(inst, {1, 2}, VBRepConfig(), stats)
+    assert stats["islands_absorbed"] == 1
+    assert (out[6:8, 28:30] == 2).all()
+    assert (out[15:20, 25:31] == 1).all()
+    changed = out != inst
+    assert changed.sum() == 4
+    # nothing moves with the rule off, or where no other faced instance lies within reach
+    off = absorb_islands(inst, {1, 2}, VBRepConfig(island_max_px=0), stats)
+    assert (off == inst).all() and stats["islands_absorbed"] == 0
+    alone = np.zeros((30, 40), np.int32)
+    alone[2:28, 2:20] = 1
+    alone[10:12, 30:32] = 1  # an island in the background, 10 px from any face
+    alone[2:28, 36:39] = 2
+    assert (absorb_islands(alone, {1, 2}, VBRepConfig(), {}) == alone).all()

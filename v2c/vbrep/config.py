@@ -100,6 +100,11 @@ class VBRepConfig:
     # --- faces the geometry stage left without a primitive
     fallback_min_px: int = 10  # pixels: such an instance this large gets a least-squares plane through its depth
     #                            points and its boundaries lifted onto its fitted neighbours (else: background)
+    island_max_px: int = 25  # pixels: a connected piece of a faced instance, not its largest, smaller than this
+    #                           goes to the faced instance around it (within speck_reach_px; `faces.absorb_islands`;
+    #                           0: off) ...
+    island_max_share: float = 0.05  # ... and than this share of the instance's pixels (a piece of a small face,
+    #                                 split by noise, stays its own)
     speck_reach_px: float = 3.0  # pixels: a smaller instance without a face (a speck) is merged into the faced
     #                              instances nearest its pixels, within this (a speck of up to 9 px lies within
     #                              2 px of its outline), and the edge graph rebuilt (`faces.absorb_specks`)

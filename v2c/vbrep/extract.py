@@ -26,11 +26,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from v2c.segment.graph import build_edge_graph
 from v2c.vbrep.assemble import assemble
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.context import ExtractContext, depth_window
 from v2c.vbrep.edges import edge_protos
-from v2c.vbrep.faces import absorb_specks, face_geoms
+from v2c.vbrep.faces import absorb_islands, absorb_specks, face_geoms
 from v2c.vbrep.model import VBRep
 from v2c.vbrep.postprocess import ProtoEdge, postprocess
 from v2c.vbrep.topology import drop_degenerate, snap_to_surfaces
@@ -57,9 +58,12 @@ def extract_vbrep(scan: Scan, seg: Segmentation, fit: FitResult, config: VBRepCo
     faces, sheets = face_geoms(fit, seg, depth, K, window, scale, cfg, stats)
     gap_thr = max(cfg.int_gap * scale, cfg.int_gap_min_m)
     # specks: instances too small for a face merge into their faced neighbours, so they leave no junction clutter
-    instances, graph = absorb_specks(np.asarray(seg.instances), fit.graph, set(faces), cfg, stats)
+    # islands: stray pieces of a faced instance go to the faced instance around them, in the edges and the meshes
+    regions = absorb_islands(np.asarray(seg.instances), set(faces), cfg, stats)
+    graph = fit.graph if stats["islands_absorbed"] == 0 else build_edge_graph(regions, cfg.graph_simplify_px)
+    instances, graph = absorb_specks(regions, graph, set(faces), cfg, stats)
     ctx = ExtractContext(faces, sheets, K, window, scale, gap_thr, depth, instances, cfg, stats)
-    ctx.regions = np.asarray(seg.instances)  # a face's mesh and measures keep its own pixels
+    ctx.regions = regions  # a face's mesh and measures keep its own pixels
     # 2. edges: typed, split and lifted
     protos: list[ProtoEdge] = []
     for gi, ge in enumerate(graph.edges):

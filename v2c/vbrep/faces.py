@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+import cv2
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
@@ -348,6 +349,39 @@ def face_geoms(
     _add_fallbacks(fs, seg, fit, scale)
     stats["rejected_primitives"] = rejected
     return fs.faces, fs.sheets
+
+
+def absorb_islands(instances: np.ndarray, faced: set[int], cfg: VBRepConfig, stats: dict) -> np.ndarray:
+    """The instance map with every island of a faced instance (a connected piece, 8-connected, other than its
+    largest, of fewer than ``island_max_px`` pixels and than ``island_max_share`` of the instance's) given to the
+    other faced instances nearest its pixels (within ``speck_reach_px``); pieces out of that reach stay. Such
+    islands are stray pixels of the segmentation (a few pixels of a box's top left among its side's); as a face's
+    they become mesh islands, and in the STEP faces of their own beside it. ``stats["islands_absorbed"]``: how many
+    pieces moved."""
+    inst = np.asarray(instances)
+    stats["islands_absorbed"] = 0
+    if cfg.island_max_px <= 0 or len(faced) < 2:
+        return inst
+    is_island = np.zeros(inst.shape, bool)
+    for i in sorted(faced):  # loop over faced instances
+        m = (inst == i).astype(np.uint8)
+        n, lab, st, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+        if n <= 2:
+            continue
+        area = st[1:, cv2.CC_STAT_AREA]
+        cap = min(cfg.island_max_px, cfg.island_max_share * float(area.sum()))
+        small = [k + 1 for k in range(n - 1) if k != int(np.argmax(area)) and area[k] < cap]
+        if small:
+            is_island |= np.isin(lab, small)
+            stats["islands_absorbed"] += len(small)
+    if not is_island.any():
+        return inst
+    owner = np.isin(inst, sorted(faced)) & ~is_island
+    dist, (iy, ix) = distance_transform_edt(~owner, return_indices=True)
+    take = is_island & (dist <= cfg.speck_reach_px)
+    out = inst.copy()
+    out[take] = inst[iy[take], ix[take]]
+    return out
 
 
 def absorb_specks(
