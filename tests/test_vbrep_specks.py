@@ -89,6 +89,10 @@ def test_a_stray_island_of_a_face_goes_to_the_face_around_it():
     assert (out[15:20, 25:31] == 1).all()
     changed = out != inst
     assert changed.sum() == 4
+    # a segmentation certain of the instance (the ground truth's score 1) keeps its pieces: a face seen in pieces
+    kept = absorb_islands(inst, {1, 2}, VBRepConfig(), stats, np.array([0.0, 1.0, 0.9]))
+    assert (kept == inst).all() and stats["islands_absorbed"] == 0
+    assert (absorb_islands(inst, {1, 2}, VBRepConfig(), stats, np.array([0.0, 0.97, 0.9])) == out).all()
     # nothing moves with the rule off, or where no other faced instance lies within reach
     off = absorb_islands(inst, {1, 2}, VBRepConfig(island_max_px=0), stats)
     assert (off == inst).all() and stats["islands_absorbed"] == 0

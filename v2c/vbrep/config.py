@@ -104,7 +104,10 @@ class VBRepConfig:
     #                           goes to the faced instance around it (within speck_reach_px; `faces.absorb_islands`;
     #                           0: off) ...
     island_max_share: float = 0.05  # ... and than this share of the instance's pixels (a piece of a small face,
-    #                                 split by noise, stays its own)
+    #                                 split by noise, stays its own) ...
+    island_keep_score: float = 1.0  # ... and never of an instance scored at least this (the oracle's ground truth,
+    #                                 score 1: a true face seen in pieces; corpus-val oracle recall -0.3 points
+    #                                 and edge-type -0.6 points when its pieces moved)
     speck_reach_px: float = 3.0  # pixels: a smaller instance without a face (a speck) is merged into the faced
     #                              instances nearest its pixels, within this (a speck of up to 9 px lies within
     #                              2 px of its outline), and the edge graph rebuilt (`faces.absorb_specks`)

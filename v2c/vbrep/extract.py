@@ -59,7 +59,7 @@ def extract_vbrep(scan: Scan, seg: Segmentation, fit: FitResult, config: VBRepCo
     gap_thr = max(cfg.int_gap * scale, cfg.int_gap_min_m)
     # specks: instances too small for a face merge into their faced neighbours, so they leave no junction clutter
     # islands: stray pieces of a faced instance go to the faced instance around them, in the edges and the meshes
-    regions = absorb_islands(np.asarray(seg.instances), set(faces), cfg, stats)
+    regions = absorb_islands(np.asarray(seg.instances), set(faces), cfg, stats, np.asarray(seg.scores))
     graph = fit.graph if stats["islands_absorbed"] == 0 else build_edge_graph(regions, cfg.graph_simplify_px)
     instances, graph = absorb_specks(regions, graph, set(faces), cfg, stats)
     ctx = ExtractContext(faces, sheets, K, window, scale, gap_thr, depth, instances, cfg, stats)

@@ -351,19 +351,24 @@ def face_geoms(
     return fs.faces, fs.sheets
 
 
-def absorb_islands(instances: np.ndarray, faced: set[int], cfg: VBRepConfig, stats: dict) -> np.ndarray:
+def absorb_islands(
+    instances: np.ndarray, faced: set[int], cfg: VBRepConfig, stats: dict, scores: np.ndarray | None = None
+) -> np.ndarray:
     """The instance map with every island of a faced instance (a connected piece, 8-connected, other than its
     largest, of fewer than ``island_max_px`` pixels and than ``island_max_share`` of the instance's) given to the
     other faced instances nearest its pixels (within ``speck_reach_px``); pieces out of that reach stay. Such
     islands are stray pixels of the segmentation (a few pixels of a box's top left among its side's); as a face's
     they become mesh islands, and in the STEP faces of their own beside it. ``stats["islands_absorbed"]``: how many
-    pieces moved."""
+    pieces moved. An instance whose score (``scores``, per id) is at least ``island_keep_score`` keeps its pieces:
+    the oracle's ground truth, whose pieces are the true face's."""
     inst = np.asarray(instances)
     stats["islands_absorbed"] = 0
     if cfg.island_max_px <= 0 or len(faced) < 2:
         return inst
     is_island = np.zeros(inst.shape, bool)
     for i in sorted(faced):  # loop over faced instances
+        if scores is not None and i < len(scores) and float(scores[i]) >= cfg.island_keep_score:
+            continue  # a segmentation certain of it (the ground truth's): a face seen in pieces
         m = (inst == i).astype(np.uint8)
         n, lab, st, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
         if n <= 2:
