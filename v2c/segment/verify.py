@@ -151,11 +151,26 @@ def plane_regions(depth_seg: Segmentation, pts: np.ndarray, valid: np.ndarray, c
     return out
 
 
+def _sensor_sigma(x: np.ndarray, cfg: VerifyConfig) -> float:
+    """The sensor's depth sigma (metres) at the median depth of points ``x``: noise_sigma_coeff z^2."""
+    return cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
+
+
 def _within_noise(x: np.ndarray, residuals: np.ndarray, cfg: VerifyConfig) -> bool:
-    """Whether the robust sigma of ``residuals`` (metres) of points ``x`` is within region_sigma sensor sigmas
-    (noise_sigma_coeff z^2 at their median depth)."""
-    sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-    return mad_sigma(residuals) <= cfg.region_sigma * sigma
+    """Whether the robust sigma of ``residuals`` (metres) of points ``x`` is within region_sigma sensor sigmas."""
+    return mad_sigma(residuals) <= cfg.region_sigma * _sensor_sigma(x, cfg)
+
+
+def _inside_points(
+    inst: np.ndarray, i: int, mask: np.ndarray, pts: np.ndarray, valid: np.ndarray, cfg: VerifyConfig
+) -> np.ndarray | None:
+    """The valid points of instance ``i`` when it holds at least merge_min_px of them and merge_inside_share lie
+    in ``mask`` (a region), else None."""
+    m = (inst == i) & valid
+    n_valid = int(m.sum())
+    if n_valid < cfg.merge_min_px or (m & mask).sum() < cfg.merge_inside_share * n_valid:
+        return None
+    return pts[m]
 
 
 def cylinder_regions(
@@ -232,8 +247,7 @@ def _one_surface(
 
     for piece in pieces:  # loop over the pieces the regions cover
         x = pts[piece & valid]
-        sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-        if float(np.median(dist(x))) > cfg.one_surface_sigma * sigma:
+        if float(np.median(dist(x))) > cfg.one_surface_sigma * _sensor_sigma(x, cfg):
             return False
     return True
 
@@ -317,13 +331,8 @@ def _groups_inside(
         inside = np.unique(inst[mask])
         members = []
         for i in inside[inside > 0]:  # loop over the instances it touches
-            m = (inst == i) & valid
-            n_valid = int(m.sum())
-            if excluded[i] or n_valid < cfg.merge_min_px or (m & mask).sum() < cfg.merge_inside_share * n_valid:
-                continue
-            x = pts[m]
-            sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-            if float(np.median(dist(x))) <= cfg.merge_sigma * sigma:
+            x = None if excluded[i] else _inside_points(inst, int(i), mask, pts, valid, cfg)
+            if x is not None and float(np.median(dist(x))) <= cfg.merge_sigma * _sensor_sigma(x, cfg):
                 members.append(int(i))
         if anchors is not None and int(anchors[members].sum()) >= 2:
             continue
@@ -355,15 +364,13 @@ def _flat_curved_pairs(
         inside = np.unique(inst[r.mask])
         anchor, anchor_px, curved = -1, 0, []
         for i in inside[inside > 0]:  # loop over the instances it touches
-            m = (inst == i) & valid
-            n_valid = int(m.sum())
-            if n_valid < cfg.merge_min_px or (m & r.mask).sum() < cfg.merge_inside_share * n_valid:
+            x = _inside_points(inst, int(i), r.mask, pts, valid, cfg)
+            if x is None:
                 continue
-            x = pts[m]
             res = x @ r.normal - r.offset
-            sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-            if float(np.median(np.abs(res))) > cfg.merge_sigma * sigma:
+            if float(np.median(np.abs(res))) > cfg.merge_sigma * _sensor_sigma(x, cfg):
                 continue
+            n_valid = len(x)
             if is_plane[i] and n_valid > anchor_px:
                 anchor, anchor_px = int(i), n_valid
             elif (

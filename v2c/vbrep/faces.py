@@ -359,26 +359,26 @@ def absorb_islands(
     other faced instances nearest its pixels (within ``speck_reach_px``); pieces out of that reach stay. Such
     islands are stray pixels of the segmentation (a few pixels of a box's top left among its side's); as a face's
     they become mesh islands, and in the STEP faces of their own beside it. ``stats["islands_absorbed"]``: how many
-    pieces moved. An instance whose score (``scores``, per id) is at least ``island_keep_score`` keeps its pieces:
-    the oracle's ground truth, whose pieces are the true face's."""
+    pieces moved (one nearest its own instance's other pixels stays, uncounted). An instance whose score
+    (``scores``, per id) is at least ``island_keep_score`` keeps its pieces: the oracle's ground truth, whose pieces
+    are the true face's."""
     inst = np.asarray(instances)
     stats["islands_absorbed"] = 0
     if cfg.island_max_px <= 0 or len(faced) < 2:
         return inst
-    is_island = np.zeros(inst.shape, bool)
+    piece = np.zeros(inst.shape, np.int64)  # 1.. per island, 0 elsewhere
+    count = 0
     for i in sorted(faced):  # loop over faced instances
         if scores is not None and i < len(scores) and float(scores[i]) >= cfg.island_keep_score:
             continue  # a segmentation certain of it (the ground truth's): a face seen in pieces
-        m = (inst == i).astype(np.uint8)
-        n, lab, st, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
-        if n <= 2:
-            continue
+        n, lab, st, _ = cv2.connectedComponentsWithStats((inst == i).astype(np.uint8), connectivity=8)
         area = st[1:, cv2.CC_STAT_AREA]
         cap = min(cfg.island_max_px, cfg.island_max_share * float(area.sum()))
-        small = [k + 1 for k in range(n - 1) if k != int(np.argmax(area)) and area[k] < cap]
-        if small:
-            is_island |= np.isin(lab, small)
-            stats["islands_absorbed"] += len(small)
+        for k in np.flatnonzero(area < cap):  # loop over its small pieces but the largest
+            if k != int(np.argmax(area)):
+                count += 1
+                piece[lab == k + 1] = count
+    is_island = piece > 0
     if not is_island.any():
         return inst
     owner = np.isin(inst, sorted(faced)) & ~is_island
@@ -386,7 +386,9 @@ def absorb_islands(
     take = is_island & (dist <= cfg.speck_reach_px)
     out = inst.copy()
     out[take] = inst[iy[take], ix[take]]
-    return out
+    moved = np.unique(piece[out != inst])
+    stats["islands_absorbed"] = len(moved)
+    return out if len(moved) else inst
 
 
 def absorb_specks(
