@@ -17,6 +17,7 @@ import pytest
 from v2c.camera import backproject
 from v2c.fit import fit_scan
 from v2c.fit.config import FitConfig
+from v2c.fit.stage import _ransac_instances
 from v2c.geometry.points import estimate_part_size, instance_points
 from v2c.geometry.selection import curvature_support, fit_instance, supported
 from v2c.labels import label_of
@@ -288,3 +289,58 @@ def test_partly_seen_cone_is_not_taken_for_a_tilted_cylinder() -> None:
             tilt = np.degrees(np.arccos(min(1.0, abs(float(q.axis_vector[0])))))
             tilted += int(isinstance(q, Cylinder) and abs(tilt - half) < 1.5)
     assert tilted >= 1
+
+
+def torus_depth(major: float, minor: float, z0: float, half_deg: float) -> np.ndarray:
+    """Depth (m) of the camera-facing patch of a torus with its axis along the camera y axis whose outer equator's
+    nearest point is (0, 0, z0): the points within ``half_deg`` of that point around the axis and around the
+    tube, z-buffered from a dense sampling; 0 elsewhere."""
+    a = np.deg2rad(half_deg)
+    u, v = np.meshgrid(np.linspace(-a, a, 1500), np.linspace(-a, a, 1500))  # around the axis, around the tube
+    ring = major + minor * np.cos(v)
+    c = z0 + major + minor  # the axis line x = 0, z = c
+    pts = np.stack([ring * np.sin(u), minor * np.sin(v), c - ring * np.cos(u)], axis=-1).reshape(-1, 3)
+    px = np.round(pts[:, 0] / pts[:, 2] * K[0, 0] + K[0, 2]).astype(int)
+    py = np.round(pts[:, 1] / pts[:, 2] * K[1, 1] + K[1, 2]).astype(int)
+    ok = (px >= 0) & (px < W) & (py >= 0) & (py < H)
+    depth = np.full(H * W, np.inf)
+    np.minimum.at(depth, py[ok] * W + px[ok], pts[ok, 2])
+    depth = depth.reshape(H, W)
+    return np.where(np.isfinite(depth), depth, 0.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_weak_plane_label_lends_no_axis_to_the_curved_type_found(seed: int) -> None:
+    """A torus patch facing the camera (major radius 300 mm, tube 60 mm, 25 degrees either way of its outer
+    equator's nearest point at 0.6 m: a board bowed both ways, its normal the view direction), weakly labelled
+    "plane Z" beside a plane labelled Z that faces the camera too: the type search finds a torus, which does not
+    want frame Z (the plane label's normal) as its axis but decides later ("?"), as the plane instance keeps its
+    label's Z; the fit comes out along the true axis (camera y) within the noise. (On the real lying sugar box the
+    torus held on the plane label's axis kept its inlier count on a loose band and came out 26-49 mm off its
+    points; on this clean patch the constrained fit loses its inliers and the next axis is taken either way.)"""
+    patch = torus_depth(0.3, 0.06, 0.6, 25.0)
+    floor = plane_depth(np.array([0.0, 0.0, -1.0]), 0.75, (200, 20, 440, 100))
+    depth = np.where(patch > 0, patch, floor)
+    inst = np.where(patch > 0, 1, np.where(floor > 0, 2, 0)).astype(np.int32)
+    rng = np.random.default_rng(seed)
+    noisy = np.where(depth > 0, depth + SIGMA_COEFF * depth**2 * rng.standard_normal(depth.shape), 0.0)
+    seg = Segmentation(
+        instances=inst,
+        labels=np.array([0, label_of("plane", "Z"), label_of("plane", "Z")], np.uint8),
+        scores=np.array([0.0, WEAK_SCORE, 0.9], np.float32),
+        method="learned",
+    )
+    cfg = replace(FitConfig(), seed=seed)
+    scan = PatchScan(noisy.astype(np.float32), K, noisy > 0)
+    pts = backproject(scan.depth, K)
+    ipts = instance_points(pts, scan.valid, inst, np.array([1, 2]), cfg)
+    fits = _ransac_instances(ipts, seg, estimate_part_size(pts[scan.valid], cfg.scale_trim), cfg)
+    assert fits.prims[1].type == "torus" and fits.want[1] == "?", (seed, fits.prims[1], fits.want[1])
+    assert fits.want[2] == 2
+    fit = fit_scan(scan, seg, cfg)
+    p = fit.primitives[1]
+    assert not isinstance(p, Plane), (seed, p)
+    assert 1 in fit.types_searched
+    assert abs(p.axis_vector @ np.array([0.0, 1.0, 0.0])) > np.cos(np.deg2rad(10.0)), (seed, p)
+    x = backproject(noisy, K)[inst == 1]
+    assert np.median(np.abs(p.signed_distance(x))) < 2 * SIGMA_COEFF * 0.6**2, seed
