@@ -415,3 +415,31 @@ def test_far_faces_counts_a_face_moved_off_the_measured_points(generated):
     assert set(m2["far_face_ids"]) - set(m["far_face_ids"]) == {moved.faces[big].id}
     assert m2["faces_far"] == m["faces_far"] + 1
     assert 0.07 < m2["face_far_max"] <= 0.1 + 1e-9
+
+
+def test_off_part_faces_are_measured_against_the_true_surface(generated):
+    """The ideal VB-Rep's faces all lie on the true visible surface (median vertex distance under half the 0.05
+    part sizes of far_face_rel: 0.023 at most here, none off the part), even where the sensor read nothing: with
+    every reading of the largest face dropped (a face seen edge-on) it is no nearer the truth and still on it;
+    moved 0.1 part sizes along z it is off the part, about 0.1 away, and it alone."""
+    import copy
+    from dataclasses import replace
+
+    scan = generated
+    vb = M.vbrep_from_gt(scan)
+    m = M.far_faces(vb, scan)
+    assert m["faces_off_part"] == 0 and m["off_part_face_ids"] == []
+    assert m["face_off_part_max"] < 0.5 * M.MetricConfig().far_face_rel
+    big = max(range(len(vb.faces)), key=lambda i: len(vb.faces[i].mesh_vertices))
+    unread = np.asarray(scan.gt.faces) == vb.faces[big].instance
+    blind = replace(scan, depth=np.where(unread, 0.0, scan.depth).astype(scan.depth.dtype))
+    m_blind = M.far_faces(vb, blind)
+    assert m_blind["faces_off_part"] == 0
+    assert m_blind["face_off_part_max"] == pytest.approx(m["face_off_part_max"])
+    size = float(scan.gt.meta["part_size_m"])
+    moved = copy.deepcopy(vb)
+    V = np.asarray(moved.faces[big].mesh_vertices, float)
+    moved.faces[big].mesh_vertices = (V + np.array([0.0, 0.0, 0.1 * size])).tolist()
+    m2 = M.far_faces(moved, scan)
+    assert m2["off_part_face_ids"] == [moved.faces[big].id]
+    assert 0.07 < m2["face_off_part_max"] <= 0.1 + 1e-9

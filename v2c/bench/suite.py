@@ -441,6 +441,7 @@ SUITE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("edge-type accuracy", "edge_type_accuracy", "pct"),
     ("farthest face from the measured part points (part sizes, any scan)", "face_far_max", "f4"),
     ("faces farther than 0.05 part sizes (all scans)", "faces_far", "int"),
+    ("faces off the true visible surface by over 0.05 part sizes (all scans)", "faces_off_part", "int"),
     ("intersection-edge confidence ECE (10 bins)", "ece_intersection", "ece"),
     ("intersection-edge confidence ECE, raw factors", "ece_intersection_raw", "ece"),
     ("all-edge confidence ECE (10 bins)", "ece_all", "ece"),

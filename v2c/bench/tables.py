@@ -89,6 +89,10 @@ def summarise(rows: list[dict[str, Any]], process_start_s: float = float("nan"))
     out["face_far_max"] = float(max(far)) if far else float("nan")  # the farthest face of any scan (part sizes)
     out["faces_far"] = int(sum(r.get("faces_far", 0) for r in ok))  # faces beyond MetricConfig.far_face_rel
     out["scans_with_far_faces"] = int(sum(1 for r in ok if r.get("faces_far", 0) > 0))
+    off = [r["face_off_part_max"] for r in ok if r.get("face_off_part_max") is not None]
+    off = [x for x in off if np.isfinite(x)]
+    out["face_off_part_max"] = float(max(off)) if off else float("nan")  # the same against the true surface
+    out["faces_off_part"] = int(sum(r.get("faces_off_part", 0) for r in ok))
     rt = [r.get("runtime", {}) for r in ok]
     out["runtime"] = _median([x.get("to_step", np.nan) for x in rt])
     out["runtime_mean"] = _mean([x.get("to_step", np.nan) for x in rt])
@@ -211,6 +215,7 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("edge-type accuracy", "edge_type_accuracy", "pct"),
     ("farthest face from the measured part points (part sizes, any scan)", "face_far_max", "f4"),
     ("faces farther than 0.05 part sizes (all scans)", "faces_far", "int"),
+    ("faces off the true visible surface by over 0.05 part sizes (all scans)", "faces_off_part", "int"),
     ("intersection-edge confidence ECE (10 bins; raw factors)", "ece_intersection", "ece"),
     ("all-edge confidence ECE (10 bins; raw factors)", "ece_all", "ece"),
     ("runtime per scan, median wall (s)", "runtime", "s"),
