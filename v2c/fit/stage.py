@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from v2c.camera import backproject
+from v2c.camera import backproject, pixel_rays_closed_form
 from v2c.fit.align import AXIS_NAMES, align_fit, frame_from_axes, init_frame
 from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis, start_with_axis
@@ -161,15 +161,52 @@ class _Fits:
     scores: dict[int, float] = field(default_factory=dict)  # label confidence of each instance ([0, 1])
 
 
-def _ransac_instances(ipts: dict[int, InstancePoints], seg: Segmentation, scale: float, config: FitConfig) -> _Fits:
-    """Step 1: RANSAC per instance, typed by its label (or by the type search for weak labels)."""
+def _rays_hit_share(prim: Primitive, rays: np.ndarray, x: np.ndarray, config: FitConfig) -> float:
+    """The share of the camera ``rays`` (N, 3; z = 1) that meet ``prim`` within the depth range of its points
+    ``x`` (widened by half that range): the smallest |signed distance| over ray_hit_samples depths along each ray
+    within ray_hit_sigma depth-noise sigmas, or within half a sample step along the ray."""
+    if not len(rays) or len(x) < 3:
+        return 1.0
+    zlo, zhi = float(x[:, 2].min()), float(x[:, 2].max())
+    pad = 0.5 * max(zhi - zlo, 1e-3)
+    z = np.linspace(max(zlo - pad, 1e-3), zhi + pad, config.ray_hit_samples)
+    step = float(z[1] - z[0])
+    sigma = float(np.median(noise_sigma(x, config)))
+    pts = rays[:, None, :] * z[None, :, None]
+    d = np.abs(prim.signed_distance(pts.reshape(-1, 3))).reshape(len(rays), len(z))
+    tol = max(config.ray_hit_sigma * sigma, 0.5 * step * float(np.median(np.linalg.norm(rays, axis=1))))
+    return float(np.mean(np.nanmin(d, axis=1) <= tol))
+
+
+def _ransac_instances(
+    ipts: dict[int, InstancePoints],
+    seg: Segmentation,
+    scale: float,
+    config: FitConfig,
+    K: np.ndarray | None = None,
+) -> _Fits:
+    """Step 1: RANSAC per instance, typed by its label (or by the type search for weak labels, whose curved
+    result must be hit by the rays of ray_hit_min_share of the instance's pixels, `_rays_hit_share`, given the
+    intrinsics ``K``)."""
     out = _Fits()
+    inst = np.asarray(seg.instances)
     for i, ip in ipts.items():  # loop over instances
         ptype, ax = _label_of(seg, i, config)
         rng = np.random.default_rng([config.seed, i])
         got_type, f = fit_instance(ip.points, ip.normals, ptype, scale, config, rng)
         if f is None:
             continue
+        if ptype is None and got_type != "plane" and K is not None and config.ray_hit_min_share > 0:
+            vv, uu = np.nonzero(inst == i)
+            if len(vv) > config.ray_hit_max_px:
+                pick = np.random.default_rng([config.seed, i, 4]).choice(len(vv), config.ray_hit_max_px, replace=False)
+                vv, uu = vv[pick], uu[pick]
+            rays = pixel_rays_closed_form(np.stack([uu, vv], axis=1).astype(float), K)
+            if _rays_hit_share(f.primitive, rays, ip.points, config) < config.ray_hit_min_share:
+                rng_plane = np.random.default_rng([config.seed, i, 5])
+                g = ransac_fit("plane", ip.points, ip.normals, scale, config, rng_plane)
+                if g is not None:
+                    got_type, f = "plane", g
         if not f.inliers.any():
             f.inliers = _inliers(f.primitive, ip, scale, config)
         if ptype is None:
@@ -520,7 +557,7 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     timings["normals"] = t - t_start
 
     # 1. RANSAC per instance
-    fits = _ransac_instances(ipts, seg, scale, config)
+    fits = _ransac_instances(ipts, seg, scale, config, K)
     timings["ransac"] = perf_counter() - t
     t = perf_counter()
 
