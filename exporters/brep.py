@@ -49,7 +49,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS
 from exporters.brep_config import BrepConfig
 from exporters.brep_edges import EdgeBuilder
 from exporters.brep_faces import FaceBuilder, edges_of
-from exporters.brep_outline import OutlineBuilder, mesh_area, mesh_centroid
+from exporters.brep_outline import OutlineBuilder, mesh_area, mesh_centroid, reconstructed_area
 from exporters.frames import FrameMap
 from exporters.polygons import connected_groups
 
@@ -68,9 +68,9 @@ class BuiltBRep:
     piece of the outline as its own face (``faces`` holds the largest); outline_edges: VFace id -> its outline's
     edges, each with the VEdge id it is named after (-1: none). skipped_faces: faces that could not be built at
     all. dropped_edges: VEdge ids on no face that are not written (their faces' outlines carry their names, or
-    they lie outside the part's box). mesh_area / built_area: VFace id -> the VB-Rep mesh's area and the built
-    face's (all pieces), mm². box: the part's box (lo, hi) with its margin, mm. fmap: the camera -> output
-    map the shape is in.
+    they lie outside the part's box). mesh_area / built_area: VFace id -> the area of the VB-Rep mesh's region
+    on the face's surface (`brep_outline.reconstructed_area`) and the built face's (all pieces), mm². box: the
+    part's box (lo, hi) with its margin, mm. fmap: the camera -> output map the shape is in.
     """
 
     shape: TopoDS_Compound
@@ -236,7 +236,7 @@ def build_brep(
             out.skipped_faces.append(f.id)
             continue
         mesh_pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
-        target = mesh_area(mesh_pts, f.mesh_triangles)
+        target = reconstructed_area(eb.surfaces[f.id], mesh_pts, f.mesh_triangles)
         out.mesh_area[f.id] = target
         centre = mesh_centroid(mesh_pts, f.mesh_triangles)
         made = fb.build_face(f, eb.edges) if f.id not in force_outline else None

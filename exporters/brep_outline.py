@@ -53,6 +53,47 @@ def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
     return float(_triangle_areas(vertices, triangles).sum())
 
 
+def surface_area(s: AnalyticSurface, vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """The area (mm²) of the region a face mesh covers on its analytic surface ``s``: each triangle's (u, v)
+    area times the surface's area element |S_u x S_v| (central differences) averaged over its edge midpoints, the
+    triangles whole in the periodic parameters (`_unwrap_triangles`). NaN where the vertices have no finite
+    (u, v). A VB-Rep mesh is built on the pixel grid, its vertices on the surface, so its flat triangles are
+    chords: on a small torus or cone seen at a slant they miss the surface's area by several per cent (a torus
+    blend of the in-family validation scans: 80.36 mm² flat, 78.77 mm² on the torus), which is the area a face
+    written on the surface is to be compared with."""
+    pts = np.asarray(vertices, float).reshape(-1, 3)
+    tris = np.asarray(triangles, int).reshape(-1, 3)
+    if not len(tris):
+        return 0.0
+    uv = s.uv(pts)
+    if not np.all(np.isfinite(uv)):
+        return float("nan")
+    uv, tris = _unwrap_triangles(s, uv, tris)
+    t = uv[tris]
+    a_uv = 0.5 * np.abs(
+        (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
+    )
+    h = 1e-6
+    du, dv = np.array([h, 0.0]), np.array([0.0, h])
+    element = np.zeros(len(t))
+    for i, j in ((0, 1), (1, 2), (2, 0)):  # the edge-midpoint rule: exact for an element quadratic in (u, v)
+        c = 0.5 * (t[:, i] + t[:, j])
+        su = (s.evaluate(c + du) - s.evaluate(c - du)) / (2 * h)
+        sv = (s.evaluate(c + dv) - s.evaluate(c - dv)) / (2 * h)
+        element += np.linalg.norm(np.cross(su, sv), axis=1) / 3.0
+    return float(np.sum(a_uv * element))
+
+
+def reconstructed_area(s: AnalyticSurface | None, vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """A VB-Rep face's area (mm²) as the file's face is to hold it: its mesh's region on its surface
+    (`surface_area`), or the flat mesh's area where there is no surface or no finite (u, v)."""
+    if s is not None:
+        a = surface_area(s, vertices, triangles)
+        if np.isfinite(a):
+            return a
+    return mesh_area(np.asarray(vertices, float).reshape(-1, 3), triangles)
+
+
 def mesh_centroid(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     """Area-weighted centroid (3,) of a triangle mesh, in the vertices' units; None for a mesh of no area."""
     w = _triangle_areas(vertices, triangles)

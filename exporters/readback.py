@@ -18,8 +18,9 @@ from OCP.TopoDS import TopoDS
 
 from exporters.brep import bounding_box, face_area, face_triangulation
 from exporters.brep_config import BrepConfig
-from exporters.brep_outline import mesh_area
+from exporters.brep_outline import mesh_area, reconstructed_area
 from exporters.frames import FrameMap
+from exporters.occ_surfaces import make_surface
 from exporters.step import faces_by_id, parse_edge_name, quiet_occt
 from exporters.xcaf import read_xcaf_step
 from v2c.vbrep.model import VBRep, VEdge, VFace
@@ -43,8 +44,9 @@ class ReadbackConfig:
 
 @dataclass(frozen=True)
 class FaceArea:
-    """One VB-Rep face: its mesh area, the area of the faces named after it in the file, and the area of their
-    triangulation by OCCT's mesher (what FreeCAD and any other viewer draw; mm²). None: not meshed."""
+    """One VB-Rep face: its reconstructed area (its mesh's region on its surface, `brep_outline.reconstructed_area`),
+    the area of the faces named after it in the file, and the area of their triangulation by OCCT's mesher (what
+    FreeCAD and any other viewer draw; mm²). None: not meshed."""
 
     id: int
     reconstructed: float
@@ -166,8 +168,17 @@ def check_written(
         if len(pts):
             recon_pts.append(pts)
         drawn = [mesh_area(p, t) for p, t in meshes.get(f.id, [])]
+        try:
+            surf = make_surface(f.primitive, fmap, f.mesh_vertices) if len(pts) else None
+        except (KeyError, ValueError, TypeError):
+            surf = None  # a face the writer could not give a surface either: its flat mesh area
         out.faces.append(
-            FaceArea(f.id, mesh_area(pts, f.mesh_triangles), written.get(f.id, 0.0), sum(drawn) if drawn else None)
+            FaceArea(
+                f.id,
+                reconstructed_area(surf, pts, f.mesh_triangles),
+                written.get(f.id, 0.0),
+                sum(drawn) if drawn else None,
+            )
         )
     if recon_pts:
         allp = np.concatenate(recon_pts)
