@@ -88,6 +88,22 @@ class PatchScan:
     mask: np.ndarray | None = None
 
 
+def labelled_scan(
+    seen: np.ndarray, inst: np.ndarray, label: int, score: float, seed: int
+) -> tuple[PatchScan, Segmentation]:
+    """The scan of depth ``seen`` (m; sensor noise added, seeded) and its segmentation ``inst``: instance 1
+    labelled ``label`` at ``score``, instance 2 a plane labelled Z at 0.9."""
+    rng = np.random.default_rng(seed)
+    noisy = np.where(seen > 0, seen + SIGMA_COEFF * seen**2 * rng.standard_normal(seen.shape), 0.0)
+    seg = Segmentation(
+        instances=inst,
+        labels=np.array([0, label, label_of("plane", "Z")], np.uint8),
+        scores=np.array([0.0, score, 0.9], np.float32),
+        method="learned",
+    )
+    return PatchScan(noisy.astype(np.float32), K, noisy > 0), seg
+
+
 def fit_labelled(
     patch: np.ndarray,
     label: int,
@@ -103,21 +119,14 @@ def fit_labelled(
     floor = plane_depth(np.array([0.0, -0.5, -0.866]), 0.8, (200, 40, 440, 120))
     depth = np.where(patch > 0, patch, floor)
     inst = np.where(patch > 0, 1, np.where(floor > 0, 2, 0)).astype(np.int32)
-    rng = np.random.default_rng(seed)
-    noisy = np.where(depth > 0, depth + SIGMA_COEFF * depth**2 * rng.standard_normal(depth.shape), 0.0)
-    seg = Segmentation(
-        instances=inst,
-        labels=np.array([0, label, label_of("plane", "Z")], np.uint8),
-        scores=np.array([0.0, score, 0.9], np.float32),
-        method="learned",
-    )
+    scan, seg = labelled_scan(depth, inst, label, score, seed)
     cfg = replace(FitConfig(), seed=seed)
     if label_certain is not None:
         cfg = replace(cfg, support_label_certain=label_certain)
     if nested_certain is not None:
         cfg = replace(cfg, nested_label_certain=nested_certain)
     cfg = replace(cfg, nested_from_axis=nested_from_axis)
-    return fit_scan(PatchScan(noisy.astype(np.float32), K, noisy > 0), seg, cfg).primitives[1]
+    return fit_scan(scan, seg, cfg).primitives[1]
 
 
 #: A learned segmenter's usual confidence in a label it gets wrong on real frames (a flat box face: 0.83); the
@@ -322,16 +331,8 @@ def test_weak_plane_label_lends_no_axis_to_the_curved_type_found(seed: int) -> N
     floor = plane_depth(np.array([0.0, 0.0, -1.0]), 0.75, (200, 20, 440, 100))
     depth = np.where(patch > 0, patch, floor)
     inst = np.where(patch > 0, 1, np.where(floor > 0, 2, 0)).astype(np.int32)
-    rng = np.random.default_rng(seed)
-    noisy = np.where(depth > 0, depth + SIGMA_COEFF * depth**2 * rng.standard_normal(depth.shape), 0.0)
-    seg = Segmentation(
-        instances=inst,
-        labels=np.array([0, label_of("plane", "Z"), label_of("plane", "Z")], np.uint8),
-        scores=np.array([0.0, WEAK_SCORE, 0.9], np.float32),
-        method="learned",
-    )
+    scan, seg = labelled_scan(depth, inst, label_of("plane", "Z"), WEAK_SCORE, seed)
     cfg = replace(FitConfig(), seed=seed)
-    scan = PatchScan(noisy.astype(np.float32), K, noisy > 0)
     pts = backproject(scan.depth, K)
     ipts = instance_points(pts, scan.valid, inst, np.array([1, 2]), cfg)
     fits = _ransac_instances(ipts, seg, estimate_part_size(pts[scan.valid], cfg.scale_trim), cfg)
@@ -342,7 +343,7 @@ def test_weak_plane_label_lends_no_axis_to_the_curved_type_found(seed: int) -> N
     assert not isinstance(p, Plane), (seed, p)
     assert 1 in fit.types_searched
     assert abs(p.axis_vector @ np.array([0.0, 1.0, 0.0])) > np.cos(np.deg2rad(10.0)), (seed, p)
-    x = backproject(noisy, K)[inst == 1]
+    x = backproject(scan.depth, K)[inst == 1]
     assert np.median(np.abs(p.signed_distance(x))) < 2 * SIGMA_COEFF * 0.6**2, seed
 
 
@@ -362,17 +363,8 @@ def test_type_searched_curve_the_pixels_rays_miss_is_a_plane() -> None:
     inst[floor > 0] = 2
     seen = np.where(band > 0, band, floor)
     for seed in range(5):
-        rng = np.random.default_rng(seed)
-        noisy = np.where(seen > 0, seen + SIGMA_COEFF * seen**2 * rng.standard_normal(seen.shape), 0.0)
-        seg = Segmentation(
-            instances=inst,
-            labels=np.array([0, label_of("plane", "U"), label_of("plane", "Z")], np.uint8),
-            scores=np.array([0.0, WEAK_SCORE, 0.9], np.float32),
-            method="learned",
-        )
-        p = fit_scan(
-            PatchScan(noisy.astype(np.float32), K, noisy > 0), seg, replace(FitConfig(), seed=seed)
-        ).primitives[1]
+        scan, seg = labelled_scan(seen, inst, label_of("plane", "U"), WEAK_SCORE, seed)
+        p = fit_scan(scan, seg, replace(FitConfig(), seed=seed)).primitives[1]
         assert isinstance(p, Plane), (seed, p)
-        x = backproject(noisy, K)[(inst == 1) & (noisy > 0)]
+        x = backproject(scan.depth, K)[(inst == 1) & scan.valid]
         assert np.median(np.abs(p.signed_distance(x))) < 0.006, seed
