@@ -191,14 +191,16 @@ def far_faces(vbrep: VBRep, scan: Scan, config: MetricConfig | None = None) -> d
     from scipy.spatial import cKDTree
 
     config = config or MetricConfig()
+    meshes = [(f.id, np.asarray(f.mesh_vertices, float).reshape(-1, 3)) for f in vbrep.faces]
+    meshes = [(fid, V) for fid, V in meshes if len(V)]
+
+    def medians(points: np.ndarray) -> list[tuple[int, float]]:
+        """(face id, median distance of its mesh vertices to the nearest of ``points``) per face with a mesh."""
+        tree = cKDTree(points)
+        return [(fid, float(np.median(tree.query(V, k=1)[0]))) for fid, V in meshes]
+
     pts = scan.points()[scan.valid]
-    dists: list[tuple[int, float]] = []
-    if len(pts):
-        tree = cKDTree(pts)
-        for f in vbrep.faces:
-            V = np.asarray(f.mesh_vertices, float).reshape(-1, 3)
-            if len(V):
-                dists.append((f.id, float(np.median(tree.query(V, k=1)[0]))))
+    dists = medians(pts) if len(pts) else []
     size = part_size(scan)
     rel = np.array([d for _, d in dists]) / size
     far = [fid for (fid, _), r in zip(dists, rel, strict=True) if r > config.far_face_rel]
@@ -216,12 +218,7 @@ def far_faces(vbrep: VBRep, scan: Scan, config: MetricConfig | None = None) -> d
     truth = backproject(clean, scan.K)[(np.asarray(scan.gt.faces) > 0) & (clean > 0)]
     if not len(truth):
         return out
-    tree = cKDTree(truth)
-    off = [
-        (f.id, float(np.median(tree.query(np.asarray(f.mesh_vertices, float).reshape(-1, 3), k=1)[0])) / size)
-        for f in vbrep.faces
-        if len(np.asarray(f.mesh_vertices).reshape(-1, 3))
-    ]
+    off = [(fid, d / size) for fid, d in medians(truth)]
     out["face_off_part_max"] = max((r for _, r in off), default=float("nan"))
     out["off_part_face_ids"] = [fid for fid, r in off if r > config.far_face_rel]
     out["faces_off_part"] = len(out["off_part_face_ids"])

@@ -178,6 +178,22 @@ def _rays_hit_share(prim: Primitive, rays: np.ndarray, x: np.ndarray, config: Fi
     return float(np.mean(np.nanmin(d, axis=1) <= tol))
 
 
+def _seen_by_its_pixels(
+    prim: Primitive, inst: np.ndarray, i: int, ip: InstancePoints, K: np.ndarray | None, config: FitConfig
+) -> bool:
+    """Whether the camera rays of instance ``i``'s pixels (of the instance map ``inst``; at most ray_hit_max_px,
+    a seeded sample) hit ``prim`` in at least ray_hit_min_share of cases (`_rays_hit_share`); True when the test is
+    off (ray_hit_min_share 0) or without intrinsics ``K``."""
+    if K is None or config.ray_hit_min_share <= 0:
+        return True
+    vv, uu = np.nonzero(inst == i)
+    if len(vv) > config.ray_hit_max_px:
+        pick = np.random.default_rng([config.seed, i, 4]).choice(len(vv), config.ray_hit_max_px, replace=False)
+        vv, uu = vv[pick], uu[pick]
+    rays = pixel_rays_closed_form(np.stack([uu, vv], axis=1).astype(float), K)
+    return _rays_hit_share(prim, rays, ip.points, config) >= config.ray_hit_min_share
+
+
 def _ransac_instances(
     ipts: dict[int, InstancePoints],
     seg: Segmentation,
@@ -196,17 +212,10 @@ def _ransac_instances(
         got_type, f = fit_instance(ip.points, ip.normals, ptype, scale, config, rng)
         if f is None:
             continue
-        if ptype is None and got_type != "plane" and K is not None and config.ray_hit_min_share > 0:
-            vv, uu = np.nonzero(inst == i)
-            if len(vv) > config.ray_hit_max_px:
-                pick = np.random.default_rng([config.seed, i, 4]).choice(len(vv), config.ray_hit_max_px, replace=False)
-                vv, uu = vv[pick], uu[pick]
-            rays = pixel_rays_closed_form(np.stack([uu, vv], axis=1).astype(float), K)
-            if _rays_hit_share(f.primitive, rays, ip.points, config) < config.ray_hit_min_share:
-                rng_plane = np.random.default_rng([config.seed, i, 5])
-                g = ransac_fit("plane", ip.points, ip.normals, scale, config, rng_plane)
-                if g is not None:
-                    got_type, f = "plane", g
+        if ptype is None and got_type != "plane" and not _seen_by_its_pixels(f.primitive, inst, i, ip, K, config):
+            g = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 5]))
+            if g is not None:
+                got_type, f = "plane", g
         if not f.inliers.any():
             f.inliers = _inliers(f.primitive, ip, scale, config)
         if ptype is None:
