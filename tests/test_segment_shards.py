@@ -159,6 +159,40 @@ def test_train_on_device_learns_and_writes_loadable_checkpoints(scans: tuple[Pat
     assert after > before + 0.2
 
 
+def test_boundary_weight_per_net_trains_the_boundary_head_of_that_net(
+    scans: tuple[Path, list[Path]], tmp_path: Path
+) -> None:
+    """Two copies of one init net trained in lock step on the same batches, one with the boundary loss at weight 1
+    and one at 0 (`nets_to_train`'s init copy, `train_on_device`'s per-net ``boundary_weight``): the records carry
+    their weights, and on the held-out scans the boundary loss of the first falls below that of the second (whose
+    boundary head learned nothing)."""
+    from v2c.segment.net import UNet, save_weights
+    from v2c.segment.train import class_weights_from_histogram, losses
+    from v2c.segment.train_device import nets_to_train
+
+    root, dirs = scans
+    packed = read_shard(write_shards(dirs, root, tmp_path / "sh")[0])
+    torch.manual_seed(5)
+    save_weights(UNet(NetConfig(widths=(8, 16, 32))), tmp_path / "start.pt", {"step": 0})
+    nets = nets_to_train(str(tmp_path / "start.pt"), (), ("init_bw",))
+    assert list(nets) == ["init", "init_bw"]
+    cfg = TrainConfig(steps=40, batch=4, crop_px=64, lr=3e-3, warmup_steps=5, val_scans=2, seed=3, bf16=False)
+    dcfg = DeviceTrainConfig(realisations=1, workers=1, eval_minutes=100.0)
+    recs = train_on_device(packed, tmp_path / "out", nets, cfg, dcfg, device="cpu", boundary_weight={"init_bw": 0.0})
+    assert recs["init"]["boundary_weight"] == 1.0 and recs["init_bw"]["boundary_weight"] == 0.0
+    x, y, b, _ = realise_all(packed, dcfg)
+    xs = torch.from_numpy(np.stack([dequantise(x[i]) for i in (0, 2)]))  # the held-out scans
+    ys, bs = torch.from_numpy(y[[0, 2]].astype(np.int64)), torch.from_numpy(b[[0, 2]].astype(np.float32))
+    cw = torch.from_numpy(class_weights_from_histogram(np.bincount(y.ravel(), minlength=256), cfg.class_weight_power))
+    bce = {}
+    for name in nets:
+        model, _ = load_weights(tmp_path / "out" / f"{name}.last.pt")
+        model.eval()
+        with torch.no_grad():
+            bce[name] = float(losses(model, xs, ys, bs, cw, cfg, False)[1])
+    assert bce["init"] < 0.8 * bce["init_bw"], bce
+
+
 def test_clutter_beside_the_part_is_ignored_and_a_plain_scan_untouched(tmp_path: Path) -> None:
     """Random appearance stands boxes, cylinders and spheres beside the part, labelled background by the
     generator. Training targets ignore them (255): every ignored pixel is off the part and its clean depth stands
@@ -225,3 +259,8 @@ def test_shards_and_train_device_commands(scans: tuple[Path, list[Path]], tmp_pa
     assert res.exit_code == 1 and f"{ck}: holds checkpoints; pass --force" in res.output, res.output
     res = CliRunner().invoke(main, ["train-device", "--shards", str(out), "-o", str(tmp_path / "w"), "--wide", "8,x"])
     assert res.exit_code == 2 and "'8,x': expected comma-separated integers" in res.output, res.output
+    res = CliRunner().invoke(
+        main, ["train-device", "--shards", str(out), "-o", str(tmp_path / "w2"), "--init-boundary-weight", "3"]
+    )
+    assert res.exit_code == 2 and "needs --init" in res.output, res.output
+    assert not (tmp_path / "w2").exists()

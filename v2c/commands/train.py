@@ -21,13 +21,13 @@ from v2c.segment.train_config import TrainConfig
 )
 @click.option(
     "--recipe",
-    type=click.Choice(["base", "stage4", "stage5", "features", "appearance", "stage9", "stage10"]),
+    type=click.Choice(["base", "stage4", "stage5", "features", "appearance", "stage9", "stage10", "stage13"]),
     default=None,
     help="First generate this training set's missing scans under DATA (MODEL_CARD.md: base = stages "
     "1-3, stage4, stage5 = stages 5-8; features = stage5 plus 1500 scans of the feature-based "
     "training families; appearance = features plus 1500 with random appearance; stage9 = procedural, "
     "feature families, random appearance, corpus training files; stage10 = the same kinds with the procedural "
-    "families weighted up, 2,200 scans); "
+    "families weighted up, 2,200 scans; stage13 = about 1,000 scans weighted to the corpus training files); "
     "resumable, --jobs processes.",
 )
 @click.option(

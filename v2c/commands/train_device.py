@@ -36,6 +36,19 @@ from v2c.segment.train_config import TrainConfig
 @click.option("--lr", type=click.FloatRange(min=0.0, min_open=True), default=6e-4, show_default=True)
 @click.option("--wide-lr-scale", type=click.FloatRange(min=0.0, min_open=True), default=1.0, show_default=True)
 @click.option("--warmup", type=click.IntRange(min=0), default=TrainConfig.warmup_steps, show_default=True)
+@click.option(
+    "--boundary-weight",
+    type=click.FloatRange(min=0.0),
+    default=TrainConfig.boundary_weight,
+    show_default=True,
+    help="Weight of the boundary loss against the label loss (every net).",
+)
+@click.option(
+    "--init-boundary-weight",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    help="Also fine-tune a second copy of --init ('init_bw') with this boundary-loss weight.",
+)
 @click.option("--realisations", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--workers", type=click.IntRange(min=1), default=16, show_default=True)
 @click.option("--val-scans", type=click.IntRange(min=1), default=48, show_default=True)
@@ -56,6 +69,8 @@ def command(
     lr: float,
     wide_lr_scale: float,
     warmup: int,
+    boundary_weight: float,
+    init_boundary_weight: float | None,
     realisations: int,
     workers: int,
     val_scans: int,
@@ -74,6 +89,8 @@ def command(
         widths = tuple(int(v) for v in wide.split(",")) if wide else ()
     except ValueError:
         raise click.BadParameter(f"{wide!r}: expected comma-separated integers", param_hint="--wide") from None
+    if init_boundary_weight is not None and not init:
+        raise click.BadParameter("needs --init (the weights its net starts from)", param_hint="--init-boundary-weight")
     packed, n_files = load_packed(shards, limit)
     if not packed:
         raise click.BadParameter(f"no packed scans in {', '.join(map(str, shards))}", param_hint="--shards")
@@ -85,11 +102,22 @@ def command(
         crop_px=crop,
         lr=lr,
         warmup_steps=warmup,
+        boundary_weight=boundary_weight,
         val_scans=val_scans,
         seed=seed,
     )
     dcfg = DeviceTrainConfig(
         realisations=realisations, workers=workers, probe_steps=probe_steps, eval_minutes=eval_minutes, seed=seed
     )
-    nets = nets_to_train(str(init) if init else None, widths)
-    train_on_device(packed, out, nets, cfg, dcfg, lr_scale={"wide": wide_lr_scale}, log=lambda m: click.echo(m))
+    copies = ("init_bw",) if init_boundary_weight is not None else ()
+    nets = nets_to_train(str(init) if init else None, widths, copies)
+    train_on_device(
+        packed,
+        out,
+        nets,
+        cfg,
+        dcfg,
+        lr_scale={"wide": wide_lr_scale},
+        log=lambda m: click.echo(m),
+        boundary_weight={"init_bw": init_boundary_weight} if init_boundary_weight is not None else None,
+    )

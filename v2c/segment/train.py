@@ -84,6 +84,18 @@ STAGE10_RECIPE: tuple[tuple, ...] = (
     (640, 480, "sensor", 175, 205, 0.0, (CORPUS_TRAIN,)),
     (640, 480, "sensor", 75, 206, 0.0, (CORPUS_TRAIN,), "random"),
 )
+#: Stage 13 (MODEL_CARD.md): a set for one accelerator call (about 1,000 scans, one 45 MiB shard) weighted to
+#: what the unseen suite lacks: renders of the corpus's training files (45 %, plain and with random appearance),
+#: the feature-based training families (25 %, a third printed), random appearance over all training families,
+#: and the procedural families (15 %) so that in-family parts are not forgotten.
+STAGE13_RECIPE: tuple[tuple, ...] = (
+    (640, 480, "sensor", 300, 301, 0.0, (CORPUS_TRAIN,)),
+    (640, 480, "sensor", 150, 302, 0.0, (CORPUS_TRAIN,), "random"),
+    (640, 480, "sensor", 250, 303, 0.3, FAMILY_GROUPS["features"]),
+    (640, 480, "sensor", 150, 304, 0.0, FAMILY_GROUPS["train"], "random"),
+    (640, 480, "sensor", 100, 305, 0.0),
+    (640, 480, "sensor", 50, 306, 0.5),
+)
 RECIPES = {
     "base": TRAINING_RECIPE,
     "stage4": STAGE4_RECIPE,
@@ -92,6 +104,7 @@ RECIPES = {
     "appearance": APPEARANCE_RECIPE,
     "stage9": STAGE9_RECIPE,
     "stage10": STAGE10_RECIPE,
+    "stage13": STAGE13_RECIPE,
 }
 
 

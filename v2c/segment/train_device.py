@@ -196,11 +196,14 @@ def train_on_device(
     device: str | None = None,
     lr_scale: dict[str, float] | None = None,
     log: Callable[[str], object] = print,
+    boundary_weight: dict[str, float] | None = None,
 ) -> dict:
     """Train every net of ``nets`` (name -> (architecture, init weights or None)) on the same batches.
 
     lr_scale: per net, a factor on ``cfg.lr`` (e.g. a net trained from scratch takes a larger step than one
     fine-tuned from weights); 1 for nets not named.
+    boundary_weight: per net, the weight of its boundary BCE against the label CE (``cfg.boundary_weight`` for
+    nets not named).
 
     Writes ``out_dir``/<name>.pt (best held-out mIoU), <name>.last.pt and <name>.json (the record). The schedule
     length is ``cfg.steps`` unless ``cfg.minutes`` is set (then fitted to the minutes after the probe steps).
@@ -242,6 +245,7 @@ def train_on_device(
             "config": asdict(cfg),
             "device_config": asdict(dcfg),
             "lr_scale": (lr_scale or {}).get(name, 1.0),
+            "boundary_weight": (boundary_weight or {}).get(name, cfg.boundary_weight),
             "net": asdict(model.cfg),
             "device": str(torch.cuda.get_device_name(dev) if dev.type == "cuda" else dev),
             "packed_scans": len(packed),
@@ -290,7 +294,7 @@ def train_on_device(
         xb, yb, bb = data.batch(ids, cfg.crop_px, rng, flip=cfg.flip)
         for name, model in models.items():
             ce, bce = losses(model, xb, yb, bb, cw, cfg, amp, device_type=dev.type)
-            loss = ce + cfg.boundary_weight * bce
+            loss = ce + (boundary_weight or {}).get(name, cfg.boundary_weight) * bce
             opts[name].zero_grad(set_to_none=True)
             loss.backward()
             opts[name].step()
@@ -346,12 +350,17 @@ def load_packed(shards: Sequence[str | Path], limit: int | None = None) -> tuple
     return packed, len(files)
 
 
-def nets_to_train(init: str | None, wide: Sequence[int]) -> dict[str, tuple[NetConfig | None, str | None]]:
-    """The nets of one run: 'init' fine-tuned from the weights file ``init``, 'wide' of widths ``wide`` from scratch,
-    or, with neither, 'scratch' of the default widths."""
+def nets_to_train(
+    init: str | None, wide: Sequence[int], init_copies: Sequence[str] = ()
+) -> dict[str, tuple[NetConfig | None, str | None]]:
+    """The nets of one run: 'init' fine-tuned from the weights file ``init`` (and one more copy of it per name of
+    ``init_copies``, e.g. trained with another loss weight), 'wide' of widths ``wide`` from scratch, or, with
+    neither, 'scratch' of the default widths."""
     nets: dict[str, tuple[NetConfig | None, str | None]] = {}
     if init:
         nets["init"] = (None, init)
+        for name in init_copies:
+            nets[name] = (None, init)
     if wide:
         nets["wide"] = (NetConfig(widths=tuple(int(v) for v in wide)), None)
     if not nets:
