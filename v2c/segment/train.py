@@ -11,6 +11,7 @@ Losses: cross-entropy over the 18 labels (255 ignored, classes weighted by frequ
 from __future__ import annotations
 
 import json
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -27,6 +28,8 @@ from v2c.segment.data import CachedScans, build_cache, dequantise, find_scans
 from v2c.segment.net import NetConfig, UNet, bf16_supported, load_weights, save_weights
 from v2c.segment.train_config import TrainConfig
 from v2c.synth.families import FAMILY_GROUPS, LEAVE_OUT_FAMILIES
+
+logger = logging.getLogger(__name__)
 
 #: The shipped training set: (width, height, noise profile, scans, `v2c synth` seed), generated into
 #: DATA/<width>x<height>_<noise>_s<seed>/. Validation uses seed 9000 and later, never these.
@@ -96,6 +99,9 @@ STAGE13_RECIPE: tuple[tuple, ...] = (
     (640, 480, "sensor", 100, 305, 0.0),
     (640, 480, "sensor", 50, 306, 0.5),
 )
+#: The largest share of a recipe's scans that may fail to generate (parts OCCT's check refuses; the feature
+#: generator's validity target is 95 %) before `generate_training_data` gives up instead of training without them.
+MAX_FAILED_SHARE = 0.05
 RECIPES = {
     "base": TRAINING_RECIPE,
     "stage4": STAGE4_RECIPE,
@@ -115,6 +121,7 @@ def generate_training_data(
     recipe: tuple = TRAINING_RECIPE,
     executor: str | ExecutorConfig = "local",
     corpus_dir: Path | None = None,
+    max_failed_share: float = MAX_FAILED_SHARE,
 ) -> list[Path]:
     """Generate the training scans of ``recipe`` (counts times ``scale``) under ``out_dir`` with the synth generator.
 
@@ -125,11 +132,18 @@ def generate_training_data(
     the part by its extent, like `v2c synth --appearance random`). A leave-out family
     (families.LEAVE_OUT_FAMILIES) is refused. The family `CORPUS_TRAIN` renders the CAD corpus's training files
     (``corpus_dir``, default `v2c.synth.corpus.default_corpus_dir`), never its validation or test files.
+
+    A scan the generator cannot make (its part fails OCCT's check; scans are pure functions of (seed, index), so it
+    fails again on every try) does not stop the recipe: the rows after it are generated, and the scans made are
+    returned with a warning naming the failures, unless more than ``max_failed_share`` of the scans asked for
+    failed (then `SynthError`). Resuming regenerates only the missing scans of a row.
     """
-    from v2c.synth.dataset import SynthConfig, generate_dataset, scan_name
+    from v2c.synth.dataset import SynthConfig, SynthError, generate_dataset, scan_name
     from v2c.synth.scene import SceneConfig
 
     done: list[Path] = []
+    failures: list[str] = []
+    asked = 0
     for w, h, noise, n, seed, *extra in recipe:
         share = float(extra[0]) if extra else 0.0
         families = tuple(extra[1]) if len(extra) > 1 and extra[1] is not None else None
@@ -155,11 +169,10 @@ def generate_training_data(
         look_tag = "_look" if look != "plain" else ""
         sub = Path(out_dir) / f"{w}x{h}_{noise}{'_print' if share > 0 else ''}{tag}{look_tag}_s{seed}"
         n = max(1, round(n * scale))
-        have = 0  # resume: scans are pure functions of (seed, index) and meta.json is written last
-        while have < n and (sub / scan_name(have) / "gt" / "meta.json").is_file():
-            have += 1
-        done += [sub / scan_name(i) for i in range(have)]
-        if have < n:
+        asked += n
+
+        missing = [i for i in range(n) if not _made(sub / scan_name(i))]
+        if missing:
             cfg = SynthConfig(
                 width=w,
                 height=h,
@@ -169,8 +182,37 @@ def generate_training_data(
                 **({"cad_files": cad_files} if cad_files else {}),
                 **({"appearance": look, "framing": "extent"} if look != "plain" else {}),
             )
-            done += generate_dataset(sub, n - have, seed, cfg, jobs=jobs, progress=False, start=have, executor=executor)
+            for start, stop in _runs(missing):
+                try:
+                    generate_dataset(
+                        sub, stop - start, seed, cfg, jobs=jobs, progress=False, start=start, executor=executor
+                    )
+                except SynthError as exc:
+                    failures.append(str(exc))
+        done += [sub / scan_name(i) for i in range(n) if _made(sub / scan_name(i))]
+    if failures:
+        lost = asked - len(done)
+        msg = f"{lost} of {asked} training scans could not be generated: " + " | ".join(failures)
+        if lost > max_failed_share * asked:
+            raise SynthError(f"{msg} (more than {max_failed_share:.0%} of the recipe)")
+        logger.warning("%s; training goes on without them", msg)
     return done
+
+
+def _made(scan_dir: Path) -> bool:
+    """Whether a scan was written whole (resume: scans are pure functions of (seed, index); meta.json is last)."""
+    return (scan_dir / "gt" / "meta.json").is_file()
+
+
+def _runs(indices: list[int]) -> list[tuple[int, int]]:
+    """Sorted indices as half-open runs of consecutive values: [1, 2, 3, 7] -> [(1, 4), (7, 8)]."""
+    runs: list[tuple[int, int]] = []
+    for i in indices:
+        if runs and runs[-1][1] == i:
+            runs[-1] = (runs[-1][0], i + 1)
+        else:
+            runs.append((i, i + 1))
+    return runs
 
 
 def _lr_at(step: int, cfg: TrainConfig) -> float:
