@@ -236,7 +236,7 @@ def build_brep(
             out.skipped_faces.append(f.id)
             continue
         mesh_pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
-        target = reconstructed_area(eb.surfaces[f.id], mesh_pts, f.mesh_triangles)
+        target = reconstructed_area(eb.surfaces[f.id], mesh_pts, f.mesh_triangles, cfg.outline_max_stretch)
         out.mesh_area[f.id] = target
         centre = mesh_centroid(mesh_pts, f.mesh_triangles)
         made = fb.build_face(f, eb.edges) if f.id not in force_outline else None

@@ -26,6 +26,7 @@ from OCP.TopoDS import TopoDS_Edge, TopoDS_Face, TopoDS_Vertex, TopoDS_Wire
 from scipy.spatial import cKDTree
 
 from exporters.occ_surfaces import TWO_PI, AnalyticSurface
+from v2c.labels import PrimitiveType
 
 if TYPE_CHECKING:
     from exporters.frames import FrameMap
@@ -53,42 +54,118 @@ def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
     return float(_triangle_areas(vertices, triangles).sum())
 
 
-def surface_area(s: AnalyticSurface, vertices: np.ndarray, triangles: np.ndarray) -> float:
-    """The area (mm²) of the region a face mesh covers on its analytic surface ``s``: each triangle's (u, v)
-    area times the surface's area element |S_u x S_v| (central differences) averaged over its edge midpoints, the
-    triangles whole in the periodic parameters (`_unwrap_triangles`). NaN where the vertices have no finite
-    (u, v). A VB-Rep mesh is built on the pixel grid, its vertices on the surface, so its flat triangles are
-    chords: on a small torus or cone seen at a slant they miss the surface's area by several per cent (a torus
-    blend of the in-family validation scans: 80.36 mm² flat, 78.77 mm² on the torus), which is the area a face
-    written on the surface is to be compared with."""
-    pts = np.asarray(vertices, float).reshape(-1, 3)
-    tris = np.asarray(triangles, int).reshape(-1, 3)
-    if not len(tris):
-        return 0.0
-    uv = s.uv(pts)
-    if not np.all(np.isfinite(uv)):
-        return float("nan")
-    uv, tris = _unwrap_triangles(s, uv, tris)
-    t = uv[tris]
+#: Largest side (radians) of the triangles an angular (u, v) region is integrated over (`_region_area`): the area
+#: element of a torus or sphere varies with the cosine of its angle, so the edge-midpoint rule errs by ~side^4.
+REGION_MAX_SIDE_RAD = 0.05
+#: Most subdivisions per side of one triangle of a region's triangulation (`_region_area`).
+REGION_MAX_SPLIT = 64
+
+
+def _surface_triangle_areas(s: AnalyticSurface, t: np.ndarray) -> np.ndarray:
+    """(M,) areas (mm²) on ``s`` of the (u, v) triangles ``t`` (M, 3, 2): each one's (u, v) area times the area
+    element |S_u x S_v| (central differences) averaged over its edge midpoints (exact for an element quadratic
+    in (u, v))."""
     a_uv = 0.5 * np.abs(
         (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
     )
     h = 1e-6
     du, dv = np.array([h, 0.0]), np.array([0.0, h])
     element = np.zeros(len(t))
-    for i, j in ((0, 1), (1, 2), (2, 0)):  # the edge-midpoint rule: exact for an element quadratic in (u, v)
+    for i, j in ((0, 1), (1, 2), (2, 0)):  # the edge-midpoint rule
         c = 0.5 * (t[:, i] + t[:, j])
         su = (s.evaluate(c + du) - s.evaluate(c - du)) / (2 * h)
         sv = (s.evaluate(c + dv) - s.evaluate(c - dv)) / (2 * h)
         element += np.linalg.norm(np.cross(su, sv), axis=1) / 3.0
-    return float(np.sum(a_uv * element))
+    return a_uv * element
 
 
-def reconstructed_area(s: AnalyticSurface | None, vertices: np.ndarray, triangles: np.ndarray) -> float:
+def _angular(s: AnalyticSurface) -> tuple[bool, bool]:
+    """Whether u and v of ``s`` are angles (the area element varies along an angle of a sphere or torus)."""
+    return s.u_periodic, s.v_periodic or s.kind is PrimitiveType.SPHERE
+
+
+def _subdivided(t: np.ndarray, n: int) -> np.ndarray:
+    """The (M, 3, 2) triangles ``t`` each cut into n² congruent ones, (M n², 3, 2)."""
+    if n <= 1:
+        return t
+    ij = [(i, j) for i in range(n) for j in range(n - i)]
+    bary = []
+    for i, j in ij:  # upright sub-triangles, then the inverted ones between them
+        bary.append([(i, j), (i + 1, j), (i, j + 1)])
+        if i + j < n - 1:
+            bary.append([(i + 1, j), (i + 1, j + 1), (i, j + 1)])
+    w = np.array(bary, float) / n  # (n², 3, 2): weights of corners 1 and 2
+    a, b, c = t[:, None, None, 0], t[:, None, None, 1], t[:, None, None, 2]
+    pts = a + w[None, :, :, :1] * (b - a) + w[None, :, :, 1:] * (c - a)
+    return pts.reshape(-1, 3, 2)
+
+
+def _region_area(s: AnalyticSurface, region: shapely.Geometry) -> float:
+    """Area (mm²) on ``s`` of a (u, v) region: its constrained Delaunay triangles, cut so that no side spans
+    more than `REGION_MAX_SIDE_RAD` of an angular parameter, by the edge-midpoint rule."""
+    cells = shapely.get_parts(shapely.constrained_delaunay_triangles(region))
+    if not len(cells):
+        return 0.0
+    t = np.stack([np.asarray(c.exterior.coords)[:3] for c in cells])
+    ang = np.array(_angular(s), bool)
+    span = np.abs(t - np.roll(t, 1, axis=1)).max(axis=1)  # (M, 2) largest side extent per parameter
+    need = np.where(ang[None, :], span / REGION_MAX_SIDE_RAD, 1.0).max(axis=1)
+    splits = np.clip(np.ceil(need), 1, REGION_MAX_SPLIT).astype(int)
+    total = 0.0
+    for n in np.unique(splits):  # loop over the subdivision counts in use
+        total += float(_surface_triangle_areas(s, _subdivided(t[splits == n], int(n))).sum())
+    return total
+
+
+def surface_area(s: AnalyticSurface, vertices: np.ndarray, triangles: np.ndarray, max_stretch: float = np.inf) -> float:
+    """The area (mm²) of the region a face mesh covers on its analytic surface ``s``, each point of it once.
+
+    The triangles are taken whole in the periodic parameters (`_unwrap_triangles`); each one's area on the surface
+    is its (u, v) area times the area element averaged over its edge midpoints (`_surface_triangle_areas`). A
+    triangle whose area on the surface exceeds ``max_stretch`` times its flat area spans two sheets of the
+    surface (a torus patch lifted onto both sides of its tube) and covers no region of it: it is left out, as the
+    outline faces leave it out (`outline_polygons`). Where the remaining triangles overlap in (u, v) (the mesh
+    folds over itself, as pixel-grid meshes do where a thin tube turns away from the camera), the area is that of
+    their union (`_region_area`), not the sum, which counted the folded part twice. NaN where the vertices have
+    no finite (u, v). A VB-Rep mesh is built on the pixel grid, its vertices on the surface, so its flat triangles
+    are chords: on a small torus or cone seen at a slant they miss the surface's area by several per cent (a torus
+    blend of the in-family validation scans: 80.36 mm² flat, 78.77 mm² on the torus), which is the area a face
+    written on the surface is to be compared with."""
+    pts = np.asarray(vertices, float).reshape(-1, 3)
+    tris0 = np.asarray(triangles, int).reshape(-1, 3)
+    if not len(tris0):
+        return 0.0
+    uv = s.uv(pts)
+    if not np.all(np.isfinite(uv)):
+        return float("nan")
+    uv, tris = _unwrap_triangles(s, uv, tris0)
+    t = uv[tris]
+    on_surface = _surface_triangle_areas(s, t)
+    keep = on_surface <= max_stretch * _triangle_areas(pts, tris0) + 1e-12
+    if not keep.any():
+        return 0.0
+    signed = 0.5 * (
+        (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
+    )
+    # A mesh wound to face the camera keeps one orientation in (u, v) until it folds over the surface's contour:
+    # with no triangle turned over, none overlaps another and the sum is the region's area.
+    major = np.sign(np.sum(signed[keep]))
+    tiny = 1e-9 * float(np.abs(signed[keep]).max())
+    if not np.any(keep & (signed * major < -tiny)):
+        return float(on_surface[keep].sum())
+    tk = t[keep & (np.abs(signed) > tiny)]
+    union = shapely.union_all(shapely.polygons(np.concatenate([tk, tk[:, :1]], axis=1)))
+    return _region_area(s, union)
+
+
+def reconstructed_area(
+    s: AnalyticSurface | None, vertices: np.ndarray, triangles: np.ndarray, max_stretch: float = np.inf
+) -> float:
     """A VB-Rep face's area (mm²) as the file's face is to hold it: its mesh's region on its surface
-    (`surface_area`), or the flat mesh's area where there is no surface or no finite (u, v)."""
+    (`surface_area`, two-sheet triangles of more than ``max_stretch`` left out), or the flat mesh's area where
+    there is no surface or no finite (u, v)."""
     if s is not None:
-        a = surface_area(s, vertices, triangles)
+        a = surface_area(s, vertices, triangles, max_stretch)
         if np.isfinite(a):
             return a
     return mesh_area(np.asarray(vertices, float).reshape(-1, 3), triangles)
@@ -243,9 +320,10 @@ def outline_polygons(
     )
     # a triangle still much larger in (u, v) than in space spans two sheets of the surface (a torus patch lifted
     # onto both sides of its tube): it is no part of the face's outline
-    t3 = np.asarray(points, float)[np.asarray(triangles, int).reshape(-1, 3)]
-    area3d = 0.5 * np.linalg.norm(np.cross(t3[:, 1] - t3[:, 0], t3[:, 2] - t3[:, 0]), axis=1)
-    keep = (area > 1e-12) & (area <= max_stretch * area3d + 1e-9)
+    # (measured on the surface at each triangle, not by one scale: a cone's or a fat torus's (u, v) stretch varies
+    # over the face, and one scale took sound triangles far from the median for two-sheet ones)
+    area3d = _triangle_areas(points, triangles)
+    keep = (area > 1e-12) & (_surface_triangle_areas(s, uv[tris]) <= max_stretch * area3d + 1e-12)
     if not keep.any():
         return [], scale
     tris = tris[keep]

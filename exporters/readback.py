@@ -33,13 +33,15 @@ class ReadbackConfig:
     within this fraction of the reconstruction's largest extent; deflection_rel, angle_rad: tessellation
     deflection of the drawn faces, as a fraction of the part size, and angle (radians): the STEP writer's round
     trip's (`BrepConfig.roundtrip_mesh_*`), so a face it let through is drawn whole here; edge_samples: points
-    per drawn edge."""
+    per drawn edge; max_stretch: mesh triangles this much larger on the surface than flat span two sheets of it
+    and are no part of the reconstructed area (the writer's `BrepConfig.outline_max_stretch`)."""
 
     area_tol_rel: float = 0.02
     box_tol_rel: float = 0.10
     deflection_rel: float = BrepConfig.roundtrip_mesh_deflection_rel
     angle_rad: float = BrepConfig.roundtrip_mesh_angle_rad
     edge_samples: int = 24
+    max_stretch: float = BrepConfig.outline_max_stretch
 
 
 @dataclass(frozen=True)
@@ -175,7 +177,7 @@ def check_written(
         out.faces.append(
             FaceArea(
                 f.id,
-                reconstructed_area(surf, pts, f.mesh_triangles),
+                reconstructed_area(surf, pts, f.mesh_triangles, cfg.max_stretch),
                 written.get(f.id, 0.0),
                 sum(drawn) if drawn else None,
             )
