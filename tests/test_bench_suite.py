@@ -186,3 +186,23 @@ def test_worst_scan_line_says_n_a_for_figures_a_scan_has_none_of() -> None:
     )
     line = S._worst_line({**row, "step_faces": 20, "step_fallback_faces": 12, "runtime": {}})
     assert "mesh-outline faces 12 of 20, n/a s" in line
+
+
+def test_whole_suite_group_holds_both_sources_only_when_both_are_there() -> None:
+    """Issue 15 states its figures on the whole unseen suite: `group_names` ends with `WHOLE_SUITE` when corpus
+    and family scans are both present (not otherwise), and `in_group` puts every scan of either source in it and
+    each scan in its own source's groups."""
+    from v2c.synth.dataset import SynthConfig
+
+    def scan(source: str, name: str, band: str | None = None) -> S.SuiteScan:
+        return S.SuiteScan(Path("x") / name, source, name, 0, 1, SynthConfig(), band=band)
+
+    cfg = S.SuiteConfig(suite="unseen")
+    both = [scan(S.CORPUS, "a.step", "<30"), scan(S.FAMILY, "feat_hex")]
+    groups = S.group_names(cfg, both)
+    assert groups[-1] == S.WHOLE_SUITE and groups.count(S.WHOLE_SUITE) == 1
+    assert S.WHOLE_SUITE not in S.group_names(cfg, both[:1]) and S.WHOLE_SUITE not in S.group_names(cfg, both[1:])
+    rows = [{"source": S.CORPUS, "part": "a.step", "band": "<30"}, {"source": S.FAMILY, "part": "feat_hex"}]
+    assert [S.in_group(r, S.WHOLE_SUITE, cfg) for r in rows] == [True, True]
+    assert [S.in_group(r, "leave-out families", cfg) for r in rows] == [False, True]
+    assert [S.in_group(r, "corpus test", cfg) for r in rows] == [True, False]

@@ -373,22 +373,31 @@ def _column(row: dict[str, Any]) -> str:
     return f"{row['segmentation']}/{row['ablation']}"
 
 
+#: The group of every scan of a suite that holds both sources (issue 15 states its figures on the whole suite).
+WHOLE_SUITE = "whole suite"
+
+
 def group_names(cfg: SuiteConfig, scans: Sequence[SuiteScan]) -> list[str]:
     """The report's groups, in order: the corpus split, its size bands, every leave-out family, the families
-    together (only sources with scans)."""
+    together (only sources with scans), and `WHOLE_SUITE` when both sources have scans."""
     out: list[str] = []
-    if any(s.source == CORPUS for s in scans):
+    corpus = any(s.source == CORPUS for s in scans)
+    if corpus:
         out.append(f"corpus {cfg.corpus_split}")
         out += [f"corpus {cfg.corpus_split} {b}" for b in band_labels(cfg.bands)]
     fams = list(dict.fromkeys(s.name for s in scans if s.source == FAMILY))
     out += [f"family {f}" for f in fams]
     if fams:
         out.append("leave-out families")
+    if corpus and fams:
+        out.append(WHOLE_SUITE)
     return out
 
 
 def in_group(row: dict[str, Any], group: str, cfg: SuiteConfig) -> bool:
     """Whether a tagged row belongs to a group of `group_names`."""
+    if group == WHOLE_SUITE:
+        return row.get("source") in (CORPUS, FAMILY)
     if group == "leave-out families":
         return row.get("source") == FAMILY
     if group.startswith("family "):
