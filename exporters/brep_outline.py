@@ -55,8 +55,9 @@ def mesh_area(vertices: np.ndarray, triangles: np.ndarray) -> float:
 
 
 #: Largest side (radians) of the triangles an angular (u, v) region is integrated over (`_region_area`): the area
-#: element of a torus or sphere varies with the cosine of its angle, so the edge-midpoint rule errs by ~side^4.
-REGION_MAX_SIDE_RAD = 0.05
+#: element of a torus or sphere varies with the cosine of its angle, so the edge-midpoint rule errs by ~side^4
+#: (0.25 rad: within 1e-6 of 0.05 rad on three folded validation faces, 2-7 x faster).
+REGION_MAX_SIDE_RAD = 0.25
 #: Most subdivisions per side of one triangle of a region's triangulation (`_region_area`).
 REGION_MAX_SPLIT = 64
 
@@ -70,6 +71,8 @@ def _surface_triangle_areas(s: AnalyticSurface, t: np.ndarray) -> np.ndarray:
     )
     h = 1e-6
     du, dv = np.array([h, 0.0]), np.array([0.0, h])
+    if s.kind is PrimitiveType.PLANE:  # one element for the whole plane, exact: |x cross y|
+        return a_uv * float(np.linalg.norm(np.cross(s.x, s.y)))
     element = np.zeros(len(t))
     for i, j in ((0, 1), (1, 2), (2, 0)):  # the edge-midpoint rule
         c = 0.5 * (t[:, i] + t[:, j])
