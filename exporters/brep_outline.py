@@ -304,10 +304,12 @@ def outline_polygons(
     min_area: float,
     max_stretch: float = 4.0,
     hole_budget: float = np.inf,
+    piece_budget: float = np.inf,
 ) -> tuple[list[shapely.Polygon], np.ndarray]:
     """The union of a mesh's triangles in the surface's scaled (u, v) (millimetres), simplified within ``tol``
-    mm, as polygons (pieces under ``min_area`` mm² dropped, and holes under it, smallest first, while together
-    they hold at most ``hole_budget`` mm²); and the (u, v) -> scaled factors (2,).
+    mm, as polygons (pieces under ``min_area`` mm² dropped, smallest first, while together they hold at most
+    ``piece_budget`` mm², and holes under it while together they hold at most ``hole_budget`` mm²); and the
+    (u, v) -> scaled factors (2,).
 
     points: (N, 3) mesh vertices in millimetres (output frame); triangles: (M, 3) indices.
     """
@@ -335,11 +337,9 @@ def outline_polygons(
         tri = tri[keep]
         union = shapely.union_all(shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1)))
     union = shapely.simplify(union, tol, preserve_topology=True)
-    polys = [
-        p
-        for p in getattr(union, "geoms", [union])
-        if isinstance(p, shapely.Polygon) and not p.is_empty and p.area >= min_area
-    ]
+    polys = [p for p in getattr(union, "geoms", [union]) if isinstance(p, shapely.Polygon) and not p.is_empty]
+    small = _smallest_within([p.area for p in polys], min_area, piece_budget)
+    polys = [p for k, p in enumerate(polys) if k not in small]
     holes = [(k, j) for k, p in enumerate(polys) for j in range(len(p.interiors))]
     drop = _smallest_within([shapely.Polygon(polys[k].interiors[j]).area for k, j in holes], min_area, hole_budget)
     dropped = {holes[i] for i in drop}
@@ -483,15 +483,19 @@ class OutlineBuilder:
         if total <= 0:
             return []
         min_area = self.min_piece_rel * total
-        # A first pass at the cap finds the pieces; each is then simplified within its own area budget.
-        polys, scale = outline_polygons(s, pts, tris, 0.0, min_area, self.max_stretch, self.hole_budget_rel * total)
-        speck = self.min_piece_tris * float(np.median(areas))
+        # A first pass at the cap finds the pieces (all of them); each is then simplified within its own area
+        # budget. Small pieces (under min_area, or specks of a few triangles) go smallest first within one budget,
+        # so a face broken into many small islands is not written short of its area.
+        polys, scale = outline_polygons(
+            s, pts, tris, 0.0, min_area, self.max_stretch, self.hole_budget_rel * total, piece_budget=0.0
+        )
+        speck = max(self.min_piece_tris * float(np.median(areas)), min_area)
         polys = _drop_specks(polys, speck, self.speck_budget_rel * total)
         cands = edge_candidates(self.vb, self.fmap, f.id)
         out = []
         for poly in polys:
             simple = _simplify_keeping_area(poly, self.tol, self.tol_area_rel)
-            for part in _separate_rings(simple, self.gap, min_area):
+            for part in _separate_rings(simple, self.gap, min(min_area, 0.5 * simple.area)):
                 piece = self._face(s, part, scale, cands)
                 if piece is not None:
                     out.append(piece)

@@ -393,3 +393,32 @@ def test_outline_of_a_cone_keeps_the_triangles_near_its_apex() -> None:
     )
     covered = sum(p.area for p in polys) / (scale[0] * scale[1])
     assert covered == pytest.approx(float(a_uv.sum()), rel=1e-6)
+
+
+def test_small_pieces_of_an_outline_go_within_a_budget() -> None:
+    """A plane face meshed as a 50 x 50 mm square plus 30 islands of 2 x 2 mm beside it (each 0.16 % of the
+    face, under a 5 mm² minimum piece; together 4.6 %: a face the segmentation broke into many islands):
+    `outline_polygons` drops every island without a budget (the face written 4.6 % short), keeps them all with
+    a zero budget, and with a 50 mm² budget drops the smallest while they fit (12 of 4 mm²)."""
+    from exporters.frames import FrameMap
+    from exporters.occ_surfaces import make_surface
+
+    fmap = FrameMap(np.eye(3), np.zeros(3))
+
+    def square(x0: float, y0: float, side: float) -> tuple[np.ndarray, np.ndarray]:
+        p = np.array([[x0, y0, 0], [x0 + side, y0, 0], [x0 + side, y0 + side, 0], [x0, y0 + side, 0]], float)
+        return p, np.array([[0, 1, 2], [0, 2, 3]])
+
+    parts = [square(0.0, 0.0, 50.0)] + [square(55.0 + 4.0 * (k % 5), 4.0 * (k // 5), 2.0) for k in range(30)]
+    pts = np.concatenate([p for p, _ in parts])
+    offsets = np.cumsum([0] + [len(p) for p, _ in parts[:-1]])
+    tris = np.concatenate([t + o for (_, t), o in zip(parts, offsets, strict=True)])
+    prim = {"type": "plane", "params": {"origin": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}}
+    s = make_surface(prim, fmap, pts / 1000.0)
+    areas = {}
+    for budget in (np.inf, 0.0, 50.0):
+        polys, _ = outline_polygons(s, pts, tris, 0.0, 5.0, piece_budget=budget)
+        areas[budget] = (len(polys), sum(p.area for p in polys))
+    assert areas[np.inf] == (1, pytest.approx(2500.0))
+    assert areas[0.0] == (31, pytest.approx(2620.0))
+    assert areas[50.0] == (19, pytest.approx(2620.0 - 48.0))
