@@ -62,17 +62,22 @@ REGION_MAX_SIDE_RAD = 0.25
 REGION_MAX_SPLIT = 64
 
 
+def _signed_areas_2d(t: np.ndarray) -> np.ndarray:
+    """(M,) signed areas of the 2D triangles ``t`` (M, 3, 2): positive when counter-clockwise."""
+    return 0.5 * (
+        (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
+    )
+
+
 def _surface_triangle_areas(s: AnalyticSurface, t: np.ndarray) -> np.ndarray:
     """(M,) areas (mm²) on ``s`` of the (u, v) triangles ``t`` (M, 3, 2): each one's (u, v) area times the area
     element |S_u x S_v| (central differences) averaged over its edge midpoints (exact for an element quadratic
     in (u, v))."""
-    a_uv = 0.5 * np.abs(
-        (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
-    )
-    h = 1e-6
-    du, dv = np.array([h, 0.0]), np.array([0.0, h])
+    a_uv = np.abs(_signed_areas_2d(t))
     if s.kind is PrimitiveType.PLANE:  # one element for the whole plane, exact: |x cross y|
         return a_uv * float(np.linalg.norm(np.cross(s.x, s.y)))
+    h = 1e-6
+    du, dv = np.array([h, 0.0]), np.array([0.0, h])
     element = np.zeros(len(t))
     for i, j in ((0, 1), (1, 2), (2, 0)):  # the edge-midpoint rule
         c = 0.5 * (t[:, i] + t[:, j])
@@ -147,9 +152,7 @@ def surface_area(s: AnalyticSurface, vertices: np.ndarray, triangles: np.ndarray
     keep = on_surface <= max_stretch * _triangle_areas(pts, tris0) + 1e-12
     if not keep.any():
         return 0.0
-    signed = 0.5 * (
-        (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
-    )
+    signed = _signed_areas_2d(t)
     # A mesh wound to face the camera keeps one orientation in (u, v) until it folds over the surface's contour:
     # with no triangle turned over, none overlaps another and the sum is the region's area.
     major = np.sign(np.sum(signed[keep]))
@@ -319,10 +322,7 @@ def outline_polygons(
     scale = _metric_scale(s, np.median(uv, axis=0))
     uv, tris = _unwrap_triangles(s, uv, np.asarray(triangles, int).reshape(-1, 3))
     tri = (uv * scale)[tris]
-    area = 0.5 * np.abs(
-        (tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1])
-        - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0])
-    )
+    area = np.abs(_signed_areas_2d(tri))
     # a triangle still much larger in (u, v) than in space spans two sheets of the surface (a torus patch lifted
     # onto both sides of its tube): it is no part of the face's outline
     # (measured on the surface at each triangle, not by one scale: a cone's or a fat torus's (u, v) stretch varies

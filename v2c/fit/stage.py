@@ -22,7 +22,7 @@ from v2c.geometry.points import InstancePoints, estimate_part_size, instance_poi
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
 from v2c.geometry.selection import fit_instance, noise_sigma, select_type, supported
-from v2c.labels import type_axis_of
+from v2c.labels import AxisClass, PrimitiveType, type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive, Torus
 from v2c.primitives.directions import unit
 from v2c.segment.graph import build_edge_graph
@@ -34,15 +34,21 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
+def _typed_label(seg: Segmentation, i: int) -> tuple[PrimitiveType, AxisClass | None] | None:
+    """Instance ``i``'s label as (primitive type, axis class), or None for background or no label."""
+    lab = int(seg.labels[i]) if i < len(seg.labels) else 0
+    return type_axis_of(lab) if 1 <= lab <= 17 else None
+
+
 def _label_of(seg: Segmentation, i: int, config: FitConfig) -> tuple[str | None, int | None | str]:
     """(type, or None for a type search; wanted axis: 0/1/2 frame axis, -1 unaligned, None sphere, "?" decide
     later). A weak label (score < label_score_min) still lends its axis class X/Y/Z: segmenters estimate the
     part frame from the scene (the ground), which names axes better than the fit alone can."""
-    lab = int(seg.labels[i]) if i < len(seg.labels) else 0
     score = float(seg.scores[i]) if i < len(seg.scores) else 0.0
-    if not 1 <= lab <= 17:
+    typed = _typed_label(seg, i)
+    if typed is None:
         return None, "?"
-    ptype, ax = type_axis_of(lab)
+    ptype, ax = typed
     k = None if ax is None else {"X": 0, "Y": 1, "Z": 2, "U": -1}[ax.value]
     if score < config.label_score_min:
         return None, k if k is not None and k >= 0 else "?"
@@ -55,11 +61,8 @@ def _same_axis_meaning(seg: Segmentation, i: int, got_type: str) -> bool:
     label whose points a curved type fits better (a bowed box side, a printed band) says nothing of that curved
     type's axis, which lies across X; held on X, a near-flat torus of the real lying sugar box kept its inlier
     count on a loose band but came out 26-49 mm off its points."""
-    lab = int(seg.labels[i]) if i < len(seg.labels) else 0
-    if not 1 <= lab <= 17:
-        return False
-    ptype, _ = type_axis_of(lab)
-    return (ptype.value == "plane") == (got_type == "plane")
+    typed = _typed_label(seg, i)
+    return typed is not None and (typed[0].value == "plane") == (got_type == "plane")
 
 
 def _inliers(prim: Primitive, ip: InstancePoints, scale: float, config: FitConfig) -> np.ndarray:

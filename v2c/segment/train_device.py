@@ -228,6 +228,7 @@ def train_on_device(
     del y
     cw = torch.from_numpy(class_weights_from_histogram(hist, cfg.class_weight_power)).to(dev)
     amp = dev.type == "cuda" or bool(cfg.bf16)
+    bnd_weight = {name: (boundary_weight or {}).get(name, cfg.boundary_weight) for name in nets}
     models: dict[str, UNet] = {}  # trained in lock step on the same batches
     opts: dict[str, torch.optim.Optimizer] = {}
     records: dict[str, dict] = {}
@@ -245,7 +246,7 @@ def train_on_device(
             "config": asdict(cfg),
             "device_config": asdict(dcfg),
             "lr_scale": (lr_scale or {}).get(name, 1.0),
-            "boundary_weight": (boundary_weight or {}).get(name, cfg.boundary_weight),
+            "boundary_weight": bnd_weight[name],
             "net": asdict(model.cfg),
             "device": str(torch.cuda.get_device_name(dev) if dev.type == "cuda" else dev),
             "packed_scans": len(packed),
@@ -294,7 +295,7 @@ def train_on_device(
         xb, yb, bb = data.batch(ids, cfg.crop_px, rng, flip=cfg.flip)
         for name, model in models.items():
             ce, bce = losses(model, xb, yb, bb, cw, cfg, amp, device_type=dev.type)
-            loss = ce + (boundary_weight or {}).get(name, cfg.boundary_weight) * bce
+            loss = ce + bnd_weight[name] * bce
             opts[name].zero_grad(set_to_none=True)
             loss.backward()
             opts[name].step()
