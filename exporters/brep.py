@@ -235,6 +235,12 @@ def build_brep(
         if f.id not in eb.surfaces:
             out.skipped_faces.append(f.id)
             continue
+        if not len(f.mesh_triangles):  # the reconstruction holds no area for it (v2c.vbrep: its mesh was
+            # left empty, e.g. its readings contradict its surface): a face built from its loops would add
+            # geometry the reconstruction does not have
+            eb.warnings.append(f"face {f.id}: no mesh in the reconstruction; skipped")
+            out.skipped_faces.append(f.id)
+            continue
         mesh_pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         target = reconstructed_area(eb.surfaces[f.id], mesh_pts, f.mesh_triangles, cfg.outline_max_stretch)
         out.mesh_area[f.id] = target

@@ -81,3 +81,27 @@ def test_intersection_edge_without_curve_fitted_on_the_nearer_face() -> None:
 def test_exact_intersections_need_no_guard() -> None:
     eb = EdgeBuilder(box_corner(), CAMERA, BrepConfig()).run()
     assert eb.fit_face == {} and eb.off_surface == {} and eb.degenerate == set() and eb.warnings == []
+
+
+def test_a_face_without_a_mesh_is_not_written_from_its_loops(tmp_path: Path) -> None:
+    """A VB-Rep face whose mesh is empty (the VB-Rep left it so: its depth readings contradict its surface) holds
+    no reconstructed area: the file skips it with a warning instead of writing its loops' face, which the
+    read-back would find infinitely larger than the reconstruction."""
+    from dataclasses import replace as dc_replace
+
+    from exporters.readback import check_written
+
+    vb = box_corner()
+    gone = vb.faces[0].id
+    emptied = dc_replace(vb.faces[0], mesh_vertices=np.zeros((0, 3)), mesh_triangles=np.zeros((0, 3), np.int64))
+    vb2 = dc_replace(vb, faces=[emptied, *vb.faces[1:]])
+    rep = step.write(vb2, tmp_path / "e.step", frame="camera")
+    assert gone in rep.skipped_faces
+    assert rep.n_faces == len(vb.faces) - 1
+    assert any(w.startswith(f"face {gone}: no mesh") for w in rep.warnings)
+    rb = check_written(vb2, tmp_path / "e.step", rep.frame_map)
+    assert not rb.off_faces()
+    assert all(f.written == 0 for f in rb.faces if f.id == gone)
+    # the full box is written whole
+    rep_full = step.write(vb, tmp_path / "b.step", frame="camera")
+    assert rep_full.n_faces == len(vb.faces) and not rep_full.skipped_faces

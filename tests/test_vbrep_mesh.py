@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from v2c.camera import project
 from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
-from v2c.vbrep.mesh import face_mesh, refine_curved
+from v2c.vbrep.mesh import beyond_measured, clip_to_measured, face_mesh, grazing, read_vertices, refine_curved
 
 from scenes.raycast import box_scene, scene_inputs
 
@@ -225,3 +226,110 @@ def test_a_small_mesh_island_far_behind_the_measured_part_is_dropped():
     assert len(kept_t) == len(tri) and len(kept_v) == len(verts)
     # without measured points nothing is dropped
     assert len(drop_stray_islands(verts, tri, None, 0.01, 0.002)[1]) == len(tri)
+
+
+def _floor_depth(region: np.ndarray, y: float) -> np.ndarray:
+    """The depth (metres) of the plane y = ``y`` (camera frame) at the pixels of ``region``, 0 elsewhere."""
+    depth = np.zeros((H, W), np.float32)
+    vs, us = np.nonzero(region)
+    depth[vs, us] = y * K[1, 1] / (vs - K[1, 2])
+    return depth
+
+
+def _measured(region: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    vs, us = np.nonzero(region & (depth > 0))
+    z = depth[vs, us].astype(float)
+    return np.column_stack([(us - K[0, 2]) / K[0, 0] * z, (vs - K[1, 2]) / K[1, 1] * z, z])
+
+
+def test_an_edge_on_plane_a_little_off_keeps_to_what_its_pixels_measured():
+    # The true surface: a floor 5 cm below the camera's axis, seen nearly edge-on (rows 150-175: 0.6-1.0 m away,
+    # about 87 degrees from the view). The fitted plane is tilted 0.5 degrees about the x axis through the
+    # floor's point at 0.8 m: along the rays its crossings run centimetres past the floor the sensor saw (a
+    # corpus part's edge-on faces, oracle segmentation). Clipped, the mesh keeps to the measured points.
+    region = _region(100, 150, 200, 176)
+    depth = _floor_depth(region, 0.05)
+    plane = from_dict({"type": "plane", "params": {"origin": [0.0, 0.05, 0.8], "normal": _tilted(0.5)}})
+    box = (np.array([-1.0, -1.0, 0.3]), np.array([1.0, 1.0, 1.5]))
+    v0, t0 = face_mesh(plane, 0, region, depth, K, WINDOW, 1, 0.02, np.inf, box, True)
+    seen = _measured(region, depth)
+    tree = cKDTree(seen)
+    read = read_vertices(v0, region, depth, K)
+    assert read.all()  # every pixel has a reading: every vertex is judged
+    v1, t1 = clip_to_measured(v0, t0, read, tree, 0.005)
+    lo, hi = seen[:, 2].min(), seen[:, 2].max()
+
+    def beyond(v: np.ndarray) -> float:
+        """How far (metres, along z) the mesh runs past the depths the sensor saw."""
+        return float(np.max(np.maximum(np.maximum(lo - v[:, 2], v[:, 2] - hi), 0.0)))
+
+    assert beyond(v0) > 0.02  # the crossings run past the floor seen
+    assert beyond(v1) <= 0.005 and tree.query(v1)[0].max() <= 0.005  # clipped: on what was measured
+    assert _area(v1, t1) > 0.3 * _area(v0, t0)  # the part of the face the sensor saw stays
+    # as a loop mesh (a trimmed face) the whole face lies past its readings at its median vertex: not used
+    assert beyond_measured(v0, read, tree, 0.002)
+    assert not beyond_measured(v1, read_vertices(v1, region, depth, K), tree, 0.005)
+    assert clip_to_measured(v0, t0, read, None, 0.005)[1] is t0  # no readings to judge by (a face its edges place)
+    judged = grazing(plane, v0, np.cos(np.radians(80.0)))
+    assert judged.all()  # 87 degrees from the view: every crossing is judged
+    assert np.array_equal(clip_to_measured(v0, t0, read, tree, 0.005, 0.0, judged)[1], t1)
+    assert len(clip_to_measured(v0, t0, read, tree, 0.005, 0.99, judged)[1]) == 0  # most of it contradicted: none
+
+
+def _tilted(deg: float) -> list[float]:
+    """The floor's normal (0, 1, 0) tilted ``deg`` degrees about the x axis."""
+    t = np.radians(deg)
+    return [0.0, float(np.cos(t)), float(-np.sin(t))]
+
+
+def test_a_well_seen_plane_is_not_clipped():
+    # A plane at 30 degrees to the view at 0.8 m with depth noise of 3 sensor sigmas (0.0015 z^2) at most: every
+    # lifted vertex lies within millimetres of a measured point, so nothing is clipped at 5 mm.
+    rng = np.random.default_rng(3)
+    n = np.array([0.0, np.sin(np.radians(30)), -np.cos(np.radians(30))])
+    plane = from_dict({"type": "plane", "params": {"origin": [0.0, 0.0, 0.8], "normal": n.tolist()}})
+    region = _region(110, 80, 210, 160)
+    vs, us = np.nonzero(region)
+    rays = np.column_stack([(us - K[0, 2]) / K[0, 0], (vs - K[1, 2]) / K[1, 1], np.ones(len(us))])
+    z = (np.array([0.0, 0.0, 0.8]) @ n) / (rays @ n)
+    depth = np.zeros((H, W), np.float32)
+    depth[vs, us] = z + np.clip(rng.normal(0.0, 1.0, len(z)), -3, 3) * 0.0015 * z**2
+    v0, t0 = face_mesh(plane, 0, region, depth, K, WINDOW, 1, 0.02, np.inf)
+    tree = cKDTree(_measured(region, depth))
+    read = read_vertices(v0, region, depth, K)
+    v1, t1 = clip_to_measured(v0, t0, read, tree, 0.005)
+    assert np.array_equal(t0, t1) and np.array_equal(v0, v1)
+    assert not beyond_measured(v0, read, tree, 0.005)
+    # the same plane fitted 2 cm off: every crossing lies 2 cm from the readings, but 30 degrees from face-on
+    # that is the fit's error, not the ray's: no vertex is judged, nothing clipped
+    off = from_dict(
+        {"type": "plane", "params": {"origin": (np.array([0.0, 0.0, 0.8]) + 0.02 * n).tolist(), "normal": n.tolist()}}
+    )
+    v2, t2 = face_mesh(off, 0, region, depth, K, WINDOW, 1, 0.02, np.inf)
+    judged = grazing(off, v2, np.cos(np.radians(80.0)))
+    assert not judged.any()
+    read2 = read_vertices(v2, region, depth, K)
+    assert np.array_equal(clip_to_measured(v2, t2, read2, tree, 0.005, 0.0, judged)[1], t2)
+
+
+def test_a_dropout_inside_a_face_is_kept_and_a_piece_past_the_readings_dropped():
+    # The edge-on floor, fitted exactly, with readings only on rows 150-162 and a dropout (a dark band the
+    # sensor did not read) on rows 163-175. The vertices the sensor read or that lie next to a reading are
+    # judged and stay (they lie on the readings); the dropout's vertices stay with them (nothing contradicts
+    # them, and the piece they form holds vertices the sensor confirmed). A second, separate patch of the same
+    # face (columns 220-240, no reading, cut off from the rest) forms a piece with no confirmed vertex: dropped.
+    region = _region(100, 150, 200, 176) | _region(220, 150, 240, 176)
+    depth = _floor_depth(_region(100, 150, 200, 163), 0.05)
+    plane = from_dict({"type": "plane", "params": {"origin": [0.0, 0.05, 0.8], "normal": [0.0, 1.0, 0.0]}})
+    box = (np.array([-1.0, -1.0, 0.3]), np.array([1.0, 1.0, 1.5]))
+    v0, t0 = face_mesh(plane, 0, region, depth, K, WINDOW, 1, 0.02, np.inf, box, True)
+    read = read_vertices(v0, region, depth, K)
+    tree = cKDTree(_measured(region, depth))
+    v1, t1 = clip_to_measured(v0, t0, read, tree, 0.03)  # a pixel row spans 17 mm of floor here
+    uv0, uv1 = project(v0, K), project(v1, K)
+    dropout = (uv0[:, 1] > 164) & (uv0[:, 0] < 210)  # vertices of the dropout band, none read
+    assert not read[dropout].any()
+    kept_dropout = (uv1[:, 1] > 164) & (uv1[:, 0] < 210)
+    assert kept_dropout.sum() > 0.5 * dropout.sum()  # the band stays with the part the sensor confirmed
+    assert not (uv1[:, 0] > 210).any()  # the separate patch with no reading at all is dropped
+    assert tree.query(v1[read_vertices(v1, region, depth, K)])[0].max() <= 0.03

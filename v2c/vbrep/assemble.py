@@ -21,7 +21,15 @@ from v2c.vbrep.confidence import edge_confidence, face_confidence
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.context import ExtractContext
 from v2c.vbrep.loop_mesh import loop_mesh, loop_polygon
-from v2c.vbrep.mesh import drop_stray_islands, face_mesh, refine_curved
+from v2c.vbrep.mesh import (
+    beyond_measured,
+    clip_to_measured,
+    drop_stray_islands,
+    face_mesh,
+    grazing,
+    read_vertices,
+    refine_curved,
+)
 from v2c.vbrep.model import EdgeType, VBRep, VEdge, VFace, VVertex
 from v2c.vbrep.pointfit import measured_points
 from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, build_loops
@@ -232,15 +240,20 @@ def _vfaces(
             cfg.mesh_plane_long and isinstance(fg.prim, Plane) and conf >= cfg.mesh_loose_min_conf,
         )
         mv = mt = None
+        own = _own_points(ctx, region, face_pts[inst])
+        evidence = cfg.mesh_evidence_tol * scale
         poly = loop_polygon(loops.get(fid[inst], []), protos, ctx.K) if cfg.mesh_from_loops else None
         if poly is not None and _loops_cover_region(poly, inst, ctx.face_map, set(inst_ids), cfg):
             mv, mt = loop_mesh(fg.prim, fg.sheet, poly, *args)
-            if len(mt):
+            if len(mt) and not beyond_measured(mv, read_vertices(mv, region, ctx.depth, ctx.K), own, evidence):
                 from_loops.append(fid[inst])
-            else:
+            else:  # no trimmed face, or one lying where the sensor did not see the face: its pixels' mesh
                 mv = mt = None
         if mv is None:
             mv, mt = face_mesh(fg.prim, fg.sheet, region, *args)
+            read = read_vertices(mv, region, ctx.depth, ctx.K)
+            judged = grazing(fg.prim, mv, np.cos(np.radians(cfg.mesh_evidence_graze_deg)))
+            mv, mt = clip_to_measured(mv, mt, read, own, evidence, cfg.mesh_evidence_min_share, judged)
         if cfg.mesh_chord_angle_rad > 0:
             mv, mt = refine_curved(
                 fg.prim,
@@ -267,6 +280,18 @@ def _vfaces(
         )
     ctx.stats["loop_meshes"] = from_loops
     return vfaces
+
+
+def _own_points(ctx: ExtractContext, region: np.ndarray, pts: np.ndarray) -> cKDTree | None:
+    """A KD-tree of the points ``pts`` (N, 3) a face's own pixels ``region`` measured, for `clip_to_measured`;
+    None (no clipping) when mesh_evidence_tol is 0 or the face has no reading on more than mesh_unmeasured_share
+    of its pixels."""
+    cfg = ctx.cfg
+    if cfg.mesh_evidence_tol <= 0 or not len(pts):
+        return None
+    if float(np.mean(ctx.depth[region] <= 0)) > cfg.mesh_unmeasured_share:
+        return None
+    return cKDTree(pts)
 
 
 def _loops_cover_region(

@@ -178,6 +178,24 @@ class VBRepConfig:
     mesh_surface_tol: float = 0.05  # scale units: a mesh ray's closest approach to a sheet it misses is moved onto
     #                                 the surface when within this of it, else dropped (as are vertices outside the
     #                                 depth window, e.g. at the camera centre); d_int's value
+    mesh_evidence_tol: float = 0.05  # scale units: a face's mesh keeps to what its own pixels measured: triangles
+    #                                  with a vertex on (or next to) a pixel with a reading that lies farther than
+    #                                  this from all of them are dropped, then pieces with no such vertex within it
+    #                                  (`v2c.vbrep.mesh.clip_to_measured`; a face seen nearly edge-on); 0 = never.
+    #                                  Faces with no reading on more than mesh_unmeasured_share of their pixels
+    #                                  (placed by their edges) are not clipped; a face's loop mesh is not used when
+    #                                  its judged vertices lie farther at their median (`mesh.beyond_measured`).
+    #                                  Issue 16's bound for far faces (0.05 part sizes), not tuned
+    mesh_evidence_graze_deg: float = 80.0  # degrees: ... only vertices whose ray meets the surface at least this
+    #                                        far from its normal are clipped (a crossing nearer face-on moves by at
+    #                                        most 1/cos(80) = 5.8 times the fit's error along the ray; the failures
+    #                                        were at 87-89 degrees); real frames, whose boards bow and whose labels
+    #                                        stand off them, lost triangles at 70-73 degrees to 0.05 part sizes
+    #                                        and their outlines broke into pieces (a cracker box's top in 3 STEP
+    #                                        faces)
+    mesh_evidence_min_share: float = 0.5  # fraction: ... and a face whose clipped mesh keeps less than this share
+    #                                       of its area gets none (its readings contradict the surface over most
+    #                                       of it: a wrong primitive). Half, not tuned
 
     # --- confidence (docs/vbrep.md)
     conf_residual: float = 0.02  # scale units: fit residual at which the residual factor is exp(-1)
