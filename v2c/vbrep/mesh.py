@@ -33,7 +33,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from v2c.camera import pixel_rays
+from v2c.camera import pixel_rays, project
 from v2c.primitives import Cone, Cylinder, Sphere, Torus
 from v2c.primitives.base import Primitive
 from v2c.vbrep.raycast import as_primitive, intersect, sheet_depth
@@ -286,10 +286,7 @@ def drop_stray_islands(
     seen past an occluder lies on measured points and stays, however small."""
     if measured is None or len(tri) < 2:
         return verts, tri
-    n = len(verts)
-    rows = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
-    cols = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
-    k, comp = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False)
+    k, comp = _pieces(len(verts), tri)
     if k < 2:
         return verts, tri
     piece_area = np.bincount(comp[tri[:, 0]], weights=triangle_areas(verts, tri), minlength=k)
@@ -303,20 +300,31 @@ def drop_stray_islands(
     return _compacted(verts, tri[~drop[comp[tri[:, 0]]]])
 
 
+def _pieces(n: int, tri: np.ndarray) -> tuple[int, np.ndarray]:
+    """The pieces of a mesh of ``n`` vertices and triangles ``tri`` (M, 3) connected through shared corners: their
+    count and each vertex's piece label (n,)."""
+    rows = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    cols = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    return connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False)
+
+
 def read_vertices(verts: np.ndarray, region: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(N,) bool: which mesh vertices (N, 3) project next to a pixel of the face (``region``) that has a depth
     reading: the pixel nearest their image point or one of its 8 neighbours (a vertex of the outline lies half a
     pixel past the face's last pixels)."""
-    if not len(verts):
-        return np.zeros(0, bool)
-    readable = binary_dilation(region & (np.asarray(depth) > 0), structure=np.ones((3, 3), bool))
-    h, w = depth.shape[:2]
-    q = verts @ np.asarray(K, float).T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = q[:, :2] / q[:, 2:3]
-    ok = np.all(np.isfinite(uv), axis=1)
-    pix = np.clip(np.rint(np.where(ok[:, None], uv, 0.0)).astype(int), 0, [w - 1, h - 1])
-    return ok & readable[pix[:, 1], pix[:, 0]]
+    seen = region & (np.asarray(depth) > 0)
+    vs, us = np.nonzero(seen)
+    if not len(verts) or not len(vs):
+        return np.zeros(len(verts), bool)
+    h, w = seen.shape
+    # the dilation on the readings' box plus a pixel, not the whole image: this runs for every face
+    v0, v1, u0, u1 = max(vs.min() - 1, 0), min(vs.max() + 2, h), max(us.min() - 1, 0), min(us.max() + 2, w)
+    readable = binary_dilation(seen[v0:v1, u0:u1], structure=np.ones((3, 3), bool))
+    pix = np.clip(np.rint(project(verts, K)).astype(int), 0, [w - 1, h - 1])
+    inside = (pix[:, 0] >= u0) & (pix[:, 0] < u1) & (pix[:, 1] >= v0) & (pix[:, 1] < v1)
+    out = np.zeros(len(verts), bool)
+    out[inside] = readable[pix[inside, 1] - v0, pix[inside, 0] - u0]
+    return out
 
 
 def grazing(prim: Primitive, verts: np.ndarray, max_cos: float) -> np.ndarray:
@@ -370,10 +378,7 @@ def clip_to_measured(
     tri = tri[~far[tri].any(axis=1)]
     if not len(tri):
         return _compacted(verts, tri)
-    n = len(verts)
-    rows = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
-    cols = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
-    _, comp = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False)
+    _, comp = _pieces(len(verts), tri)
     supported = np.zeros(comp.max() + 1, bool)
     used = np.unique(tri)
     supported[comp[used[near[used]]]] = True
