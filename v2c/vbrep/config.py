@@ -121,6 +121,11 @@ class VBRepConfig:
     fallback_min_view_deg: float = 5.0  # degrees: ... and its evidence's centroid sees it at least this far from
     #                                     edge-on (a free plane there is no surface its pixels show; the upright
     #                                     sugar box's side, 0.5 degrees behind edge-on, came out as 10 STEP slivers)
+    fallback_own_first: bool = True  # a plane-labelled face's free fallback plane is fitted to its own depth
+    #                                  points where they form a patch (flatness), and a neighbour's lifted edge
+    #                                  joins them only within fallback_rms of that plane (`faces.own_first_plane`);
+    #                                  other labels and False: every source together (before 2026-11-29; a curved
+    #                                  face's own few points passed as a plane its edges had refused)
     fallback_trim: float = 0.8  # share: the free plane and sphere fits are refitted on this share of the evidence
     #                             closest to their first fit
     fallback_fit_iters: int = 10  # Gauss-Newton iterations of the cylinder fit with a given axis
