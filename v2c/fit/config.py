@@ -104,6 +104,16 @@ class FitConfig(RansacConfig):
     # times the free fit's plus one depth-noise sigma (ratio)
     tangent_clip_sigma: float = 3.0  # residuals are clipped at this many depth-noise sigmas in that RMS (ratio)
     tangent_max_nfev: int = 50  # function evaluations of one constrained fit (count)
+    crossing_planes: bool = True  # an unaligned plane (axis class U or none) is refitted parallel to the line
+    # where two neighbouring planes meet (a chamfer between them) when that explains its inlier points nearly as
+    # well as its free plane (`stage._planes_along_crossings`): the sensor's correlated depth error tilts a small
+    # patch by degrees, and the frame that holds aligned planes does not reach it
+    crossing_min_deg: float = 10.0  # degrees: two neighbouring planes this far apart or more meet in such a line
+    crossing_max_rms_ratio: float = 1.05  # ratio: ... taken when the constrained plane's RMS distance to the points
+    # is at most this times the free (total-least-squares) plane's
+    crossing_min_points: int = 10  # ... for a plane with at least this many inlier points (count)
+    crossing_max_turn_deg: float = 15.0  # degrees: ... and turning the plane by at most this (a correction of the
+    # tilt; a thin strip's points fit any plane through its long axis, a crossing along it included)
     torus_blend_fit: bool = True  # refit each torus as a blend tangent to a coaxial neighbouring cylinder and a
     # plane across its axis (only the minor radius free), or to the cylinder alone, when that explains its points
     # as well as its free fit (tangent_rms_ratio, tangent_clip_sigma; `tangency.constrain_blends`)
