@@ -14,6 +14,8 @@ from v2c.fit.stage import _planes_along_crossings
 from v2c.geometry.points import instance_points
 from v2c.primitives import Plane
 
+from scenes.raycast import planes_depth
+
 K = np.array([[600.0, 0.0, 160.0], [0.0, 600.0, 120.0], [0.0, 0.0, 1.0]])
 
 
@@ -31,13 +33,7 @@ def _scene(tilt_per_px: float, rng: np.random.Generator, cols: tuple[int, int] =
     c = Plane(p1, np.array([0.0, 1.0, -0.2]) / np.hypot(1.0, 0.2))
     inst = np.zeros((240, 320), np.int32)
     inst[60:100, 100:220], inst[100:108, cols[0] : cols[1]], inst[108:141, 100:220] = 1, 2, 3
-    vs, us = np.nonzero(inst > 0)
-    rays = pixel_rays(np.stack([us, vs], 1).astype(float), K)
-    depth = np.zeros(inst.shape)
-    for k, p in ((1, a), (2, b), (3, c)):
-        sel = inst[vs, us] == k
-        n = np.asarray(p.axis_vector, float)
-        depth[vs[sel], us[sel]] = float(n @ np.asarray(p.origin, float)) / (rays[sel] @ n)
+    depth = planes_depth(inst, K, {1: a, 2: b, 3: c})
     on_b = inst == 2
     u = np.nonzero(on_b)[1].astype(float)
     depth[on_b] += tilt_per_px * (u - u.mean()) + rng.normal(0.0, noise_m, int(on_b.sum()))
@@ -91,10 +87,7 @@ def test_a_plane_across_the_crossing_is_kept() -> None:
     turn = np.radians(30.0)
     rot = np.array([[np.cos(turn), 0.0, np.sin(turn)], [0.0, 1.0, 0.0], [-np.sin(turn), 0.0, np.cos(turn)]])
     b2 = Plane(np.asarray(b.origin, float), rot @ np.asarray(b.axis_vector, float))
-    vs, us = np.nonzero(inst == 2)
-    rays = pixel_rays(np.stack([us, vs], 1).astype(float), K)
-    n = np.asarray(b2.axis_vector, float)
-    depth[vs, us] = float(n @ np.asarray(b2.origin, float)) / (rays @ n)
+    depth = np.where(inst == 2, planes_depth(inst, K, {2: b2}), depth)
     free, got = _fit_b(depth, inst, (a, b2, c), FitConfig())
     assert _deg(free, b2) < 0.5
     assert _deg(got, free) < 1e-9

@@ -11,7 +11,7 @@ from v2c.primitives import from_dict
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.model import EdgeType, VertexKind
 
-from scenes.raycast import box_scene, cylinder_scene, plate_feature_scene, scene_inputs
+from scenes.raycast import box_scene, cylinder_scene, planes_depth, plate_feature_scene, scene_inputs
 
 NOISE_M = 0.0004  # depth noise of the scenes (metres), about a RealSense at 0.45 m
 
@@ -277,20 +277,6 @@ def test_labelled_fallback_from_one_edge() -> None:
             assert faces[2].extra.get("fallback")
 
 
-def _planes_depth(inst: np.ndarray, K: np.ndarray, planes: dict) -> np.ndarray:
-    """The depth (metres) of each instance's plane (``planes``: instance -> Plane) along its pixels' rays."""
-    from v2c.camera import pixel_rays
-
-    vs, us = np.nonzero(inst > 0)
-    rays = pixel_rays(np.stack([us, vs], 1).astype(float), K)
-    depth = np.zeros(inst.shape)
-    for k, p in planes.items():
-        sel = inst[vs, us] == k
-        n = np.asarray(p.axis_vector, float)
-        depth[vs[sel], us[sel]] = float(n @ np.asarray(p.origin, float)) / (rays[sel] @ n)
-    return depth
-
-
 def _chamfer_strip_scene(noise_m: float, seed: int = 0):
     """A face-on plane A (rows 60-99), a 45-degree chamfer strip B (rows 100-104, unfitted) and a steep wall C
     (rows 105-140), meeting at the pixel sides between rows 99 / 100 and 104 / 105; depth of B with noise."""
@@ -311,7 +297,7 @@ def _chamfer_strip_scene(noise_m: float, seed: int = 0):
     c = Plane(p1, nc)
     inst = np.zeros((240, 320), np.int32)
     inst[60:100, 100:220], inst[100:105, 100:220], inst[105:141, 100:220] = 1, 2, 3
-    depth = _planes_depth(inst, K, {1: a, 2: b, 3: c})
+    depth = planes_depth(inst, K, {1: a, 2: b, 3: c})
     rng = np.random.default_rng(seed)
     depth[inst == 2] += rng.normal(0.0, noise_m, int((inst == 2).sum()))
     return K, inst, depth, a, b, c
@@ -511,7 +497,7 @@ def test_small_chamfer_seen_beside_a_nearer_face_keeps_its_own_plane() -> None:
     inst[60:105, 100:220] = 1
     inst[100:105, 150:170] = 2
     inst[105:141, 100:220] = 3
-    depth = _planes_depth(inst, K, {1: near, 2: chamfer, 3: wall})
+    depth = planes_depth(inst, K, {1: near, 2: chamfer, 3: wall})
     depth[inst == 2] += np.random.default_rng(1).normal(0.0, 0.0002, int((inst == 2).sum()))
     fit = SimpleNamespace(
         primitives={1: near, 3: wall}, residuals={1: 0.0, 3: 0.0}, axis_labels={1: "Z", 3: None}, frame=np.eye(3)

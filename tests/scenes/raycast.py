@@ -166,6 +166,19 @@ def scene_inputs(
     return SimpleNamespace(scan=scan, seg=seg, fit=fit, render=r)
 
 
+def planes_depth(inst: np.ndarray, K: np.ndarray, planes: dict) -> np.ndarray:
+    """The depth (metres) of each instance's plane (``planes``: instance id -> `v2c.primitives.Plane`, camera
+    frame) along its pixels' rays; 0 on pixels of no listed instance."""
+    vs, us = np.nonzero(inst > 0)
+    rays = pixel_rays(np.stack([us, vs], 1).astype(float), K)
+    depth = np.zeros(inst.shape)
+    for k, p in planes.items():  # loop over instances
+        sel = inst[vs, us] == k
+        n = np.asarray(p.axis_vector, float)
+        depth[vs[sel], us[sel]] = float(n @ np.asarray(p.origin, float)) / (rays[sel] @ n)
+    return depth
+
+
 def _labels_image(faces: np.ndarray, scene: Scene) -> np.ndarray:
     lut = np.zeros(len(scene.faces) + 1, np.uint8)
     for k, f in enumerate(scene.faces):

@@ -197,7 +197,7 @@ def _face_box(
     """The box a face's mesh must lie in: the part's box, padded (more for a sure face with few depth readings of
     its own, which its edges place) and, for a curved face, deep enough for a hole's wall."""
     cfg, scale = ctx.cfg, ctx.scale
-    loose = float(np.mean(ctx.depth[region] <= 0)) > cfg.mesh_unmeasured_share and conf >= cfg.mesh_loose_min_conf
+    loose = _mostly_unread(ctx, region) and conf >= cfg.mesh_loose_min_conf
     pad = (cfg.mesh_bound_pad_unmeasured if loose else cfg.mesh_bound_pad) * scale
     lo, hi = bounds[0] - pad, bounds[1] + pad
     if not isinstance(fg.prim, Plane):  # a hole's wall may run deeper than any point seen: up to one part
@@ -289,9 +289,15 @@ def _own_points(ctx: ExtractContext, region: np.ndarray, pts: np.ndarray) -> cKD
     cfg = ctx.cfg
     if cfg.mesh_evidence_tol <= 0 or not len(pts):
         return None
-    if float(np.mean(ctx.depth[region] <= 0)) > cfg.mesh_unmeasured_share:
+    if _mostly_unread(ctx, region):
         return None
     return cKDTree(pts)
+
+
+def _mostly_unread(ctx: ExtractContext, region: np.ndarray) -> bool:
+    """Whether a face (its pixels ``region``) has no depth reading on more than mesh_unmeasured_share of its
+    pixels: a face its edges place."""
+    return float(np.mean(ctx.depth[region] <= 0)) > ctx.cfg.mesh_unmeasured_share
 
 
 def _loops_cover_region(

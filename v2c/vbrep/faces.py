@@ -3,7 +3,7 @@
 A fitted primitive with valid parameters is taken as it is; one with invalid parameters (`valid_primitive`) is
 rejected, and a curved one is replaced by a least-squares sphere through its depth points when that fits. An
 instance left without a surface (at least ``fallback_min_px`` pixels) gets a fallback from its evidence (its own
-depth points and its boundaries lifted onto fitted neighbours, `fallback_plane_points`): the plane or cylinder
+depth points and its boundaries lifted onto fitted neighbours, `fallback_sources`): the plane or cylinder
 its label's axis class gives (`labelled_fallback`), else a free plane when at least two sources fix it; where a
 free plane would be drawn for a curved label, that type on an axis its fitted neighbours suggest takes its place
 where it fits (`curved_fallback`: a small fillet, rounded rim, chamfer or ball end that had too few points for
@@ -181,23 +181,23 @@ def _extent(prim: Primitive) -> float:
     return 0.0
 
 
-def fallback_plane_points(
+def fallback_sources(
     inst: int,
     inst_map: np.ndarray,
     depth: np.ndarray,
     K: np.ndarray,
     faces: dict[int, FaceGeom],
     window: tuple[float, float],
-) -> list[np.ndarray]:
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """3D evidence (camera frame, metres) for an instance the geometry stage could not fit (e.g. a face seen at a
     grazing angle, where the sensor returns no depth): its own depth points, plus its boundary pixels next to each
     fitted neighbour lifted onto that neighbour's surface (where two faces meet, the edge lies on both), at the
     pixel sides they share (half a pixel from either pixel's centre: the face's own boundary pixels lifted onto a
     neighbour that meets it at an angle lie off it by up to a pixel's footprint times that angle's tangent,
-    which on a face of a few pixels turned the fitted plane by tens of degrees). Returns the point sets of each
-    source with at least 3 points."""
+    which on a face of a few pixels turned the fitted plane by tens of degrees). Returns its own points (N, 3;
+    any number) and each lifted edge with at least 3 points."""
     m = inst_map == inst
-    pts = [measured_points(m, depth, K)]
+    own = measured_points(m, depth, K)
     h, w = m.shape
     vs, us = np.nonzero(m)
     crossings: dict[int, list[np.ndarray]] = {}
@@ -210,12 +210,27 @@ def fallback_plane_points(
             sel = ok & (other == j)
             # the shared pixel side: half a pixel from the face's pixel towards the neighbour's
             crossings.setdefault(int(j), []).append(np.stack([us[sel] + du / 2, vs[sel] + dv / 2], 1))
+    edges = []
     for j in sorted(crossings):  # loop over the fitted neighbours
         if j not in faces:
             continue
         rays = pixel_rays(np.concatenate(crossings[j]).astype(float), K)
-        pts.append(rays * sheet_depth(intersect(faces[j].prim, rays, window), faces[j].sheet)[:, None])
-    return [p for p in pts if len(p) >= 3]
+        edges.append(rays * sheet_depth(intersect(faces[j].prim, rays, window), faces[j].sheet)[:, None])
+    return own, [e for e in edges if len(e) >= 3]
+
+
+def fallback_plane_points(
+    inst: int,
+    inst_map: np.ndarray,
+    depth: np.ndarray,
+    K: np.ndarray,
+    faces: dict[int, FaceGeom],
+    window: tuple[float, float],
+) -> list[np.ndarray]:
+    """The point sets of `fallback_sources` with at least 3 points each: its own first (when it has 3), then its
+    lifted edges."""
+    own, edges = fallback_sources(inst, inst_map, depth, K, faces, window)
+    return [own, *edges] if len(own) >= 3 else edges
 
 
 def _plane_label(seg: Segmentation, inst: int) -> bool:
@@ -236,7 +251,7 @@ def own_first_plane(
     its normal within 7 degrees came out 87 degrees off with them (a corpus part, training split, oracle)."""
     got = fit_plane_points(own, trim) if own is not None else None
     if got is None or got[2] < min_flat:
-        return fit_plane_points(np.concatenate([e for e in ([own] if own is not None else []) + edges]), trim)
+        return fit_plane_points(np.concatenate(([own] if own is not None else []) + edges), trim)
     plane = got[0]
     kept = [own] + [e for e in edges if float(np.sqrt(np.mean(plane.signed_distance(e) ** 2))) <= max_rms]
     return fit_plane_points(np.concatenate(kept), trim) if len(kept) > 1 else got
@@ -322,7 +337,9 @@ def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float
     for inst in np.flatnonzero(counts >= cfg.fallback_min_px):
         if inst == 0 or int(inst) in fs.faces:
             continue
-        sources = fallback_plane_points(int(inst), fs.inst_map, fs.depth, fs.K, fs.faces, fs.window)
+        own_pts, edges = fallback_sources(int(inst), fs.inst_map, fs.depth, fs.K, fs.faces, fs.window)
+        own = own_pts if len(own_pts) >= 3 else None
+        sources = edges if own is None else [own, *edges]
         if not sources:
             continue
         evidence = np.concatenate(sources)
@@ -333,8 +350,6 @@ def _add_fallbacks(fs: _FaceSet, seg: Segmentation, fit: FitResult, scale: float
             continue
         if len(sources) < 2:  # one neighbour's edge alone does not fix a free plane (it may lie in that neighbour)
             continue
-        n_own = int(np.count_nonzero((fs.inst_map == inst) & (fs.depth > 0)))
-        own, edges = (sources[0], sources[1:]) if n_own >= 3 else (None, sources)
         got = (
             own_first_plane(own, edges, cfg.fallback_trim, cfg.fallback_rms * scale, cfg.fallback_flatness)
             if cfg.fallback_own_first and _plane_label(seg, int(inst))
