@@ -371,6 +371,26 @@ def test_fragment_larger_than_the_fragment_size_is_left_alone() -> None:
     assert out.num_instances == 2
 
 
+def test_fragment_behind_a_fragment_joins_once_the_one_in_front_has_joined() -> None:
+    """A 10 x 10 px fragment on the plane whose only neighbour is a 2-px ring of 96 px around it, also on the plane:
+    too large to join the ring (over absorb_max_share of it) in the first round, while the ring joins the plane. A
+    second round judges it against the grown instance and it joins too, for every one of 10 noise seeds; one round
+    leaves it an instance of its own."""
+    from v2c.segment.refine import absorb_fragments
+
+    for seed in range(10):
+        depth = _tilted_plane(np.random.default_rng(seed), 0.0015 * 0.5**2)
+        inst = np.ones((H, W), np.int32)
+        inst[53:67, 73:87] = 2
+        inst[55:65, 75:85] = 3
+        labels = np.array([0, PLANE_Z, PLANE_Z, CYL_Z], np.uint8)
+        seg = Segmentation(inst, labels, np.array([0, 0.9, 0.6, 0.6], np.float32), "learned")
+        one = absorb_fragments(seg, depth, K, RefineConfig(absorb_rounds=1))
+        assert one.num_instances == 2 and (one.instances[55:65, 75:85] == 2).all(), seed
+        out = absorb_fragments(seg, depth, K, RefineConfig())
+        assert out.num_instances == 1 and list(out.labels) == [0, PLANE_Z], seed
+
+
 def _correlated_field(seed: int, std_m: float) -> np.ndarray:
     """(H, W) depth error (metres): white noise blurred with a 3-px Gaussian (the `structured_light` profile's
     correlation length), rescaled to std ``std_m``."""

@@ -132,6 +132,8 @@ class RefineConfig:
     absorb_min_px: int = 6  # fragments with fewer valid pixels are left alone (pixels)
     absorb_min_valid_share: float = 0.5  # ... and those with depth on less of their pixels (fraction; a face seen
     # edge-on returns little depth, and what it returns lies on its neighbour)
+    absorb_rounds: int = 3  # absorption repeated on its own result while something joins, at most this many rounds
+    # (count): fragments that joined each other are judged again as the larger piece they became
     noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
     # synthetic `sensor` profile's D4xx model
     hypotheses: int = 64  # RANSAC plane hypotheses per instance (count)
@@ -871,9 +873,27 @@ def absorb_fragments(
     of noise that the network gave a label of their own. A fragment off every neighbour's surface (a hole's wall,
     a chamfer, a step: another surface) stays, and so does one whose curved label earns its curvature
     (`_curvature_earned`: a fillet strip leaves its plane tangentially, within the noise at first). Smallest
-    fragments first; the merged instance keeps the largest member's label and score. ransac: the settings of the
-    curved neighbours' fits (default `RansacConfig()`)."""
+    fragments first; the merged instance keeps the largest member's label and score; repeated on the result while
+    something joins, at most absorb_rounds times. ransac: the settings of the curved
+    neighbours' fits (default `RansacConfig()`)."""
     ransac = ransac or RansacConfig()
+    for _ in range(max(cfg.absorb_rounds, 1)):  # loop over rounds, until nothing joins
+        out = _absorb_round(seg, depth, K, cfg, geometry, ransac)
+        if out is seg:
+            break
+        seg = out
+    return seg
+
+
+def _absorb_round(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    cfg: RefineConfig,
+    geometry: tuple[np.ndarray, float] | None,
+    ransac: RansacConfig,
+) -> Segmentation:
+    """One round of `absorb_fragments`: ``seg`` itself when nothing joins."""
     prepared = _step_input(seg, depth, K, cfg.enabled and cfg.absorb, geometry, ransac)
     if prepared is None:
         return seg
@@ -907,16 +927,12 @@ def absorb_fragments(
             (ip.pixels, inst.shape),
         )
     }
-    frags = [i for i in frags if i not in curved]
     surfaces: dict[int, object] = {}
     sets = UnionFind(range(1, len(labels)))
-    for i in sorted(frags, key=lambda j: (n_px[j], j)):  # loop over fragments, smallest first
+    for i in sorted((j for j in frags if j not in curved), key=lambda j: (n_px[j], j)):  # fragments, smallest first
         frag = inst == i
-        nbs = np.unique(np.concatenate([pairs[pairs[:, 0] == i, 1], pairs[pairs[:, 1] == i, 0]]))
         best, best_d = None, cfg.absorb_sigma
-        for g in nbs.tolist():  # loop over its neighbours
-            if n_px[g] <= n_px[i] or n_px[i] > cfg.absorb_max_share * n_px[g]:
-                continue
+        for g in _hosts(i, pairs, n_px, cfg):  # loop over its neighbours
             d = _neighbour_distance(frag, g, inst, valid, pts, size, labels, cfg, ransac, rng, surfaces)
             if d <= best_d:
                 best, best_d = g, d
@@ -926,3 +942,9 @@ def absorb_fragments(
     if not groups:
         return seg
     return _relabel(seg, inst, groups, np.ones(len(labels), bool))
+
+
+def _hosts(i: int, pairs: np.ndarray, n_px: np.ndarray, cfg: RefineConfig) -> list[int]:
+    """The touching instances fragment ``i`` may join: larger than it, by at least 1 / absorb_max_share."""
+    nbs = np.unique(np.concatenate([pairs[pairs[:, 0] == i, 1], pairs[pairs[:, 1] == i, 0]]))
+    return [g for g in nbs.tolist() if n_px[g] > n_px[i] and n_px[i] <= cfg.absorb_max_share * n_px[g]]
