@@ -40,7 +40,14 @@ from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_Transform
 from OCP.BRepCheck import BRepCheck_Analyzer
 from OCP.BRepGProp import BRepGProp
 from OCP.BRepMesh import BRepMesh_IncrementalMesh
-from OCP.gp import gp_Trsf, gp_Vec
+from OCP.Geom import (
+    Geom_ConicalSurface,
+    Geom_CylindricalSurface,
+    Geom_Plane,
+    Geom_SphericalSurface,
+    Geom_ToroidalSurface,
+)
+from OCP.gp import gp_Pnt, gp_Trsf, gp_Vec
 from OCP.GProp import GProp_GProps
 from OCP.TopAbs import TopAbs_REVERSED
 from OCP.TopLoc import TopLoc_Location
@@ -145,8 +152,53 @@ def meshes(face: TopoDS_Face, deflection: float, angle_rad: float, min_share: fl
         return False
     if min_share <= 0:
         return True
-    drawn = mesh_area(*face_triangulation(TopoDS.Face_s(copy), deflection, angle_rad))
-    return drawn >= min_share * face_area(copy)
+    return drawn_area(TopoDS.Face_s(copy), deflection, angle_rad) >= min_share * face_area(copy)
+
+
+def drawn_area(face: TopoDS_Face, deflection: float, angle_rad: float) -> float:
+    """The area (its units squared) on its surface of OCCT's triangulation of ``face`` (meshed in place at this
+    linear deflection, its units, and angle, as `face_triangulation`; 0 where the mesher leaves it bare): each
+    triangle's (u, v) area times the surface's area element at its (u, v) centroid. The flat triangles are chords
+    of a curved face and undercount it by its sagitta, with no hole anywhere (corpus training split, oracle: a
+    0.3 mm cylinder drawn at 0.1 mm deflection came out 1.6 % short, and counted as drawn short); the region they
+    cover on the surface is what a hole would shrink. Flat area where the triangulation has no (u, v) nodes."""
+    BRepMesh_IncrementalMesh(face, deflection, False, angle_rad, True)
+    loc = TopLoc_Location()
+    tri = BRep_Tool.Triangulation_s(face, loc)
+    if tri is None or tri.NbTriangles() == 0:
+        return 0.0
+    tris = np.array([tri.Triangle(i).Get() for i in range(1, tri.NbTriangles() + 1)], int) - 1
+    if not tri.HasUVNodes():
+        pts = np.array([tri.Node(i).Coord() for i in range(1, tri.NbNodes() + 1)])
+        return mesh_area(pts, tris)
+    uv = np.array([tri.UVNode(i).Coord() for i in range(1, tri.NbNodes() + 1)])[tris]  # (M, 3, 2)
+    a_uv = 0.5 * np.abs(
+        (uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
+        - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0])
+    )
+    return float(np.sum(a_uv * _area_element(BRep_Tool.Surface_s(face), uv.mean(axis=1))))
+
+
+def _area_element(surface: object, uv: np.ndarray) -> np.ndarray:
+    """|S_u x S_v| of an OCCT surface at the (u, v) points (K, 2): closed forms for the writer's five kinds (OCCT's
+    parametrisations), the first derivatives of any other."""
+    v = uv[:, 1]
+    if isinstance(surface, Geom_Plane):
+        return np.ones(len(uv))
+    if isinstance(surface, Geom_CylindricalSurface):
+        return np.full(len(uv), surface.Radius())
+    if isinstance(surface, Geom_ConicalSurface):
+        return np.abs(surface.RefRadius() + v * np.sin(surface.SemiAngle()))
+    if isinstance(surface, Geom_SphericalSurface):
+        return surface.Radius() ** 2 * np.abs(np.cos(v))
+    if isinstance(surface, Geom_ToroidalSurface):
+        return surface.MinorRadius() * np.abs(surface.MajorRadius() + surface.MinorRadius() * np.cos(v))
+    out = np.empty(len(uv))
+    p, du, dv = gp_Pnt(), gp_Vec(), gp_Vec()
+    for k, (a, b) in enumerate(uv):  # loop over the points (a surface of no closed form)
+        surface.D1(float(a), float(b), p, du, dv)
+        out[k] = du.Crossed(dv).Magnitude()
+    return out
 
 
 def face_triangulation(face: TopoDS_Face, deflection: float, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:

@@ -16,9 +16,9 @@ import numpy as np
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.TopoDS import TopoDS
 
-from exporters.brep import bounding_box, face_area, face_triangulation
+from exporters.brep import bounding_box, drawn_area, face_area, face_triangulation
 from exporters.brep_config import BrepConfig
-from exporters.brep_outline import mesh_area, reconstructed_area
+from exporters.brep_outline import reconstructed_area
 from exporters.frames import FrameMap
 from exporters.occ_surfaces import make_surface
 from exporters.step import faces_by_id, parse_edge_name, quiet_occt
@@ -169,7 +169,7 @@ def check_written(
         pts = fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         if len(pts):
             recon_pts.append(pts)
-        drawn = [mesh_area(p, t) for p, t in meshes.get(f.id, [])]
+        drawn = [drawn_area(g, deflection, cfg.angle_rad) for g in by_id.get(f.id, [])]
         try:
             surf = make_surface(f.primitive, fmap, f.mesh_vertices) if len(pts) else None
         except (KeyError, ValueError, TypeError):

@@ -47,10 +47,17 @@ from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
-from exporters.brep import BuiltBRep, bounding_box, build_brep, face_area, face_triangulation, translate_built
+from exporters.brep import (
+    BuiltBRep,
+    bounding_box,
+    build_brep,
+    drawn_area,
+    face_area,
+    translate_built,
+)
 from exporters.brep_config import BrepConfig
 from exporters.brep_faces import edges_of
-from exporters.brep_outline import edge_candidates, mesh_area, nearest_edge_ids
+from exporters.brep_outline import edge_candidates, nearest_edge_ids
 from exporters.frames import Frame, FrameMap, frame_map
 from exporters.xcaf import RGB, ReadSubShape, SubShapeAttrs, read_xcaf_step, write_xcaf_step
 from v2c.errors import V2cError
@@ -323,7 +330,7 @@ def written_face_areas(
     by_id = faces_by_id(read_xcaf_step(path).faces)
     areas = {fid: sum(face_area(f) for f in fs) for fid, fs in by_id.items()}
     drawn = {
-        fid: sum(mesh_area(*face_triangulation(f, deflection, angle_rad)) for f in fs)
+        fid: sum(drawn_area(f, deflection, angle_rad) for f in fs)
         for fid, fs in by_id.items()
         if meshed is None or fid in meshed
     }
