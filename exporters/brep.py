@@ -101,8 +101,9 @@ class BuiltBRep:
 #: integration is exact for faces bounded by lines and circles but not for boundaries of fitted B-spline (u, v)
 #: curves: on a leave-out family scan (feat_block scan 8, oracle) it gave 2,533 mm² for a planar face whose
 #: triangulation and reconstruction are 1,880 mm² (adaptive: 1,880), sending faces to their mesh outline and
-#: counting written faces as off.
-AREA_REL_PRECISION = 1e-6
+#: counting written faces as off. 1e-3, not 1e-6: on the 202 faces written for three corpus-val scans (oracle)
+#: the areas agree within 3e-10, and the integration takes a third of the time (0.063 s against 0.185 s).
+AREA_REL_PRECISION = 1e-3
 
 
 def face_area(face: TopoDS_Shape) -> float:
