@@ -56,9 +56,17 @@ from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS
 from exporters.brep_config import BrepConfig
 from exporters.brep_edges import EdgeBuilder
 from exporters.brep_faces import FaceBuilder, edges_of
-from exporters.brep_outline import OutlineBuilder, mesh_area, mesh_centroid, reconstructed_area
+from exporters.brep_outline import (
+    OutlineBuilder,
+    area_element,
+    mesh_area,
+    mesh_centroid,
+    reconstructed_area,
+    signed_areas_2d,
+)
 from exporters.frames import FrameMap
 from exporters.polygons import connected_groups
+from v2c.labels import PrimitiveType
 
 if TYPE_CHECKING:
     from v2c.vbrep.model import VBRep
@@ -173,10 +181,7 @@ def drawn_area(face: TopoDS_Face, deflection: float, angle_rad: float) -> float:
         pts = np.array([tri.Node(i).Coord() for i in range(1, tri.NbNodes() + 1)])
         return mesh_area(pts, tris)
     uv = np.array([tri.UVNode(i).Coord() for i in range(1, tri.NbNodes() + 1)])[tris]  # (M, 3, 2)
-    a_uv = 0.5 * np.abs(
-        (uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
-        - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0])
-    )
+    a_uv = np.abs(signed_areas_2d(uv))
     return float(np.sum(a_uv * _area_element(BRep_Tool.Surface_s(face), uv.mean(axis=1))))
 
 
@@ -187,13 +192,13 @@ def _area_element(surface: object, uv: np.ndarray) -> np.ndarray:
     if isinstance(surface, Geom_Plane):
         return np.ones(len(uv))
     if isinstance(surface, Geom_CylindricalSurface):
-        return np.full(len(uv), surface.Radius())
+        return area_element(PrimitiveType.CYLINDER, v, surface.Radius())
     if isinstance(surface, Geom_ConicalSurface):
-        return np.abs(surface.RefRadius() + v * np.sin(surface.SemiAngle()))
+        return area_element(PrimitiveType.CONE, v, surface.RefRadius(), half_angle=surface.SemiAngle())
     if isinstance(surface, Geom_SphericalSurface):
-        return surface.Radius() ** 2 * np.abs(np.cos(v))
+        return area_element(PrimitiveType.SPHERE, v, surface.Radius())
     if isinstance(surface, Geom_ToroidalSurface):
-        return surface.MinorRadius() * np.abs(surface.MajorRadius() + surface.MinorRadius() * np.cos(v))
+        return area_element(PrimitiveType.TORUS, v, surface.MajorRadius(), surface.MinorRadius())
     out = np.empty(len(uv))
     p, du, dv = gp_Pnt(), gp_Vec(), gp_Vec()
     for k, (a, b) in enumerate(uv):  # loop over the points (a surface of no closed form)

@@ -62,7 +62,7 @@ REGION_ELEMENT_SAMPLES = 4097
 REGION_GAUSS_NODES = 8
 
 
-def _signed_areas_2d(t: np.ndarray) -> np.ndarray:
+def signed_areas_2d(t: np.ndarray) -> np.ndarray:
     """(M,) signed areas of the 2D triangles ``t`` (M, 3, 2): positive when counter-clockwise."""
     return 0.5 * (
         (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
@@ -73,7 +73,7 @@ def _surface_triangle_areas(s: AnalyticSurface, t: np.ndarray) -> np.ndarray:
     """(M,) areas (mm²) on ``s`` of the (u, v) triangles ``t`` (M, 3, 2): each one's (u, v) area times the area
     element |S_u x S_v| (central differences) averaged over its edge midpoints (exact for an element quadratic
     in (u, v))."""
-    a_uv = np.abs(_signed_areas_2d(t))
+    a_uv = np.abs(signed_areas_2d(t))
     if s.kind is PrimitiveType.PLANE:  # one element for the whole plane, exact: |x cross y|
         return a_uv * float(np.linalg.norm(np.cross(s.x, s.y)))
     h = 1e-6
@@ -87,17 +87,27 @@ def _surface_triangle_areas(s: AnalyticSurface, t: np.ndarray) -> np.ndarray:
     return a_uv * element
 
 
-def _element(s: AnalyticSurface, v: np.ndarray) -> np.ndarray:
-    """The area element |S_u x S_v| (mm² per unit of u and v) of a surface of revolution at ``v``: u is the angle
-    round the axis on every kind but the plane, so it does not depend on u."""
+def area_element(
+    kind: PrimitiveType, v: np.ndarray, radius: float, minor_radius: float = 0.0, half_angle: float = 0.0
+) -> np.ndarray:
+    """The area element |S_u x S_v| (the radius's units squared per unit of u and v) at ``v`` of a cylinder, cone,
+    sphere or torus in OCCT's parametrisation (u the angle round the axis, so the element does not depend on u;
+    ``radius`` a cone's at v = 0, a torus's major one)."""
     v = np.asarray(v, float)
-    if s.kind is PrimitiveType.CYLINDER:
-        return np.full(v.shape, abs(s.radius))
-    if s.kind is PrimitiveType.CONE:
-        return np.abs(s.radius + v * np.sin(s.half_angle))
-    if s.kind is PrimitiveType.SPHERE:
-        return s.radius**2 * np.abs(np.cos(v))
-    return s.minor_radius * np.abs(s.radius + s.minor_radius * np.cos(v))  # torus
+    if kind is PrimitiveType.CYLINDER:
+        return np.full(v.shape, abs(radius))
+    if kind is PrimitiveType.CONE:
+        return np.abs(radius + v * np.sin(half_angle))
+    if kind is PrimitiveType.SPHERE:
+        return radius**2 * np.abs(np.cos(v))
+    if kind is PrimitiveType.TORUS:
+        return minor_radius * np.abs(radius + minor_radius * np.cos(v))
+    raise ValueError(f"no area element of one parameter for a {kind.value}")
+
+
+def _element(s: AnalyticSurface, v: np.ndarray) -> np.ndarray:
+    """`area_element` of a surface of revolution ``s`` at ``v`` (mm² per unit of u and v)."""
+    return area_element(s.kind, v, s.radius, s.minor_radius, s.half_angle)
 
 
 def _region_area(s: AnalyticSurface, region: shapely.Geometry) -> float:
@@ -174,7 +184,7 @@ def surface_area(s: AnalyticSurface, vertices: np.ndarray, triangles: np.ndarray
     keep = on_surface <= max_stretch * _triangle_areas(pts, tris0) + 1e-12
     if not keep.any():
         return 0.0
-    signed = _signed_areas_2d(t)
+    signed = signed_areas_2d(t)
     # A mesh wound to face the camera keeps one orientation in (u, v) until it folds over the surface's contour:
     # with no triangle turned over, and no two triangles on the same side of an edge they share, none overlaps
     # another and the sum is the region's area.
@@ -361,7 +371,7 @@ def outline_polygons(
     scale = _metric_scale(s, np.median(uv, axis=0))
     uv, tris = _unwrap_triangles(s, uv, np.asarray(triangles, int).reshape(-1, 3))
     tri = (uv * scale)[tris]
-    area = np.abs(_signed_areas_2d(tri))
+    area = np.abs(signed_areas_2d(tri))
     # a triangle still much larger in (u, v) than in space spans two sheets of the surface (a torus patch lifted
     # onto both sides of its tube): it is no part of the face's outline
     # (measured on the surface at each triangle, not by one scale: a cone's or a fat torus's (u, v) stretch varies

@@ -307,11 +307,11 @@ def test_fallback_edges_are_lifted_at_the_shared_pixel_sides() -> None:
     # An unfitted chamfer strip between two fitted planes: its edges with them, lifted onto them, lie on the strip's
     # own plane (the true edge lines), not a pixel's footprint times the angle off it as its boundary pixels do.
     from v2c.vbrep.classify import FaceGeom
-    from v2c.vbrep.faces import fallback_plane_points
+    from v2c.vbrep.faces import fallback_sources
 
     K, inst, depth, a, b, c = _chamfer_strip_scene(0.0)
     faces = {1: FaceGeom(1, a), 3: FaceGeom(3, c)}
-    own, *edges = fallback_plane_points(2, inst, depth, K, faces, (0.05, 5.0))
+    own, edges = fallback_sources(2, inst, depth, K, faces, (0.05, 5.0))
     assert len(own) == 5 * 120 and len(edges) == 2
     for pts in edges:
         assert np.abs(b.signed_distance(pts)).max() < 1e-9  # metres: on both planes, exactly

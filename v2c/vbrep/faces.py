@@ -20,7 +20,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from v2c.camera import pixel_rays
-from v2c.labels import type_axis_of
+from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, type_axis_of
 from v2c.primitives import Cone, Cylinder, Plane, Sphere, Torus
 from v2c.primitives.directions import unit
 from v2c.segment.graph import EdgeGraph, build_edge_graph
@@ -219,24 +219,10 @@ def fallback_sources(
     return own, [e for e in edges if len(e) >= 3]
 
 
-def fallback_plane_points(
-    inst: int,
-    inst_map: np.ndarray,
-    depth: np.ndarray,
-    K: np.ndarray,
-    faces: dict[int, FaceGeom],
-    window: tuple[float, float],
-) -> list[np.ndarray]:
-    """The point sets of `fallback_sources` with at least 3 points each: its own first (when it has 3), then its
-    lifted edges."""
-    own, edges = fallback_sources(inst, inst_map, depth, K, faces, window)
-    return [own, *edges] if len(own) >= 3 else edges
-
-
 def _plane_label(seg: Segmentation, inst: int) -> bool:
     """Whether instance ``inst``'s label names a plane (any axis class)."""
     labels = np.asarray(seg.labels)
-    return inst < len(labels) and 1 <= int(labels[inst]) <= 16 and type_axis_of(int(labels[inst]))[0].value == "plane"
+    return inst < len(labels) and int(TYPE_OF_LABEL[int(labels[inst])]) == TYPE_NAMES.index("plane")
 
 
 def own_first_plane(
