@@ -391,6 +391,36 @@ def test_fragment_behind_a_fragment_joins_once_the_one_in_front_has_joined() -> 
         assert out.num_instances == 1 and list(out.labels) == [0, PLANE_Z], seed
 
 
+def test_curved_island_joins_its_only_neighbour_and_a_curved_strip_between_two_faces_stays(monkeypatch) -> None:
+    """The curvature guard keeps a curved-labelled fragment whose curved fit earns its curvature out of the join (a
+    fillet strip leaves its face tangentially). A blend runs between two faces: a fragment that one instance
+    encloses (an island inside one face: a printed spot on the real lying sugar box's top) joins where its depth
+    fits, earned curvature or not, for 10 noise seeds; the same fragment touching two instances stays, so does one
+    on the silhouette (its other face may be unseen: a can's rim), and with absorb_island_curved off the island
+    stays too. The guard is forced to 'earned' here so that the rule, not the fit, is what decides."""
+    from v2c.segment import refine
+    from v2c.segment.refine import absorb_fragments
+
+    monkeypatch.setattr(refine, "_curvature_earned", lambda *a, **k: True)
+    for seed in range(10):
+        depth, seg = _island_scene(0.0, seed)
+        out = absorb_fragments(seg, depth, K, RefineConfig())
+        assert out.num_instances == 1 and list(out.labels) == [0, PLANE_Z], seed
+        kept = absorb_fragments(seg, depth, K, RefineConfig(absorb_island_curved=False))
+        assert kept.num_instances == 2, seed
+        rim = seg.instances.copy()
+        rim[50:66, 86:90] = 0  # the island on the silhouette: a blend whose other face is unseen may end there
+        edge = Segmentation(rim, seg.labels, seg.scores, "learned")
+        assert absorb_fragments(edge, depth, K, RefineConfig()).num_instances == 2, seed
+        inst = seg.instances.copy()
+        inst[:, 78:] = np.where(inst[:, 78:] == 1, 3, inst[:, 78:])  # the plane's right half: a second face
+        two = Segmentation(
+            inst, np.array([0, PLANE_Z, CYL_Z, PLANE_Z], np.uint8), np.array([0, 0.9, 0.7, 0.9], np.float32), "learned"
+        )
+        out = absorb_fragments(two, depth, K, RefineConfig())
+        assert out.num_instances == 3 and (out.instances[50:66, 70:86] == 2).all(), seed
+
+
 def _correlated_field(seed: int, std_m: float) -> np.ndarray:
     """(H, W) depth error (metres): white noise blurred with a 3-px Gaussian (the `structured_light` profile's
     correlation length), rescaled to std ``std_m``."""

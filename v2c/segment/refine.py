@@ -132,6 +132,10 @@ class RefineConfig:
     absorb_min_px: int = 6  # fragments with fewer valid pixels are left alone (pixels)
     absorb_min_valid_share: float = 0.5  # ... and those with depth on less of their pixels (fraction; a face seen
     # edge-on returns little depth, and what it returns lies on its neighbour)
+    absorb_island_curved: bool = True  # a curved-labelled fragment enclosed by one instance (touching no other and
+    # not the background: an island inside one face) joins it where its depth fits, though it earns its curvature:
+    # a blend runs between two faces (a printed spot on a box's top). One on the silhouette may be a blend whose
+    # other face is unseen (a can's rim beyond its lid) and stays
     absorb_rounds: int = 3  # absorption repeated on its own result while something joins, at most this many rounds
     # (count): fragments that joined each other are judged again as the larger piece they became
     noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
@@ -872,7 +876,8 @@ def absorb_fragments(
     absorb_sigma sensor sigmas (`_neighbour_distance`): islands of printed art, strips along a box edge, pieces
     of noise that the network gave a label of their own. A fragment off every neighbour's surface (a hole's wall,
     a chamfer, a step: another surface) stays, and so does one whose curved label earns its curvature
-    (`_curvature_earned`: a fillet strip leaves its plane tangentially, within the noise at first). Smallest
+    (`_curvature_earned`: a fillet strip leaves its plane tangentially, within the noise at first) unless one
+    instance encloses it (absorb_island_curved: a blend runs between faces, an island inside one is not one). Smallest
     fragments first; the merged instance keeps the largest member's label and score; repeated on the result while
     something joins, at most absorb_rounds times. ransac: the settings of the curved
     neighbours' fits (default `RansacConfig()`)."""
@@ -911,10 +916,13 @@ def _absorb_round(
         return seg
     rng = np.random.default_rng(cfg.seed)
     types = [TYPE_NAMES[int(TYPE_OF_LABEL[int(k)])] for k in labels]
+    n_touch = np.bincount(pairs.ravel(), minlength=len(labels))
+    on_background = _touching_background(inst, len(labels))
     curved = {
         i
         for i in frags
         if types[i] != "plane"
+        and not (cfg.absorb_island_curved and n_touch[i] <= 1 and not on_background[i])
         and (ip := instance_points(pts, valid, inst, np.array([i]), ransac).get(i)) is not None
         and _curvature_earned(
             types[i],
@@ -942,6 +950,16 @@ def _absorb_round(
     if not groups:
         return seg
     return _relabel(seg, inst, groups, np.ones(len(labels), bool))
+
+
+def _touching_background(inst: np.ndarray, n: int) -> np.ndarray:
+    """(n,) bool: the instances with a pixel 4-adjacent to the background (id 0: the silhouette, the mask's edge or
+    a pixel no instance holds)."""
+    out = np.zeros(n, bool)
+    for a, b in ((inst[:, :-1], inst[:, 1:]), (inst[:-1], inst[1:])):  # horizontal, then vertical neighbours
+        out[a[(b == 0) & (a > 0)]] = True
+        out[b[(a == 0) & (b > 0)]] = True
+    return out
 
 
 def _hosts(i: int, pairs: np.ndarray, n_px: np.ndarray, cfg: RefineConfig) -> list[int]:
