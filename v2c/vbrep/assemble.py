@@ -216,13 +216,15 @@ def _vfaces(
 ) -> list[VFace]:
     """The VB-Rep faces with their meshes, loops, confidences and sigmas (mm). A face whose loops bound a valid
     image region gets the mesh of that region (`v2c.vbrep.loop_mesh`: the trimmed face; noted in
-    ``ctx.stats["loop_meshes"]``), any other the mesh of its pixel region."""
+    ``ctx.stats["loop_meshes"]``), any other the mesh of its pixel region, kept to what its pixels measured; one
+    whose pixel mesh misses its own readings gets none (``ctx.stats["faces_off_their_readings"]``)."""
     cfg, scale = ctx.cfg, ctx.scale
     part_pts = measured_points(ctx.face_map > 0, ctx.depth, ctx.K)
     bounds = _part_box(ctx, part_pts)
     measured = cKDTree(part_pts) if len(part_pts) and cfg.mesh_island_max_share > 0 else None
     vfaces = []
     from_loops = []
+    off_readings = []  # faces left without a mesh: their surface misses their own readings
     for inst in inst_ids:
         fg = ctx.faces[inst]
         region = ctx.face_map == inst
@@ -253,6 +255,9 @@ def _vfaces(
             mv, mt = face_mesh(fg.prim, fg.sheet, region, *args)
             read = read_vertices(mv, region, ctx.depth, ctx.K)
             judged = grazing(fg.prim, mv, np.cos(np.radians(cfg.mesh_evidence_graze_deg)))
+            if cfg.mesh_evidence_median and beyond_measured(mv, read, own, evidence):
+                mv, mt = mv[:0], mt[:0]  # its surface misses its own readings at most of its pixels: a wrong primitive
+                off_readings.append(fid[inst])
             mv, mt = clip_to_measured(mv, mt, read, own, evidence, cfg.mesh_evidence_min_share, judged)
         if cfg.mesh_chord_angle_rad > 0:
             mv, mt = refine_curved(
@@ -279,6 +284,7 @@ def _vfaces(
             )
         )
     ctx.stats["loop_meshes"] = from_loops
+    ctx.stats["faces_off_their_readings"] = off_readings
     return vfaces
 
 

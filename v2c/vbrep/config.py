@@ -198,6 +198,11 @@ class VBRepConfig:
     #                                        stand off them, lost triangles at 70-73 degrees to 0.05 part sizes
     #                                        and their outlines broke into pieces (a cracker box's top in 3 STEP
     #                                        faces)
+    mesh_evidence_median: bool = True  # a face whose pixel mesh lies farther than mesh_evidence_tol from its own
+    #                                    readings at the median of its vertices on pixels with a reading, at any
+    #                                    angle, gets none (`mesh.beyond_measured`: its surface misses what its
+    #                                    pixels measured, a wrong primitive: a 19 px face fitted as a 101 mm
+    #                                    cylinder 8 mm off its readings)
     mesh_evidence_min_share: float = 0.5  # fraction: ... and a face whose clipped mesh keeps less than this share
     #                                       of its area gets none (its readings contradict the surface over most
     #                                       of it: a wrong primitive). Half, not tuned
