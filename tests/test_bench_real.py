@@ -173,3 +173,16 @@ def test_bench_real_uses_the_given_weights(shared_data: Path, tmp_path: Path, mo
     assert row["ok"], row.get("error")
     assert seen and all(Path(str(w)) == given for w in seen)
     assert data["weights"] == str(given)
+
+
+def test_faces_per_box_side_averages_the_box_frames_alone() -> None:
+    """Issue 17's figure, faces per visible box side, is the mean over the box frames; faces_per_side keeps the mean
+    over boxes and cans."""
+    common = {"segmentation": "learned", "ok": True, "depth_rms_mm": 1.0, "coverage_3mm": 0.9, "seconds": 4.0}
+    common["cpu_seconds"] = 3.0
+    box = {**common, "frame": "b", "object": "box", "faces": 4, "faces_per_side": 4 / 3, "expected": {}}
+    box["box"] = {"largest_two_deg": 90.0}
+    can = {**common, "frame": "c", "object": "can", "faces": 6, "faces_per_side": 3.0, "expected": {"radius_mm": 33.0}}
+    can["can"] = {"cylinder_faces": 1, "radius_mm": 33.0, "error_pct": 0.0}
+    s = R._summary([box, can])
+    assert s["faces_per_box_side"] == 4 / 3 and s["faces_per_side"] == (4 / 3 + 3.0) / 2
