@@ -578,10 +578,16 @@ def _merge_groups(
 
 def touching_pairs(inst: np.ndarray) -> np.ndarray:
     """(P, 2) int: the pairs (a < b) of instances (ids > 0) that touch (4-neighbour pixel pairs)."""
+    pairs = _contacts(inst)
+    return pairs[pairs[:, 0] > 0]
+
+
+def _contacts(inst: np.ndarray) -> np.ndarray:
+    """(P, 2) int: the pairs (a < b) of ids, the background's 0 among them, that touch (4-neighbour pixel pairs)."""
     pairs = np.concatenate(
         [np.stack([inst[:, :-1].ravel(), inst[:, 1:].ravel()], 1), np.stack([inst[:-1].ravel(), inst[1:].ravel()], 1)]
     )
-    pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs.min(axis=1) > 0)]
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     return np.unique(np.sort(pairs, axis=1), axis=0).reshape(-1, 2)
 
 
@@ -906,7 +912,8 @@ def _absorb_round(
     labels = np.asarray(seg.labels)
     n_px = np.bincount(inst[valid].ravel(), minlength=len(labels))
     area = np.bincount(inst.ravel(), minlength=len(labels))
-    pairs = touching_pairs(inst)
+    contacts = _contacts(inst)
+    pairs = contacts[contacts[:, 0] > 0]  # `touching_pairs`
     frags = [
         i
         for i in range(1, len(labels))
@@ -917,7 +924,8 @@ def _absorb_round(
     rng = np.random.default_rng(cfg.seed)
     types = [TYPE_NAMES[int(TYPE_OF_LABEL[int(k)])] for k in labels]
     n_touch = np.bincount(pairs.ravel(), minlength=len(labels))
-    on_background = _touching_background(inst, len(labels))
+    on_background = np.zeros(len(labels), bool)  # a pixel 4-adjacent to the background: the silhouette, the mask's
+    on_background[contacts[contacts[:, 0] == 0, 1]] = True  # edge or a pixel no instance holds
     curved = {
         i
         for i in frags
@@ -950,16 +958,6 @@ def _absorb_round(
     if not groups:
         return seg
     return _relabel(seg, inst, groups, np.ones(len(labels), bool))
-
-
-def _touching_background(inst: np.ndarray, n: int) -> np.ndarray:
-    """(n,) bool: the instances with a pixel 4-adjacent to the background (id 0: the silhouette, the mask's edge or
-    a pixel no instance holds)."""
-    out = np.zeros(n, bool)
-    for a, b in ((inst[:, :-1], inst[:, 1:]), (inst[:-1], inst[1:])):  # horizontal, then vertical neighbours
-        out[a[(b == 0) & (a > 0)]] = True
-        out[b[(a == 0) & (b > 0)]] = True
-    return out
 
 
 def _hosts(i: int, pairs: np.ndarray, n_px: np.ndarray, cfg: RefineConfig) -> list[int]:
