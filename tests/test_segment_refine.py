@@ -503,3 +503,55 @@ def test_coaxial_merge_refits_a_members_cylinder_where_ransac_misses(monkeypatch
     monkeypatch.setattr(refine, "ransac_fit", union_misses)
     assert refine.merge_coaxial(seg, depth, K, RefineConfig()).num_instances == 1
     assert refine.merge_coaxial(seg, depth, K, RefineConfig(merge_coax_refit=False)).num_instances == 2
+
+
+def _ridge_scene(seed: int, fillet_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (metres) of a convex ridge z = 0.5 + |X| (two planes meeting at 90 degrees along the image column
+    u = 80, the crease nearest the camera) with the sensor's noise (0.0015 z^2), and the true crease's columns.
+    fillet_m = 0: the crease is sharp and the depth is averaged over 9 px across it (a sensor's matching window
+    rounds it); > 0: a true fillet of that radius joins the planes (tangent at |X| = r / sqrt(2))."""
+    xr = (np.arange(W, dtype=float)[None, :].repeat(H, 0) - K[0, 2]) / K[0, 0]
+    z = 0.5 / (1.0 - np.abs(xr))
+    if fillet_m > 0:
+        c = 0.5 + fillet_m * np.sqrt(2.0)  # the fillet's axis, inside the solid
+        a = xr**2 + 1.0
+        zf = (c - np.sqrt(np.maximum(c * c - a * (c * c - fillet_m**2), 0.0))) / a
+        on = np.abs(zf * xr) <= fillet_m / np.sqrt(2.0)
+        z = np.where(on, zf, z)
+    else:
+        off = np.abs(np.arange(W) - K[0, 2])[None, :].repeat(H, 0)  # pixels from the crease
+        z = np.where(off <= 8, cv2.blur(z, (9, 1)), z)  # (the blur's border reflection kept off the planes)
+        on = off <= 6  # the band the network labels a fillet
+    rng = np.random.default_rng(seed)
+    return z + rng.normal(0.0, 1.0, z.shape) * 0.0015 * z**2, on
+
+
+def test_crease_strip_is_cut_between_its_planes_and_a_resolved_fillet_stays() -> None:
+    """A real sensor's matching window rounds a box's crease over about 9 px, and the network labels the band a
+    fillet (the real frames' boxes). The band, 13 px wide and labelled cylinder between two plane instances, is
+    cut between them along the crease (each pixel to the plane the envelope shows there), for 5 noise seeds; with
+    the step off it stays. A true fillet of 60 mm radius (about 17 px each side of the crease at 0.5 m), which
+    departs from the planes by millimetres outside the sensor's band, stays; so does a strip no wider than the band
+    (7 px: there depth cannot tell a narrow fillet from the rounding, and the network's label stands)."""
+    from v2c.segment.refine import split_crease_strips
+
+    labels = np.array([0, PLANE_Z, CYL_Z, PLANE_Z], np.uint8)
+    scores = np.array([0, 0.9, 0.7, 0.9], np.float32)
+    u = np.arange(W)[None, :].repeat(H, 0)
+    for seed in range(5):
+        for fillet in (0.0, 0.06):
+            depth, strip = _ridge_scene(seed, fillet)
+            inst = np.where(strip, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
+            seg = Segmentation(inst, labels, scores, "learned")
+            out = split_crease_strips(seg, depth, K, RefineConfig())
+            if fillet:
+                assert out.num_instances == 3 and (out.instances == inst).all(), seed
+                continue
+            assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, PLANE_Z], seed
+            left, right = out.instances[:, : int(K[0, 2]) - 1], out.instances[:, int(K[0, 2]) + 1 :]
+            assert (left == 1).all() and (right == 2).all(), seed  # the cut follows the crease (column 80)
+            kept = split_crease_strips(seg, depth, K, RefineConfig(crease=False))
+            assert kept.num_instances == 3, seed
+            narrow = np.where(np.abs(u - K[0, 2]) <= 3, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
+            out = split_crease_strips(Segmentation(narrow, labels, scores, "learned"), depth, K, RefineConfig())
+            assert out.num_instances == 3, seed
