@@ -113,6 +113,7 @@ def test_bench_real_one_frame(shared_data: Path, tmp_path: Path) -> None:
     assert row["ok"], row.get("error")
     assert row["faces"] >= 1 and Path(row["step"]).is_file()
     assert 0.0 <= row["coverage_3mm"] <= 1.0 and 0.0 <= row["coverage_3mm_faces"] <= 1.0
+    assert 0.0 <= row["coverage_3mm_object"] <= 1.0  # the frame has a mask polygon
     assert row["object_px"] > 1000 and row["depth_rms_mm"] > 0 and row["seconds"] > 0
     assert "lm_occluded_example | can | learned" in res.output
     assert data["summary"]["learned"]["frames"] == 1

@@ -217,3 +217,34 @@ def test_table_on_a_floor_drops_both_planes() -> None:
     res = pick_object(r.depth.astype(np.float64), K, r.depth > 0)
     assert _iou(res.mask, box_mask) >= 0.9
     assert not (res.mask & (floor | top)).any()
+
+
+def test_roi_without_mask_keeps_the_one_object_it_frames(table_scene: tuple[Path, dict[str, np.ndarray]]) -> None:
+    """A ROI is a box, and neighbours reach into it. Framing the centre box with a ROI that also holds a third of
+    the side box and most of the cylinder, the part region (`segment.geometric.part_region`, what the learned and
+    geometric segmenters take without a mask) is the centre box alone: its largest depth-connected piece above
+    the ground found around the ROI. Pixels without depth that the object encloses (a hole cut in its readings, a
+    shiny lid) are the object's too. Without roi_one_object the neighbours' pixels stay in."""
+    from dataclasses import replace
+
+    from v2c.segment.geometric import GeometricConfig, part_region
+
+    folder, truth = table_scene
+    ys, xs = np.nonzero(truth["centre_box"])
+    roi = (int(xs.min()) - 40, int(ys.min()) - 15, int(xs.max()) + 60, int(ys.max()) + 15)
+    scan = load_scan(folder, roi=roi)
+    inside = scan.roi_mask()
+    assert (truth["side_box"] & inside).sum() > 300 and (truth["cylinder"] & inside).sum() > 300  # as described
+    part, _ = part_region(scan, GeometricConfig())
+    box = truth["centre_box"]
+    assert (part & box).sum() >= 0.97 * box.sum()
+    assert not (part & (truth["side_box"] | truth["cylinder"])).any()
+    assert (part & ~box).sum() <= 0.02 * box.sum()  # a few table pixels along its foot at most
+    whole, _ = part_region(scan, GeometricConfig(roi_one_object=False))
+    assert (whole & (truth["side_box"] | truth["cylinder"])).sum() > 600
+    hole = np.zeros_like(box)
+    hole[int(np.median(ys)) - 3 : int(np.median(ys)) + 4, int(np.median(xs)) - 3 : int(np.median(xs)) + 4] = True
+    assert (hole <= box).all()
+    holed = replace(scan, depth=np.where(hole, 0.0, scan.depth))
+    part, _ = part_region(holed, GeometricConfig())
+    assert part[hole].all() and not (part & (truth["side_box"] | truth["cylinder"])).any()

@@ -40,6 +40,7 @@ __all__ = [
     "PickRequest",
     "PickResult",
     "current_pick",
+    "depth_pieces",
     "fit_support_plane",
     "large_frame_warning",
     "parse_point",
@@ -182,9 +183,10 @@ def fit_support_plane(
     return n, dd, np.abs(points @ n + dd) < tol
 
 
-def _components(keep: np.ndarray, depth: np.ndarray, cfg: PickConfig) -> tuple[int, np.ndarray]:
+def depth_pieces(keep: np.ndarray, depth: np.ndarray, cfg: PickConfig | None = None) -> tuple[int, np.ndarray]:
     """Depth-connected pieces of the pixels ``keep``: 4-neighbours join when their depths differ by less than
     connect_step_mm + connect_step_rel x depth. Returns (count, (H, W) int labels, -1 outside ``keep``)."""
+    cfg = cfg or PickConfig()
     h, w = keep.shape
     ids = np.arange(h * w).reshape(h, w)
     rows, cols = [], []
@@ -239,7 +241,7 @@ def pick_object(
         if np.median(pts[keep][on2] @ n + d) < cfg.extra_plane_height_mm / 1000.0:
             break  # a large flat face of an object on the support, not a further support
         keep &= np.abs(pts @ n2 + d2) > drop_m
-    _, labels = _components(keep, depth.astype(np.float64), cfg)
+    _, labels = depth_pieces(keep, depth.astype(np.float64), cfg)
     sizes = np.bincount(labels[keep], minlength=1)
     big = keep & (sizes[np.maximum(labels, 0)] >= cfg.min_object_px)
     if big[v, u]:

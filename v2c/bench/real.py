@@ -22,12 +22,16 @@ Per frame and segmentation method (``learned``, ``geometric``):
   with a mask, 74-602 mm.)
 - ``coverage_3mm``: the share of the object's depth pixels within ``near_mm`` (3 mm) of a face of the STEP file
   as written (camera frame, mm) and read back through OCCT. The object's pixels are *not* the segmentation's: they
-  are the ROI's valid depth pixels standing more than `GeometricConfig.min_height_m` above the RANSAC ground plane
-  (`segment.geometric.part_region`, a depth heuristic: no face assignment involved, so pixels the segmentation
-  dropped count as misses). ``coverage_3mm_faces``: the same share over the pixels the segmentation assigned to
-  faces. Distances: the read-back shape is tessellated (`synth.occ.tessellate`), each point's nearest mesh
-  vertex (KD-tree) decides where it is clearly inside (< near) or clearly outside (> near + the longest triangle
-  edge), and the exact point-to-triangle distance (trimesh) decides the rest.
+  are the ROI's valid depth pixels standing more than `GeometricConfig.min_height_m` above the frame's RANSAC
+  ground plane, every object in the ROI (`segment.geometric.part_region` with roi_one_object and roi_ground_margin
+  off, as the segmenters took the ROI until 2026-11-29; a depth heuristic: no face assignment involved, so pixels
+  the segmentation dropped count as misses). ``coverage_3mm_faces``: the same share over the pixels the
+  segmentation assigned to faces. ``coverage_3mm_object``: the same share over the object pixels inside the
+  frame's mask polygon (the object alone, neighbours that reach into a ROI left out; the same as
+  ``coverage_3mm`` with ``mask``).
+  Distances: the read-back shape is tessellated (`synth.occ.tessellate`), each point's nearest mesh vertex
+  (KD-tree) decides where it is clearly inside (< near) or clearly outside (> near + the longest triangle edge),
+  and the exact point-to-triangle distance (trimesh) decides the rest.
 - ``mask`` (``masks=True``, `v2c bench --real --real-masks`): a frame whose entry in real_rois.json has a ``mask``
   polygon (the object's outline drawn on color.png, occluders left out) is reconstructed with that polygon
   rasterised (`polygon_mask`) as its mask.png, inside its ROI; its object pixels are then the ROI's object pixels
@@ -273,7 +277,9 @@ def measure_frame(
     entry["depth_median_mm"] = float(1000 * np.median(d_fit)) if len(d_fit) else float("nan")
 
     # the depth heuristic of the ROI alone (ground plane estimated without the mask), then inside the mask
-    obj = part_region(roi_scan, GeometricConfig())[0]
+    # (the ruler as it was before the ROI path picked one object: every pixel above the frame's ground in the ROI)
+    obj = part_region(roi_scan, GeometricConfig(roi_one_object=False, roi_ground_margin=0.0))[0]
+    in_polygon = polygon_mask(spec["mask"], scan.height, scan.width) if spec.get("mask") else None
     if use_mask:
         obj &= scan.mask
     faces_px = (inst > 0) & scan.valid & np.isin(inst, list(fit.primitives))
@@ -285,6 +291,10 @@ def measure_frame(
     entry["object_px"] = int(obj.sum())
     entry["coverage_3mm"] = float(np.mean(dmap[obj] < near_mm)) if obj.any() else float("nan")
     entry["coverage_3mm_faces"] = float(np.mean(dmap[faces_px] < near_mm)) if faces_px.any() else float("nan")
+    on_object = obj & in_polygon if in_polygon is not None else None
+    entry["coverage_3mm_object"] = (
+        float(np.mean(dmap[on_object] < near_mm)) if on_object is not None and on_object.any() else float("nan")
+    )
     return entry
 
 
@@ -370,6 +380,7 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "cans": len(cans),
         "cans_without_cylinder": sum(1 for r in cans if not r["can"].get("cylinder_faces")),
         "coverage_3mm": mean([r["coverage_3mm"] for r in ok]),
+        "coverage_3mm_object": mean([r.get("coverage_3mm_object") for r in ok]),
         "depth_rms_mm": mean([r["depth_rms_mm"] for r in ok]),
         "seconds_median": float(np.median([r["seconds"] for r in ok])) if ok else float("nan"),
         "cpu_seconds_median": float(np.median([r["cpu_seconds"] for r in ok])) if ok else float("nan"),
@@ -422,7 +433,8 @@ def format_table(report: dict[str, Any]) -> str:
             f"{_f(s['box_angle_error_deg'])} deg; can "
             f"radius error {_f(s['can_radius_error_pct'])} % ({s['cans'] - s['cans_without_cylinder']} of {s['cans']} "
             f"cans with a cylindrical face); within {report['near_mm']:g} mm "
-            f"{_f(100 * s['coverage_3mm'])} %; depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
+            f"{_f(100 * s['coverage_3mm'])} % (the object alone {_f(100 * s.get('coverage_3mm_object', float('nan')))} "
+            f"%); depth RMS {_f(s['depth_rms_mm'], '.2f')} mm; median "
             f"{_f(s['seconds_median'])} s ({_f(s['cpu_seconds_median'])} CPU s) per frame + "
             f"{_f(report['process_start_s'])} s process start"
         )

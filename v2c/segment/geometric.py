@@ -36,6 +36,7 @@ from v2c.geometry.config import RansacConfig
 from v2c.geometry.points import mad_sigma
 from v2c.geometry.selection import supported
 from v2c.labels import AxisClass, PrimitiveType, axis_class, label_of
+from v2c.pick import PickConfig, depth_pieces
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere
 from v2c.scan import Scan
 from v2c.segment.data import FeatureConfig, Ground, estimate_ground, estimate_normals, gravity_frame
@@ -50,6 +51,11 @@ class GeometricConfig:
 
     features: FeatureConfig = field(default_factory=lambda: FeatureConfig(smooth_sigma_px=2.0, diff_step_px=2))
     min_height_m: float = 0.003  # without a mask: part = points this far above the ground plane (metres)
+    roi_ground_margin: float = 0.5  # with a ROI and no mask, the ground plane is found in the band this wide around
+    # the ROI (fraction of the ROI's smaller side): the support the part stands on, not the frame's largest
+    # up-facing plane (a floor far below the real frames' tables); the whole frame where the band finds none
+    roi_one_object: bool = True  # with a ROI and no mask, the part is the largest depth-connected piece of what
+    # stands above the ground in the ROI (`v2c.pick.depth_pieces`): a ROI is a box, and neighbours reach into it
     depth_jump_rel: float = 0.015  # relative depth jump between 4-neighbours that marks a step edge
     noise_sigma_coeff: float = 0.0015  # depth noise sigma = this * z^2 (1/m, z in metres): the `sensor` profile
     dist_sigma: float = 2.5  # plane inlier distance: this many noise sigmas ... (ratio)
@@ -795,8 +801,20 @@ def part_frame(fits: list[_Fit], view_frame: np.ndarray) -> np.ndarray:
 
 
 def part_region(scan: Scan, cfg: GeometricConfig) -> tuple[np.ndarray, Ground | None]:
-    """(part pixels (H, W) bool, ground plane or None)."""
-    ground = estimate_ground(scan.depth, scan.K, scan.mask, cfg.features)
+    """(part pixels (H, W) bool, ground plane or None): the mask's valid pixels, else those standing min_height_m
+    above the ground plane (all valid pixels without one), within the ROI; with a ROI and no mask only the largest
+    depth-connected piece of them (roi_one_object)."""
+    ground = None
+    if scan.mask is None and scan.roi is not None and cfg.roi_ground_margin > 0:
+        x0, y0, x1, y1 = scan.roi
+        m = int(round(cfg.roi_ground_margin * min(x1 - x0, y1 - y0)))
+        h, w = scan.depth.shape
+        band = np.zeros((h, w), bool)
+        band[max(y0 - m, 0) : min(y1 + m, h), max(x0 - m, 0) : min(x1 + m, w)] = True
+        band &= ~scan.roi_mask()
+        ground = estimate_ground(scan.depth, scan.K, ~band, cfg.features)  # (its mask = pixels left out)
+    if ground is None:
+        ground = estimate_ground(scan.depth, scan.K, scan.mask, cfg.features)
     valid = scan.depth > 0
     if scan.mask is not None:
         part = valid & scan.mask
@@ -807,7 +825,42 @@ def part_region(scan: Scan, cfg: GeometricConfig) -> tuple[np.ndarray, Ground | 
         part = valid.copy()
     if scan.roi is not None:
         part &= scan.roi_mask()
+        if scan.mask is None and cfg.roi_one_object and part.any():
+            from scipy.ndimage import binary_fill_holes
+
+            obj = _one_object(part, scan)
+            # pixels without depth that the object encloses (a shiny lid) are the object's, as in a drawn mask
+            part = obj | (binary_fill_holes(obj) & ~(scan.depth > 0) & scan.roi_mask())
     return part, ground
+
+
+def _one_object(part: np.ndarray, scan: Scan, pick: PickConfig | None = None) -> np.ndarray:
+    """The object among ``part``'s pixels (H, W) bool: its largest depth-connected piece (`v2c.pick.depth_pieces`)
+    and every piece whose points come within the pick's join step (connect_step_mm + connect_step_rel x depth) of
+    it in space, repeated while one joins: pieces of one object that holes without depth part (a shiny lid), not
+    the neighbours that stand apart from it (a bottle in front of a box)."""
+    from scipy.spatial import cKDTree
+
+    pick = pick or PickConfig()
+    depth = np.asarray(scan.depth, np.float64)
+    _, pieces = depth_pieces(part, depth, pick)
+    ids, sizes = np.unique(pieces[part], return_counts=True)
+    order = ids[np.argsort(-sizes, kind="stable")]
+    pts = backproject(depth, scan.K)
+    keep = pieces == order[0]
+    rest = list(order[1:])
+    joined = True
+    while joined and rest:  # loop while some piece joins
+        joined = False
+        tree = cKDTree(pts[keep])
+        for k in list(rest):  # loop over the pieces left
+            x = pts[pieces == k]
+            step = pick.connect_step_mm / 1000.0 + pick.connect_step_rel * x[:, 2]
+            if (tree.query(x, k=1)[0] < step).any():
+                keep |= pieces == k
+                rest.remove(k)
+                joined = True
+    return keep
 
 
 def step_edges(depth: np.ndarray, cfg: GeometricConfig) -> np.ndarray:
