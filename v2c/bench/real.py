@@ -279,9 +279,12 @@ def measure_frame(
     # the depth heuristic of the ROI alone (ground plane estimated without the mask), then inside the mask
     # (the ruler as it was before the ROI path picked one object: every pixel above the frame's ground in the ROI)
     obj = part_region(roi_scan, GeometricConfig(roi_one_object=False, roi_ground_margin=0.0))[0]
-    in_polygon = polygon_mask(spec["mask"], scan.height, scan.width) if spec.get("mask") else None
+    in_polygon = None  # the frame's mask polygon, rasterised (already the scan's mask with use_mask)
     if use_mask:
+        in_polygon = scan.mask
         obj &= scan.mask
+    elif spec.get("mask"):
+        in_polygon = polygon_mask(spec["mask"], scan.height, scan.width)
     faces_px = (inst > 0) & scan.valid & np.isin(inst, list(fit.primitives))
     verts, tris = step_mesh(step_path)
     sel = obj | faces_px

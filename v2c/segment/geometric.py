@@ -54,8 +54,9 @@ class GeometricConfig:
     roi_ground_margin: float = 0.5  # with a ROI and no mask, the ground plane is found in the band this wide around
     # the ROI (fraction of the ROI's smaller side): the support the part stands on, not the frame's largest
     # up-facing plane (a floor far below the real frames' tables); the whole frame where the band finds none
-    roi_one_object: bool = True  # with a ROI and no mask, the part is the largest depth-connected piece of what
-    # stands above the ground in the ROI (`v2c.pick.depth_pieces`): a ROI is a box, and neighbours reach into it
+    roi_one_object: bool = True  # with a ROI and no mask, the part is the one object of what stands above the
+    # ground in the ROI (`_one_object`: the largest depth-connected piece and the pieces that come near it, with the
+    # pixels without depth it encloses): a ROI is a box, and neighbours reach into it
     depth_jump_rel: float = 0.015  # relative depth jump between 4-neighbours that marks a step edge
     noise_sigma_coeff: float = 0.0015  # depth noise sigma = this * z^2 (1/m, z in metres): the `sensor` profile
     dist_sigma: float = 2.5  # plane inlier distance: this many noise sigmas ... (ratio)
@@ -802,8 +803,8 @@ def part_frame(fits: list[_Fit], view_frame: np.ndarray) -> np.ndarray:
 
 def part_region(scan: Scan, cfg: GeometricConfig) -> tuple[np.ndarray, Ground | None]:
     """(part pixels (H, W) bool, ground plane or None): the mask's valid pixels, else those standing min_height_m
-    above the ground plane (all valid pixels without one), within the ROI; with a ROI and no mask only the largest
-    depth-connected piece of them (roi_one_object)."""
+    above the ground plane (all valid pixels without one), within the ROI; with a ROI and no mask only the one
+    object among them (roi_one_object, `_one_object`) and the pixels without depth it encloses."""
     ground = None
     if scan.mask is None and scan.roi is not None and cfg.roi_ground_margin > 0:
         x0, y0, x1, y1 = scan.roi
@@ -830,7 +831,7 @@ def part_region(scan: Scan, cfg: GeometricConfig) -> tuple[np.ndarray, Ground | 
 
             obj = _one_object(part, scan)
             # pixels without depth that the object encloses (a shiny lid) are the object's, as in a drawn mask
-            part = obj | (binary_fill_holes(obj) & ~(scan.depth > 0) & scan.roi_mask())
+            part = obj | (binary_fill_holes(obj) & ~valid & scan.roi_mask())
     return part, ground
 
 
@@ -844,22 +845,19 @@ def _one_object(part: np.ndarray, scan: Scan, pick: PickConfig | None = None) ->
     pick = pick or PickConfig()
     depth = np.asarray(scan.depth, np.float64)
     _, pieces = depth_pieces(part, depth, pick)
-    ids, sizes = np.unique(pieces[part], return_counts=True)
-    order = ids[np.argsort(-sizes, kind="stable")]
-    pts = backproject(depth, scan.K)
-    keep = pieces == order[0]
-    rest = list(order[1:])
-    joined = True
-    while joined and rest:  # loop while some piece joins
-        joined = False
-        tree = cKDTree(pts[keep])
-        for k in list(rest):  # loop over the pieces left
-            x = pts[pieces == k]
-            step = pick.connect_step_mm / 1000.0 + pick.connect_step_rel * x[:, 2]
-            if (tree.query(x, k=1)[0] < step).any():
-                keep |= pieces == k
-                rest.remove(k)
-                joined = True
+    flat = np.flatnonzero(part)
+    piece = pieces.ravel()[flat]  # each part pixel's piece
+    x = backproject(depth, scan.K).reshape(-1, 3)[flat]
+    step = pick.connect_step_mm / 1000.0 + pick.connect_step_rel * x[:, 2]
+    ids, sizes = np.unique(piece, return_counts=True)
+    inside = np.isin(piece, ids[np.argmax(sizes)])  # the largest piece (the first of equal ones)
+    while not inside.all():  # loop while some piece joins: every piece with a point near the object joins at once
+        near = cKDTree(x[inside]).query(x[~inside], k=1)[0] < step[~inside]
+        if not near.any():
+            break
+        inside |= np.isin(piece, piece[~inside][near])
+    keep = np.zeros(part.shape, bool)
+    keep.flat[flat[inside]] = True
     return keep
 
 

@@ -281,11 +281,14 @@ def _plane_ransac(x: np.ndarray, tol: float, cfg: RefineConfig, rng: np.random.G
     d = np.einsum("ij,ij->i", n, tri[ok, 0])
     score = (np.abs(sub @ n.T - d) < tol).sum(axis=0)
     k = int(np.argmax(score))
-    inl = np.abs(x @ n[k] - d[k]) < tol
-    c = x[inl].mean(axis=0)
-    _, _, vt = np.linalg.svd(x[inl] - c, full_matrices=False)
-    nn = vt[2]
-    return nn, float(nn @ c)
+    return _lsq_plane(x[np.abs(x @ n[k] - d[k]) < tol])
+
+
+def _lsq_plane(x: np.ndarray) -> tuple[np.ndarray, float]:
+    """(unit normal, offset) of the total least-squares plane n.x = d through the points x (n >= 3, 3)."""
+    c = x.mean(axis=0)
+    nrm = np.linalg.svd(x - c, full_matrices=False)[2][2]
+    return nrm, float(nrm @ c)
 
 
 def _settled_plane(
@@ -297,9 +300,7 @@ def _settled_plane(
         inl = np.abs(x @ nrm - off) < tol
         if inl.sum() < 3:
             break
-        c = x[inl].mean(axis=0)
-        nrm = np.linalg.svd(x[inl] - c, full_matrices=False)[2][2]
-        off = float(nrm @ c)
+        nrm, off = _lsq_plane(x[inl])
     return nrm, off
 
 
@@ -1020,24 +1021,28 @@ def split_crease_strips(
     if not len(pairs):
         return seg
     plane = _is_plane(labels)
+    tol = 0.5 * cfg.tol_part * size  # the hosts' RANSAC inlier band (metres)
     planes: dict[int, tuple[np.ndarray, float]] = {}
     groups = []
     for i in range(1, len(labels)):  # loop over the curved-labelled instances
         if plane[i] or n_px[i] < 3:
             continue
-        nbs = np.unique(np.concatenate([pairs[pairs[:, 0] == i, 1], pairs[pairs[:, 1] == i, 0]]))
-        hosts = [int(g) for g in nbs if plane[g] and n_px[g] >= cfg.crease_host_ratio * n_px[i] and n_px[g] >= 3]
+        hosts = [
+            int(g)
+            for g in _neighbours(i, pairs)
+            if plane[g] and n_px[g] >= cfg.crease_host_ratio * n_px[i] and n_px[g] >= 3
+        ]
         if len(hosts) < 2:
             continue
         for g in hosts:  # loop over the hosts, each plane fitted once
             if g not in planes:
-                tol = 0.5 * cfg.tol_part * size
                 x = pts[(inst == g) & valid]
                 planes[g] = _settled_plane(x, *_plane_ransac(x, tol, cfg, np.random.default_rng([cfg.seed, g])), tol)
-        cut = _crease_hosts(i, hosts, planes, inst, valid, pts, K, cfg)
+        sel = inst == i
+        cut = _crease_hosts(sel, hosts, planes, inst, valid, pts, K, cfg)
         if cut is None:
             continue
-        inst[inst == i] = cut
+        inst[sel] = cut
         groups.append([i, int(np.bincount(cut).argmax())])  # the emptied id goes
     if not groups:
         return seg
@@ -1045,7 +1050,7 @@ def split_crease_strips(
 
 
 def _crease_hosts(
-    i: int,
+    sel: np.ndarray,
     hosts: list[int],
     planes: dict[int, tuple[np.ndarray, float]],
     inst: np.ndarray,
@@ -1054,7 +1059,8 @@ def _crease_hosts(
     K: np.ndarray,
     cfg: RefineConfig,
 ) -> np.ndarray | None:
-    """The host of each pixel of instance ``i`` (row-major order) where it is a crease strip, else None.
+    """The host of each pixel of the strip ``sel`` ((H, W) bool, one instance; row-major order) where it is a crease
+    strip, else None.
 
     The hosts' planes, seen along each pixel's ray, form an envelope: where they make a convex edge the nearest
     surface is the plane met farthest along the ray, where a concave one the nearest met (the choice that agrees
@@ -1069,7 +1075,6 @@ def _crease_hosts(
         cfg.crease_min_angle_deg
     ):
         return None
-    sel = inst == i
     inside = cv2.distanceTransform(np.pad(sel, 1).astype(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1][sel]
     if float(np.percentile(inside, cfg.crease_width_quantile * 100.0)) <= cfg.crease_band_px:
         return None  # no wider than the band: the depth cannot tell a fillet from the rounding; the label stands
@@ -1110,7 +1115,13 @@ def _crease_hosts(
     return np.asarray(hosts)[side[box_sel]].astype(np.int32)
 
 
+def _neighbours(i: int, pairs: np.ndarray) -> np.ndarray:
+    """The ids that instance ``i`` touches, sorted, given the touching pairs (P, 2) of `touching_pairs`."""
+    return np.unique(np.concatenate([pairs[pairs[:, 0] == i, 1], pairs[pairs[:, 1] == i, 0]]))
+
+
 def _hosts(i: int, pairs: np.ndarray, n_px: np.ndarray, cfg: RefineConfig) -> list[int]:
     """The touching instances fragment ``i`` may join: larger than it, by at least 1 / absorb_max_share."""
-    nbs = np.unique(np.concatenate([pairs[pairs[:, 0] == i, 1], pairs[pairs[:, 1] == i, 0]]))
-    return [g for g in nbs.tolist() if n_px[g] > n_px[i] and n_px[i] <= cfg.absorb_max_share * n_px[g]]
+    return [
+        g for g in _neighbours(i, pairs).tolist() if n_px[g] > n_px[i] and n_px[i] <= cfg.absorb_max_share * n_px[g]
+    ]
