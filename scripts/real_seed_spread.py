@@ -35,9 +35,11 @@ def main() -> None:
         s = rep["summary"]["learned"]
         worst = max((r.get("box", {}).get("max_error_deg", 0.0) for r in rep["frames"] if r.get("ok")), default=0.0)
         faces = {r["frame"]: r.get("faces") for r in rep["frames"]}
-        runs[seed] = {"summary": s, "worst_box_deg": worst, "faces": faces}
+        cover = {r["frame"]: round(r["coverage_3mm_object"], 4) for r in rep["frames"] if r.get("ok")}
+        runs[seed] = {"summary": s, "worst_box_deg": worst, "faces": faces, "coverage_3mm_object": cover}
         print(f"seed {seed}: " + ", ".join(f"{k} {s[k]:.3f}" for k in KEYS) + f", worst box face {worst:.1f} deg")
         print(f"  STEP faces: {faces}")
+        print(f"  object pixels within 3 mm: {cover}")
     for k in KEYS:  # loop over the figures: their mean over the seeds
         vals = [r["summary"][k] for r in runs.values() if math.isfinite(r["summary"][k])]
         print(f"mean {k}: {sum(vals) / len(vals):.3f} (min {min(vals):.3f}, max {max(vals):.3f})")

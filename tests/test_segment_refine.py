@@ -555,3 +555,52 @@ def test_crease_strip_is_cut_between_its_planes_and_a_resolved_fillet_stays() ->
             narrow = np.where(np.abs(u - K[0, 2]) <= 3, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
             out = split_crease_strips(Segmentation(narrow, labels, scores, "learned"), depth, K, RefineConfig())
             assert out.num_instances == 3, seed
+
+
+def test_remerge_joins_pieces_of_one_plane_and_not_a_step_of_a_few_sigma() -> None:
+    """`remerge` (the merge once more after the steps that change which instances touch) joins two pieces of one
+    plane under the sensor's noise (0.0015 z^2) and keeps a parallel piece 3 mm off it apart: about 8 sensor
+    sigmas at 0.5 m, beyond remerge_sigma, although within the first merge's tolerance (merge_tol_part of the part
+    size), which joins it. Five noise seeds; with remerge off nothing changes."""
+    from v2c.segment.refine import merge_coplanar, remerge
+
+    labels = np.array([0, PLANE_Z, PLANE_Z, PLANE_Z], np.uint8)
+    scores = np.array([0, 0.9, 0.9, 0.9], np.float32)
+    inst = np.ones((H, W), np.int32)
+    inst[:, 60:120] = 2  # one plane cut in two (columns 0-59 and 60-119)
+    inst[:, 120:] = 3  # ... and a parallel face 3 mm further (a step)
+    seg = Segmentation(inst, labels, scores, "learned")
+    for seed in range(5):
+        depth = _tilted_plane(np.random.default_rng(seed))
+        depth[:, 120:] += 0.003
+        sigma = 0.0015 * depth**2
+        depth = depth + np.random.default_rng(100 + seed).normal(0.0, 1.0, depth.shape) * sigma
+        assert 0.003 / float(np.median(sigma)) > 2 * RefineConfig().remerge_sigma  # the step, in sensor sigmas
+        assert merge_coplanar(seg, depth, K, RefineConfig()).num_instances == 1, seed  # the first merge's tolerance
+        out = remerge(seg, depth, K, RefineConfig())
+        assert out.num_instances == 2, seed
+        assert np.array_equal(out.instances == 1, inst <= 2) and np.array_equal(out.instances == 2, inst == 3), seed
+        assert remerge(seg, depth, K, RefineConfig(remerge=False)) is seg
+
+
+def test_after_the_crease_cut_the_pieces_it_kept_apart_are_merged() -> None:
+    """A crease strip with an arm across one side's plane (the real cracker box: a strip along the crease and
+    printed art reaching into a side) keeps that side in two pieces that never touch, so the first merge cannot
+    join them. Once `split_crease_strips` has cut the strip between its planes the two pieces touch, and
+    `remerge` joins them: two instances, left and right of the crease. Five noise seeds."""
+    from v2c.segment.refine import remerge, split_crease_strips
+
+    u = np.arange(W)[None, :].repeat(H, 0)
+    v = np.arange(H)[:, None].repeat(W, 1)
+    labels = np.array([0, PLANE_Z, CYL_Z, PLANE_Z, PLANE_Z], np.uint8)
+    scores = np.array([0, 0.9, 0.7, 0.9, 0.9], np.float32)
+    for seed in range(5):
+        depth, strip = _ridge_scene(seed)
+        strip = strip | ((v >= 55) & (v <= 66) & (u > K[0, 2]))  # the arm, 12 rows across the right side
+        inst = np.where(strip, 2, np.where(u < K[0, 2], 1, np.where(v < 55, 3, 4))).astype(np.int32)
+        cut = split_crease_strips(Segmentation(inst, labels, scores, "learned"), depth, K, RefineConfig())
+        assert cut.num_instances == 3, seed  # the left side and the right side's two pieces
+        out = remerge(cut, depth, K, RefineConfig())
+        assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, PLANE_Z], seed
+        left, right = out.instances[:, : int(K[0, 2]) - 1], out.instances[:, int(K[0, 2]) + 1 :]
+        assert (left == 1).all() and (right == 2).all(), seed

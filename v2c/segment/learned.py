@@ -20,7 +20,7 @@ from v2c.scan import Scan
 from v2c.segment.data import MIRROR_SIGN_CHANNEL, FeatureConfig, scan_features
 from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
 from v2c.segment.net import UNet, bf16_supported, load_weights
-from v2c.segment.refine import RefineConfig, absorb_fragments, refine_instances
+from v2c.segment.refine import RefineConfig, absorb_fragments, refine_instances, remerge
 from v2c.segment.types import Segmentation
 from v2c.segment.verify import VerifyConfig, needs_regions, verify_instances
 
@@ -146,7 +146,9 @@ def segment_learned(
     from v2c.segment.geometric import segment_geometric
 
     seg = verify_instances(seg, segment_geometric(scan), scan.depth, scan.K, cfg.verify, ransac)
-    # the fragments that verification left (pieces it cut off, instances it did not merge) are judged once more
+    # the pieces that verification left (pieces it cut off, instances it did not merge) are judged once more
+    if cfg.refine.remerge:
+        return remerge(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
     return absorb_fragments(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
 
 

@@ -26,7 +26,9 @@ the number of pixels per independent reading.
 
 A real sensor also rounds every crease over its matching window, and the network labels the rounded band a
 fillet. A curved-labelled strip between plane instances, wider than that band, whose depth outside it the planes
-explain is cut between them along their crease (`split_crease_strips`).
+explain is cut between them along their crease (`split_crease_strips`). Those cuts and absorptions change which
+instances touch, so the coplanar merge and the absorption run once more, the merge gated by the sensor's noise
+(`remerge`).
 """
 
 from __future__ import annotations
@@ -157,6 +159,10 @@ class RefineConfig:
     # and changed nothing on the validation sets)
     crease_min_angle_deg: float = 20.0  # two hosts' planes meet at least at this angle (degrees; flatter pairs make
     # no crease)
+    remerge: bool = True  # the merge and the fragment absorption once more after the steps that change which
+    # instances touch (`remerge`: after the crease cut, and in segment_learned after the depth-region verification)
+    remerge_sigma: float = 3.0  # ... that merge only where each piece's points lie within this many sensor sigmas of
+    # the other's plane or of the joint plane (median; ratio): merge_tol_part alone joins a step of a few millimetres
     absorb_rounds: int = 3  # absorption repeated on its own result while something joins, at most this many rounds
     # (count): fragments that joined each other are judged again as the larger piece they became
     noise_sigma_coeff: float = 0.0015  # sensor depth sigma = this * z^2 (1/m, z in metres): RansacConfig's, the
@@ -214,8 +220,8 @@ def refine_instances(
     normals: np.ndarray | None = None,
     ransac: RansacConfig | None = None,
 ) -> Segmentation:
-    """`split_plane_outliers`, `merge_coaxial`, `split_coaxial_steps`, `merge_coplanar`, `absorb_fragments`, then
-    `split_crease_strips`, on one point map
+    """`split_plane_outliers`, `merge_coaxial`, `split_coaxial_steps`, `merge_coplanar`, `absorb_fragments`,
+    `split_crease_strips`, then `remerge`, on one point map
     (normals: see `split_plane_outliers`; ransac: the instance points, RANSAC and type-selection settings of the
     cylinder and curvature tests, default `RansacConfig()`; a `v2c.fit.FitConfig` is one)."""
     if not cfg.enabled:
@@ -227,7 +233,26 @@ def refine_instances(
     seg = split_coaxial_steps(seg, depth, K, cfg, geometry, ransac)
     seg = merge_coplanar(seg, depth, K, cfg, geometry, ransac)
     seg = absorb_fragments(seg, depth, K, cfg, geometry, ransac)
-    return split_crease_strips(seg, depth, K, cfg, geometry)
+    seg = split_crease_strips(seg, depth, K, cfg, geometry)
+    return remerge(seg, depth, K, cfg, geometry, ransac)
+
+
+def remerge(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    cfg: RefineConfig = RefineConfig(),
+    geometry: tuple[np.ndarray, float] | None = None,
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
+    """`merge_coplanar` with pieces within remerge_sigma sensor sigmas of one plane, then `absorb_fragments`: the
+    merge and the absorption once more after a step that changed which instances touch (with remerge; ``seg``
+    itself without). A crease strip cut between its planes, a strip absorbed or a piece the depth regions cut off
+    leaves two pieces of one face touching that the first merge never compared: a box side in two on real frames."""
+    if not cfg.remerge:
+        return seg
+    seg = merge_coplanar(seg, depth, K, cfg, geometry, ransac, max_sigma=cfg.remerge_sigma)
+    return absorb_fragments(seg, depth, K, cfg, geometry, ransac)
 
 
 def design_effect(
@@ -538,11 +563,16 @@ def _gric_config(
 
 
 def _coplanar_pairs(
-    pairs: np.ndarray, planes: dict[int, tuple[np.ndarray, float, np.ndarray]], tol: float, cfg: RefineConfig
+    pairs: np.ndarray,
+    planes: dict[int, tuple[np.ndarray, float, np.ndarray]],
+    tol: float,
+    cfg: RefineConfig,
+    max_sigma: float = float("inf"),
 ) -> tuple[list[tuple[int, int]], list[tuple[float, int, int]]]:
     """The touching pairs whose own planes agree (normals within merge_angle_deg, each one's points within ``tol``
     metres of the other's plane, median), and, with merge_joint, the other flat pairs as joint-plane candidates:
-    (score, a, b), score = the pair's larger median distance to the other's plane (metres), best first."""
+    (score, a, b), score = the pair's larger median distance to the other's plane (metres), best first. A pair
+    with a piece further than ``max_sigma`` sensor sigmas from the other's plane (median) is neither."""
     cos_min = np.cos(np.deg2rad(cfg.merge_angle_deg))
     agree: list[tuple[int, int]] = []
     joint: list[tuple[float, int, int]] = []
@@ -551,11 +581,18 @@ def _coplanar_pairs(
             continue
         (na, da, xa), (nb, db, xb) = planes[a], planes[b]
         dab, dba = float(np.median(np.abs(xb @ na - da))), float(np.median(np.abs(xa @ nb - db)))
+        if dab > max_sigma * _sensor_sigma(xb, cfg) or dba > max_sigma * _sensor_sigma(xa, cfg):
+            continue
         if abs(float(na @ nb)) >= cos_min and dab < tol and dba < tol:
             agree.append((a, b))
         elif cfg.merge_joint:
             joint.append((min(dab, dba), a, b))
     return agree, sorted(joint)
+
+
+def _sensor_sigma(x: np.ndarray, cfg: RefineConfig) -> float:
+    """The sensor's depth sigma (metres, noise_sigma_coeff z^2) at the median depth of the points x (n, 3)."""
+    return cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
 
 
 def _explained_by_one_plane(
@@ -564,13 +601,15 @@ def _explained_by_one_plane(
     tol: float,
     cfg: RefineConfig,
     rng: np.random.Generator,
+    max_sigma: float = float("inf"),
 ) -> bool:
     """True when one plane fitted to the point sets ``xs`` (metres) lies within ``tol`` of each (median distance)
     and within merge_joint_angle_deg of each set's own plane (``own``: (unit normal, offset) per set), or, with
     merge_joint_excess_sigma, explains the set nearly as well as its own plane: its median distance exceeds that
     to the own plane by at most merge_joint_excess_sigma sensor sigmas (noise_sigma_coeff z^2 at the set's median
     depth). A small piece's own plane can tilt far on real depth while the joint plane fits it as well, within the
-    noise; a narrow chamfer strip, which the angle test is there for, lies further off the joint plane."""
+    noise; a narrow chamfer strip, which the angle test is there for, lies further off the joint plane. Never when
+    a set's median distance to the joint plane exceeds ``max_sigma`` sensor sigmas."""
     x = np.concatenate(xs)
     if len(x) > cfg.merge_joint_points:
         x = x[rng.choice(len(x), cfg.merge_joint_points, replace=False)]
@@ -580,9 +619,11 @@ def _explained_by_one_plane(
         joint = float(np.median(np.abs(xi @ n - d)))
         if joint >= tol:
             return False
+        sigma = _sensor_sigma(xi, cfg)
+        if joint > max_sigma * sigma:
+            return False
         if abs(float(n @ ni)) >= cos_min:
             continue
-        sigma = cfg.noise_sigma_coeff * float(np.median(xi[:, 2])) ** 2
         if joint - float(np.median(np.abs(xi @ ni - di))) > cfg.merge_joint_excess_sigma * sigma:
             return False
     return True
@@ -594,11 +635,12 @@ def _merge_groups(
     tol: float,
     cfg: RefineConfig,
     rng: np.random.Generator,
+    max_sigma: float = float("inf"),
 ) -> list[list[int]]:
     """Groups (instance ids, two or more) to merge: the pairs whose own planes agree, joined transitively (as
     always), then with merge_joint the remaining flat pairs best first, each joining two groups only when one
-    plane explains every piece of both (`_explained_by_one_plane`)."""
-    agree, joint = _coplanar_pairs(pairs, planes, tol, cfg)
+    plane explains every piece of both (`_explained_by_one_plane`); ``max_sigma``: their sensor-sigma gate."""
+    agree, joint = _coplanar_pairs(pairs, planes, tol, cfg, max_sigma)
     sets = UnionFind(sorted(planes))
     for a, b in agree:
         sets.union(a, b)
@@ -608,7 +650,12 @@ def _merge_groups(
             continue
         members = sets.members((ra, rb))
         if _explained_by_one_plane(
-            [planes[i][2] for i in members], [(planes[i][0], planes[i][1]) for i in members], tol, cfg, rng
+            [planes[i][2] for i in members],
+            [(planes[i][0], planes[i][1]) for i in members],
+            tol,
+            cfg,
+            rng,
+            max_sigma,
         ):
             sets.union(ra, rb)
     return sets.groups()
@@ -821,6 +868,7 @@ def merge_coplanar(
     cfg: RefineConfig = RefineConfig(),
     geometry: tuple[np.ndarray, float] | None = None,
     ransac: RansacConfig | None = None,
+    max_sigma: float = float("inf"),
 ) -> Segmentation:
     """``seg`` with adjacent plane instances merged where they lie on one plane (normals within merge_angle_deg,
     each one's points within merge_tol_part part sizes of the other's plane, median): the network cut a face where
@@ -829,7 +877,9 @@ def merge_coplanar(
     sigmas and their label's type does not earn its curvature; printed art: on real frames the network calls
     pieces of a box side cylinders and cones). The merged instance keeps the
     largest plane-labelled piece's label and score. Only touching instances (4-neighbour pixel pairs). ransac:
-    the instance points, RANSAC and type-selection settings of `_flat` (default `RansacConfig()`)."""
+    the instance points, RANSAC and type-selection settings of `_flat` (default `RansacConfig()`); max_sigma: no
+    piece merges further than this many sensor sigmas (median) from the other's plane or the joint plane (ratio;
+    `remerge`'s gate, off by default)."""
     ransac = ransac or RansacConfig()
     prepared = _step_input(seg, depth, K, cfg.enabled and cfg.merge, geometry, ransac)
     if prepared is None:
@@ -856,7 +906,7 @@ def merge_coplanar(
                 ):
                     continue
             planes[int(i)] = (nrm, off, x)
-    groups = _merge_groups(pairs, planes, tol, cfg, rng)
+    groups = _merge_groups(pairs, planes, tol, cfg, rng, max_sigma)
     if not groups:
         return seg
     # the largest plane-labelled piece's label and score stand (the largest piece's where none is a plane: then a
