@@ -604,3 +604,30 @@ def test_after_the_crease_cut_the_pieces_it_kept_apart_are_merged() -> None:
         assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, PLANE_Z], seed
         left, right = out.instances[:, : int(K[0, 2]) - 1], out.instances[:, int(K[0, 2]) + 1 :]
         assert (left == 1).all() and (right == 2).all(), seed
+
+
+def test_crease_strip_at_the_silhouette_is_judged_away_from_it() -> None:
+    """Where a crease strip reaches the part's silhouette, the sensor's matching window mixes the background's
+    depth into the strip's points within the band of the silhouette (the real cracker box's top corner). Those
+    points are not judged (crease_silhouette), so a 13-row strip whose top 5 rows carry mixed depth is cut between
+    its planes; judged with them it stays. Five noise seeds."""
+    from v2c.segment.refine import split_crease_strips
+
+    u = np.arange(W)[None, :].repeat(H, 0)
+    v = np.arange(H)[:, None].repeat(W, 1)
+    labels = np.array([0, PLANE_Z, CYL_Z, PLANE_Z], np.uint8)
+    scores = np.array([0, 0.9, 0.7, 0.9], np.float32)
+    top = 60  # the rows above are background, 1 m away
+    for seed in range(5):
+        depth, strip = _ridge_scene(seed)
+        strip = strip & (v >= top) & (v < top + 13)
+        inst = np.where(strip, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
+        inst[v < top] = 0
+        mixed = (v >= top) & (v < top + 5)  # up to half the background's depth, fading over 5 rows
+        depth = depth.copy()
+        depth[mixed] += 0.5 * (1.0 - depth[mixed]) * (top + 5 - v[mixed]) / 6.0
+        depth[v < top] = 1.0
+        seg = Segmentation(inst, labels, scores, "learned")
+        out = split_crease_strips(seg, depth, K, RefineConfig())
+        assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, PLANE_Z], seed
+        assert split_crease_strips(seg, depth, K, RefineConfig(crease_silhouette=False)).num_instances == 3, seed

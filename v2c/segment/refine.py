@@ -159,6 +159,8 @@ class RefineConfig:
     # and changed nothing on the validation sets)
     crease_min_angle_deg: float = 20.0  # two hosts' planes meet at least at this angle (degrees; flatter pairs make
     # no crease)
+    crease_silhouette: bool = True  # crease_sigma's test leaves out a strip's points within crease_band_px of the
+    # silhouette too (pixels of no instance: the background, the mask's edge): the window mixes in their depth
     remerge: bool = True  # the merge and the fragment absorption once more after the steps that change which
     # instances touch (`remerge`: after the crease cut, and in segment_learned after the depth-region verification)
     remerge_sigma: float = 3.0  # ... that merge only where each piece's points lie within this many sensor sigmas of
@@ -1118,7 +1120,9 @@ def _crease_hosts(
     is wider than the band (crease_width_quantile of its pixels farther than crease_band_px from its outline),
     the hosts meet pairwise at crease_min_angle_deg or more somewhere, and its points farther than crease_band_px from
     every crease lie within crease_sigma sensor sigmas of the envelope (median; points within the band are the
-    sensor's rounding and are not judged; a strip whose depth lies wholly within the band is one)."""
+    sensor's rounding and are not judged, nor with crease_silhouette those within the band of a pixel of no
+    instance, where the window mixes in the background's depth; a strip whose depth lies wholly within the band
+    is one)."""
     nrm = np.array([planes[g][0] for g in hosts])
     off = np.array([planes[g][1] for g in hosts])
     if max(np.degrees(np.arccos(min(abs(float(a @ b)), 1.0))) for k, a in enumerate(nrm) for b in nrm[k + 1 :]) < (
@@ -1157,6 +1161,10 @@ def _crease_hosts(
     dist = cv2.distanceTransform((~change).astype(np.uint8), cv2.DIST_L2, 5)  # pixels to the nearest crease
     box_sel = sel[y0:y1, x0:x1]
     judged = box_sel & valid[y0:y1, x0:x1] & (dist > cfg.crease_band_px)
+    if cfg.crease_silhouette:  # the matching window mixes the part's depth with the background's there too
+        judged &= cv2.distanceTransform((inst[y0:y1, x0:x1] != 0).astype(np.uint8), cv2.DIST_L2, 5) > (
+            cfg.crease_band_px
+        )
     if judged.any():  # (a strip with depth only within the band is all rounding)
         zz = pts[y0:y1, x0:x1, 2][judged]
         sigma = cfg.noise_sigma_coeff * zz**2
