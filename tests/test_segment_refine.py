@@ -608,9 +608,9 @@ def test_after_the_crease_cut_the_pieces_it_kept_apart_are_merged() -> None:
 
 def test_crease_strip_at_the_silhouette_is_judged_away_from_it() -> None:
     """Where a crease strip reaches the part's silhouette, the sensor's matching window mixes the background's
-    depth into the strip's points within the band of the silhouette (the real cracker box's top corner). Those
-    points are not judged (crease_silhouette), so a 13-row strip whose top 5 rows carry mixed depth is cut between
-    its planes; judged with them it stays. Five noise seeds."""
+    depth into the strip's points within the band of the silhouette (the real cracker box's top corner). With
+    crease_silhouette (off by default) those points are not judged, so a 13-row strip whose top 5 rows carry mixed
+    depth is cut between its planes; judged with them (the default) it stays. Five noise seeds."""
     from v2c.segment.refine import split_crease_strips
 
     u = np.arange(W)[None, :].repeat(H, 0)
@@ -628,6 +628,6 @@ def test_crease_strip_at_the_silhouette_is_judged_away_from_it() -> None:
         depth[mixed] += 0.5 * (1.0 - depth[mixed]) * (top + 5 - v[mixed]) / 6.0
         depth[v < top] = 1.0
         seg = Segmentation(inst, labels, scores, "learned")
-        out = split_crease_strips(seg, depth, K, RefineConfig())
+        out = split_crease_strips(seg, depth, K, RefineConfig(crease_silhouette=True))
         assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, PLANE_Z], seed
-        assert split_crease_strips(seg, depth, K, RefineConfig(crease_silhouette=False)).num_instances == 3, seed
+        assert split_crease_strips(seg, depth, K, RefineConfig()).num_instances == 3, seed

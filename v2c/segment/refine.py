@@ -159,8 +159,11 @@ class RefineConfig:
     # and changed nothing on the validation sets)
     crease_min_angle_deg: float = 20.0  # two hosts' planes meet at least at this angle (degrees; flatter pairs make
     # no crease)
-    crease_silhouette: bool = True  # crease_sigma's test leaves out a strip's points within crease_band_px of the
-    # silhouette too (pixels of no instance: the background, the mask's edge): the window mixes in their depth
+    crease_silhouette: bool = False  # crease_sigma's test leaves out a strip's points within crease_band_px of the
+    # silhouette too (pixels of no instance: the background, the mask's edge), where a real sensor's window mixes
+    # in the background's depth. Off: it cut true fillets at the silhouette (in-family seed 0 recall 91.84 ->
+    # 91.39 %) and on the real frames traded a face per box for a point of the cracker box's coverage
+    # (docs/bench.md, session 19)
     remerge: bool = True  # the merge and the fragment absorption once more after the steps that change which
     # instances touch (`remerge`: after the crease cut, and in segment_learned after the depth-region verification)
     remerge_sigma: float = 3.0  # ... that merge only where each piece's points lie within this many sensor sigmas of
