@@ -22,6 +22,12 @@ def mad_sigma(r: np.ndarray) -> float:
     return MAD_TO_SIGMA * float(np.median(np.abs(r)))
 
 
+def median_depth_sigma(x: np.ndarray, coeff: float) -> float:
+    """The sensor's depth sigma (metres) at the median depth of camera-frame points ``x`` (N, 3): coeff z^2 (a
+    config's noise_sigma_coeff; `geometry.selection.noise_sigma` gives it per point)."""
+    return coeff * float(np.median(x[:, 2])) ** 2
+
+
 @dataclass
 class InstancePoints:
     """Valid pixels of one instance: flat pixel indices (n,), points (n, 3) and unit normals (n, 3), camera frame,

@@ -33,7 +33,7 @@ import numpy as np
 
 from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
-from v2c.geometry.points import mad_sigma
+from v2c.geometry.points import mad_sigma, median_depth_sigma
 from v2c.geometry.selection import supported
 from v2c.labels import AxisClass, PrimitiveType, axis_class, label_of
 from v2c.pick import PickConfig, depth_pieces
@@ -279,7 +279,7 @@ def fit_of_type(
     if kind == "plane":
         return fit_plane(x)
     sub = x[_strided(len(x), cfg.polish_points)]
-    noise = cfg.noise_sigma_coeff * float(np.median(sub[:, 2])) ** 2
+    noise = median_depth_sigma(sub, cfg.noise_sigma_coeff)
     if start is not None and start.type == kind:
         starts: list[Primitive | None] = [start]
     elif kind == "cylinder":

@@ -41,7 +41,7 @@ from scipy.optimize import least_squares
 
 from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
-from v2c.geometry.points import estimate_part_size, instance_points, mad_sigma
+from v2c.geometry.points import estimate_part_size, instance_points, mad_sigma, median_depth_sigma
 from v2c.geometry.ransac import RansacFit, ransac_fit, refine_primitive
 from v2c.geometry.selection import select_type, supported
 from v2c.groups import UnionFind
@@ -531,7 +531,7 @@ def _flat(
     noise model cfg.noise_sigma_coeff and the other settings of ``ransac``; ``normals`` (N, 3) the points'
     depth-gradient normals; ``where``: the points' flat pixel indices and the image shape, for the design effect
     of the curved fit's residuals, `_gric_config`): a true shallow cone or a wide fillet keeps its own face."""
-    sigma = cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
+    sigma = median_depth_sigma(x, cfg.noise_sigma_coeff)
     if mad_sigma(x @ nrm - off) > cfg.flat_sigma * sigma:
         return False
     ptype = TYPE_NAMES[int(TYPE_OF_LABEL[int(labels[i])])]
@@ -586,18 +586,16 @@ def _coplanar_pairs(
             continue
         (na, da, xa), (nb, db, xb) = planes[a], planes[b]
         dab, dba = float(np.median(np.abs(xb @ na - da))), float(np.median(np.abs(xa @ nb - db)))
-        if dab > max_sigma * _sensor_sigma(xb, cfg) or dba > max_sigma * _sensor_sigma(xa, cfg):
+        if np.isfinite(max_sigma) and (
+            dab > max_sigma * median_depth_sigma(xb, cfg.noise_sigma_coeff)
+            or dba > max_sigma * median_depth_sigma(xa, cfg.noise_sigma_coeff)
+        ):
             continue
         if abs(float(na @ nb)) >= cos_min and dab < tol and dba < tol:
             agree.append((a, b))
         elif cfg.merge_joint:
             joint.append((min(dab, dba), a, b))
     return agree, sorted(joint)
-
-
-def _sensor_sigma(x: np.ndarray, cfg: RefineConfig) -> float:
-    """The sensor's depth sigma (metres, noise_sigma_coeff z^2) at the median depth of the points x (n, 3)."""
-    return cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
 
 
 def _explained_by_one_plane(
@@ -624,7 +622,7 @@ def _explained_by_one_plane(
         joint = float(np.median(np.abs(xi @ n - d)))
         if joint >= tol:
             return False
-        sigma = _sensor_sigma(xi, cfg)
+        sigma = median_depth_sigma(xi, cfg.noise_sigma_coeff)
         if joint > max_sigma * sigma:
             return False
         if abs(float(n @ ni)) >= cos_min:

@@ -54,7 +54,7 @@ import numpy as np
 
 from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
-from v2c.geometry.points import instance_points, mad_sigma
+from v2c.geometry.points import instance_points, mad_sigma, median_depth_sigma
 from v2c.geometry.ransac import ransac_fit, refine_primitive
 from v2c.groups import UnionFind
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
@@ -151,14 +151,9 @@ def plane_regions(depth_seg: Segmentation, pts: np.ndarray, valid: np.ndarray, c
     return out
 
 
-def _sensor_sigma(x: np.ndarray, cfg: VerifyConfig) -> float:
-    """The sensor's depth sigma (metres) at the median depth of points ``x``: noise_sigma_coeff z^2."""
-    return cfg.noise_sigma_coeff * float(np.median(x[:, 2])) ** 2
-
-
 def _within_noise(x: np.ndarray, residuals: np.ndarray, cfg: VerifyConfig) -> bool:
     """Whether the robust sigma of ``residuals`` (metres) of points ``x`` is within region_sigma sensor sigmas."""
-    return mad_sigma(residuals) <= cfg.region_sigma * _sensor_sigma(x, cfg)
+    return mad_sigma(residuals) <= cfg.region_sigma * median_depth_sigma(x, cfg.noise_sigma_coeff)
 
 
 def _inside_points(
@@ -247,7 +242,7 @@ def _one_surface(
 
     for piece in pieces:  # loop over the pieces the regions cover
         x = pts[piece & valid]
-        if float(np.median(dist(x))) > cfg.one_surface_sigma * _sensor_sigma(x, cfg):
+        if float(np.median(dist(x))) > cfg.one_surface_sigma * median_depth_sigma(x, cfg.noise_sigma_coeff):
             return False
     return True
 
@@ -332,7 +327,9 @@ def _groups_inside(
         members = []
         for i in inside[inside > 0]:  # loop over the instances it touches
             x = None if excluded[i] else _inside_points(inst, int(i), mask, pts, valid, cfg)
-            if x is not None and float(np.median(dist(x))) <= cfg.merge_sigma * _sensor_sigma(x, cfg):
+            if x is None:
+                continue
+            if float(np.median(dist(x))) <= cfg.merge_sigma * median_depth_sigma(x, cfg.noise_sigma_coeff):
                 members.append(int(i))
         if anchors is not None and int(anchors[members].sum()) >= 2:
             continue
@@ -368,7 +365,7 @@ def _flat_curved_pairs(
             if x is None:
                 continue
             res = x @ r.normal - r.offset
-            if float(np.median(np.abs(res))) > cfg.merge_sigma * _sensor_sigma(x, cfg):
+            if float(np.median(np.abs(res))) > cfg.merge_sigma * median_depth_sigma(x, cfg.noise_sigma_coeff):
                 continue
             n_valid = len(x)
             if is_plane[i] and n_valid > anchor_px:
