@@ -360,10 +360,12 @@ def build_brep(
     used = set().union(*face_edges.values()) if face_edges else set()
     outlined = set(out.face_parts)
     faces_by_edge = {e.id: set(e.faces) for e in vbrep.edges}
+    # the VEdge names the outline faces' edges carry (`brep_outline`: each after the face's nearest VB-Rep edge)
+    carried = {name for fid in outlined for _, name in out.outline_edges.get(fid, [])}
     for eid in sorted(out.edges):
         if eid in used:
             continue
-        if faces_by_edge.get(eid, set()) & outlined:
+        if faces_by_edge.get(eid, set()) & outlined and eid in carried:
             out.dropped_edges.append(eid)  # the outline's edges carry its name
             continue
         if not all(_inside(ed, out.box) for ed in out.edges[eid]):

@@ -244,7 +244,11 @@ def _vfaces(
         mv = mt = None
         own = _own_points(ctx, region, face_pts[inst])
         evidence = cfg.mesh_evidence_tol * scale
-        poly = loop_polygon(loops.get(fid[inst], []), protos, ctx.K) if cfg.mesh_from_loops else None
+        poly = (
+            loop_polygon(loops.get(fid[inst], []), protos, ctx.K, fg.prim, cfg.loop_ring_pieces)
+            if cfg.mesh_from_loops
+            else None
+        )
         if poly is not None and _loops_cover_region(poly, inst, ctx.face_map, set(inst_ids), cfg):
             mv, mt = loop_mesh(fg.prim, fg.sheet, poly, *args)
             if len(mt) and not beyond_measured(mv, read_vertices(mv, region, ctx.depth, ctx.K), own, evidence):
@@ -307,7 +311,7 @@ def _mostly_unread(ctx: ExtractContext, region: np.ndarray) -> bool:
 
 
 def _loops_cover_region(
-    poly: shapely.Polygon, inst: int, instances: np.ndarray, faced: set[int], cfg: VBRepConfig
+    poly: shapely.Polygon | shapely.MultiPolygon, inst: int, instances: np.ndarray, faced: set[int], cfg: VBRepConfig
 ) -> bool:
     """Whether a face's loop polygon (image pixels) is the face seen: its intersection over union with the face's
     pixel region (pixel centres inside the polygon, the polygon's area) at least ``loop_mesh_min_iou``, and no

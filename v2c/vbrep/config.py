@@ -172,6 +172,9 @@ class VBRepConfig:
     #                               spans much depth per pixel, and it has one crossing)
     mesh_from_loops: bool = True  # a face whose loops bound a valid image region is meshed from them (the trimmed
     #                               face, `v2c.vbrep.loop_mesh`), else from its pixel region
+    loop_ring_pieces: int = 8  # count: a curved face's loop polylines are followed on its surface, each segment
+    #                            cut into this many pieces moved onto it, before the loop's image region is taken
+    #                            (`loop_mesh._on_surface_between`; 1: straight image segments)
     loop_mesh_min_iou: float = 0.8  # ratio: ... when that region's intersection over union with the face's pixels
     #                                 is at least this. Chosen on the corpus validation VB-Reps (oracle, 30 scans):
     #                                 face precision 0.968 before, 0.892 with every valid loop region, 0.933 with
