@@ -346,8 +346,8 @@ class FaceBuilder:
     ) -> tuple[TopoDS_Face, list[Loop]] | None:
         """The face trimmed by its loops and the loops it kept, trying in turn: the VB-Rep's loops; their
         edges chained again through shared vertices (when the given loops do not close); only the loops that
-        close; only the largest closed loop. Anything but the first is reported as a warning. None if all
-        fail."""
+        close; the largest closed loop with each other closed loop that leaves it a valid face (largest first);
+        only the largest closed loop. Anything but the first is reported as a warning. None if all fail."""
         # degenerate edges (dropped by the EdgeBuilder, their vertices merged) leave their loops
         given = [[(eid, rev) for eid, rev in lp if eid not in self.degenerate] for lp in f.loops]
         given = [lp for lp in given if lp]
@@ -366,8 +366,6 @@ class FaceBuilder:
         closed = by_area([lp for lp in given if self._loop_closed(lp)])
         if closed and len(closed) < len(given):
             attempts.append(("only its closed loops", closed))
-        if len(closed) > 1:
-            attempts.append(("only its largest loop", closed[:1]))
         tried: list[list[Loop]] = []
         for why, loops in attempts:
             if loops in tried:
@@ -375,8 +373,25 @@ class FaceBuilder:
             tried.append(loops)
             face = self._try_face(f, loops, edges)
             if face is not None:
-                if why:
-                    why = f"its loops do not bound a valid face; bounded by {why}"
-                    self.warnings.append(f"face {f.id}: {why}")
-                return face, loops
+                return self._report(f, why, face, loops)
+        if len(closed) > 1:
+            # the largest loop with each hole that leaves it a valid face, largest first (one hole whose wire
+            # crosses the outer one in (u, v) no longer costs the face its other holes); tried only now, as every
+            # valid trial keeps ShapeFix's edge replacements
+            kept, face = closed[:1], None
+            for hole in closed[1:]:
+                got = self._try_face(f, [*kept, hole], edges)
+                if got is not None:
+                    kept, face = [*kept, hole], got
+            if face is not None:
+                return self._report(f, "its largest loop and the holes it can take", face, kept)
+            face = self._try_face(f, closed[:1], edges)
+            if face is not None:
+                return self._report(f, "only its largest loop", face, closed[:1])
         return None
+
+    def _report(self, f: VFace, why: str, face: TopoDS_Face, loops: list[Loop]) -> tuple[TopoDS_Face, list[Loop]]:
+        """``face`` and ``loops``, with a warning naming ``why`` when the face is not bounded by all its loops."""
+        if why:
+            self.warnings.append(f"face {f.id}: its loops do not bound a valid face; bounded by {why}")
+        return face, loops

@@ -8,6 +8,7 @@ import pytest
 from v2c.bench.vbrep import chamfer, edge_type_accuracy
 from v2c.camera import project
 from v2c.primitives import from_dict
+from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.extract import extract_vbrep
 from v2c.vbrep.model import EdgeType, VertexKind
 
@@ -124,6 +125,34 @@ def test_hole_and_boss_are_told_apart(hole_and_boss):
         z_clean = inp.scan.gt.depth_clean[uv[ok, 1], uv[ok, 0]]
         good = z_clean > 0
         assert np.median(np.abs(cyl.mesh_vertices[ok][good, 2] - z_clean[good])) < 0.001
+
+
+def test_a_hole_wall_without_readings_is_placed_deeper_than_its_rim():
+    """The sensor read none of a hole's wall (a shiny or dark bore, a wall seen at a grazing angle): the wall
+    takes the sheet that meets the readings around it (`VBRepConfig.sheet_ring_px`), the far side of its
+    cylinder seen from inside, not the near side (the first crossing of every ray, which lies in front of the
+    plate around the hole)."""
+    from dataclasses import replace
+
+    inp = scene_inputs(plate_feature_scene("hole"), noise_m=NOISE_M, seed=3)
+    inst = np.asarray(inp.seg.instances)
+    cyl_inst = next(i for i, p in inp.fit.primitives.items() if p.type == "cylinder")
+    depth = np.asarray(inp.scan.depth).copy()
+    depth[inst == cyl_inst] = 0.0
+    v = extract_vbrep(replace(inp.scan, depth=depth), inp.seg, inp.fit)
+    cyl = next(f for f in v.faces if f.primitive["type"] == "cylinder")
+    assert v.meta["faces"][str(cyl.id)]["concave"]
+    uv = np.rint(project(cyl.mesh_vertices, inp.scan.K)).astype(int)
+    h, w = depth.shape
+    ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    z_clean = inp.scan.gt.depth_clean[uv[ok, 1], uv[ok, 0]]
+    good = z_clean > 0
+    assert good.sum() > 20
+    assert np.median(np.abs(cyl.mesh_vertices[ok][good, 2] - z_clean[good])) < 0.001
+    # without the ring's readings (the option off) the wall is put on the near side of its cylinder
+    off = extract_vbrep(replace(inp.scan, depth=depth), inp.seg, inp.fit, replace(VBRepConfig(), sheet_ring_px=0))
+    near = next(f for f in off.faces if f.primitive["type"] == "cylinder")
+    assert not off.meta["faces"][str(near.id)]["concave"]
 
 
 def test_hole_has_occluded_far_wall_boss_has_visibility(hole_and_boss):

@@ -96,6 +96,9 @@ class VBRepConfig:
 
     # --- ambiguity (which sheet of a surface the face is: boss or hole)
     sheet_max_pixels: int = 4000  # pixels: at most this many (seeded sample) per face to score the sheets
+    sheet_ring_px: int = 3  # pixels: a face none of whose pixels has a reading takes the sheet that best meets the
+    #                         readings of the other pixels within this of its outline (a hole's wall the sensor
+    #                         did not read lies deeper than its rim, not on the near side of its cylinder)
 
     # --- faces the geometry stage left without a primitive
     fallback_min_px: int = 10  # pixels: such an instance this large gets a least-squares plane through its depth

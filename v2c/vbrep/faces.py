@@ -268,8 +268,26 @@ class _FaceSet:
             self.rng,
             self.cfg.sheet_max_pixels,
         )
+        if not np.isfinite(ch.errors).any() and self.cfg.sheet_ring_px > 0:
+            ch = SheetChoice(self._ring_sheet(inst, prim), ch.errors)
         self.faces[inst] = FaceGeom(inst, prim, ch.sheet, res, axl, extra)
         self.sheets[inst] = ch
+
+    def _ring_sheet(self, inst: int, prim: Primitive) -> int:
+        """The sheet of ``prim`` that best meets the readings within ``sheet_ring_px`` of instance ``inst``'s
+        outline (other instances' pixels and the background's; `choose_sheet` on them); 0 (the nearest) when
+        none is there either. For a face whose own pixels have no reading: the errors that score its
+        confidence stay its own (none)."""
+        r = self.cfg.sheet_ring_px
+        region = (self.inst_map == inst).astype(np.uint8)
+        ring = (cv2.dilate(region, np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0) & (region == 0) & (self.depth > 0)
+        vs, us = np.nonzero(ring)
+        if len(us) == 0:
+            return 0
+        pix = np.stack([us, vs], 1).astype(float)
+        return choose_sheet(
+            prim, pix, self.depth[vs, us], self.K, self.window, self.rng, self.cfg.sheet_max_pixels
+        ).sheet
 
     def coincides(self, plane: Plane, scale: float) -> bool:
         """Whether ``plane`` is a fitted plane again (within fallback_min_angle_deg and fallback_rms)."""
