@@ -264,12 +264,17 @@ def _add_shell(bb: BRep_Builder, compound: TopoDS_Compound, faces: list[TopoDS_F
 
 
 def build_brep(
-    vbrep: VBRep, fmap: FrameMap, config: BrepConfig | None = None, force_outline: frozenset[int] = frozenset()
+    vbrep: VBRep,
+    fmap: FrameMap,
+    config: BrepConfig | None = None,
+    force_outline: frozenset[int] = frozenset(),
+    raw_outline: frozenset[int] = frozenset(),
 ) -> BuiltBRep:
     """The OCCT topology of a VB-Rep in the output frame of ``fmap`` (millimetres); see the module doc.
 
     force_outline: VFace ids bounded by their mesh outline whatever their loops (`exporters.step.write` uses
-    it for faces that a STEP round trip changed)."""
+    it for faces that a STEP round trip changed); raw_outline: VFace ids whose outline is taken as the mesh gives
+    it, not simplified (`exporters.step.write`: outline faces OCCT's mesher drew short)."""
     cfg = config or BrepConfig()
     eb = EdgeBuilder(vbrep, fmap, cfg).run()
     fb = FaceBuilder(eb)
@@ -324,7 +329,7 @@ def build_brep(
                 face_edges[f.id] = {eid for lp in made[1] for eid, _ in lp}
                 out.built_area[f.id] = area
                 continue
-        pieces = [p for p in ob.build(f, eb.surfaces[f.id]) if _inside(p.face, out.box)]
+        pieces = [p for p in ob.build(f, eb.surfaces[f.id], f.id in raw_outline) if _inside(p.face, out.box)]
         if not pieces:
             eb.warnings.append(f"face {f.id}: {why}, and no face could be built from its mesh outline; skipped")
             out.skipped_faces.append(f.id)

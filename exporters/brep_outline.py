@@ -541,8 +541,9 @@ class OutlineBuilder:
         self.hole_budget_rel = hole_budget_rel
         self.bb = BRep_Builder()
 
-    def build(self, f: VFace, s: AnalyticSurface) -> list[OutlinePiece]:
-        """The outline faces of ``f`` on surface ``s`` (empty when none can be built)."""
+    def build(self, f: VFace, s: AnalyticSurface, raw: bool = False) -> list[OutlinePiece]:
+        """The outline faces of ``f`` on surface ``s`` (empty when none can be built); ``raw``: the outline as the
+        mesh gives it, not simplified (`exporters.step.write` asks for it for a face OCCT's mesher drew short)."""
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         tris = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
         areas = _triangle_areas(pts, tris)
@@ -565,7 +566,7 @@ class OutlineBuilder:
             return _region_area(s, shapely.transform(g, lambda c: c / scale))
 
         for poly in polys:
-            simple = _simplify_keeping_area(poly, self.tol, self.tol_area_rel, measure=on_surface)
+            simple = poly if raw else _simplify_keeping_area(poly, self.tol, self.tol_area_rel, measure=on_surface)
             # coordinates on a grid of the ring gap: a ring that runs out and back along a line a thousandth of a
             # millimetre wide (a cylinder's contour, where the mesh's vertices crowd one u) is valid to shapely
             # and a self-intersecting wire to OCCT at its precision; snapped, the spike collapses and goes
