@@ -380,6 +380,8 @@ class FaceBuilder:
             # valid trial keeps ShapeFix's edge replacements
             kept, face = closed[:1], None
             for hole in closed[1:]:
+                if [*kept, hole] in tried:  # refused above (a refused trial changes nothing)
+                    continue
                 got = self._try_face(f, [*kept, hole], edges)
                 if got is not None:
                     kept, face = [*kept, hole], got

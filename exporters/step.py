@@ -327,18 +327,13 @@ def faces_by_id(faces: list[ReadSubShape]) -> dict[int, list[TopoDS_Face]]:
 
 
 def written_face_areas(
-    path: str | Path, deflection: float, angle_rad: float, meshed: frozenset[int] | None = None
+    path: str | Path, deflection: float, angle_rad: float
 ) -> tuple[dict[int, float], dict[int, float]]:
     """VFace id -> the area (mm²) of the faces named after it in a STEP written by `write` (all pieces), and
-    VFace id -> the area of their triangulation by OCCT's mesher at ``deflection`` (mm) and ``angle_rad``, for
-    the ids in ``meshed`` (all when None)."""
+    VFace id -> the area of their triangulation by OCCT's mesher at ``deflection`` (mm) and ``angle_rad``."""
     by_id = faces_by_id(read_xcaf_step(path).faces)
     areas = {fid: sum(face_area(f) for f in fs) for fid, fs in by_id.items()}
-    drawn = {
-        fid: sum(drawn_area(f, deflection, angle_rad) for f in fs)
-        for fid, fs in by_id.items()
-        if meshed is None or fid in meshed
-    }
+    drawn = {fid: sum(drawn_area(f, deflection, angle_rad) for f in fs) for fid, fs in by_id.items()}
     return areas, drawn
 
 

@@ -590,8 +590,8 @@ def test_an_outline_face_the_mesher_draws_short_is_written_again_unsimplified(tm
         raws.append(frozenset(kwargs.get("raw_outline", args[4] if len(args) > 4 else frozenset())))
         return real_build(*args, **kwargs)
 
-    def short_first(path, deflection, angle, meshed=None):
-        areas, drawn = real_areas(path, deflection, angle, meshed)
+    def short_first(path, deflection, angle):
+        areas, drawn = real_areas(path, deflection, angle)
         if len(raws) == 1:  # the first round trip: the outline face drawn at 69 %
             drawn = {**drawn, 0: 0.69 * areas[0]}
         return areas, drawn
