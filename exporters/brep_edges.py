@@ -33,7 +33,7 @@ from exporters.occ_curves import (
     project_on_curve,
 )
 from exporters.occ_surfaces import AnalyticSurface, distance_to_surface, make_surface
-from exporters.polygons import subsample
+from exporters.polygons import signed_area, subsample
 from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
 
@@ -79,7 +79,9 @@ class EdgeBuilder:
     it still close without it. An intersection edge without an exact intersection curve is fitted on the face
     whose surface its polyline lies nearer (``fit_face``); how far the fitted edge then lies off the other face's
     surface is measured (``off_surface``: VEdge id -> (face id, mm)) and reported as a warning: covered by the
-    edge's tolerance up to ``branch_tol``, a gap between the faces beyond it.
+    edge's tolerance up to ``branch_tol``, a gap between the faces beyond it. A thin face's loop of two exact
+    edges between the same two vertices is fitted so too (`refit_lens_loops`; ``lens_vertices``: VVertex id ->
+    the face whose surface alone places it).
     """
 
     def __init__(self, vbrep: VBRep, fmap: FrameMap, config: BrepConfig) -> None:
@@ -100,6 +102,7 @@ class EdgeBuilder:
         self.vertex_alias: dict[int, int] = {}
         self.fit_face: dict[int, int] = {}
         self.off_surface: dict[int, tuple[int, float]] = {}
+        self.lens_vertices: dict[int, int] = {}
         self.bb = BRep_Builder()
 
     def run(self) -> EdgeBuilder:
@@ -109,6 +112,7 @@ class EdgeBuilder:
         self.build_intersection_curves()
         self.place_vertices()
         self.build_edge_geometry()
+        self.refit_lens_loops()
         self.edges = self.build_edges()
         return self
 
@@ -324,28 +328,102 @@ class EdgeBuilder:
         """Step 4a: each edge's `EdgeGeom` (``geoms``): its intersection curve trimmed at its vertices, else a
         pcurve fitted in a face's (u, v) space, else a free 3D B-spline; an edge with none is dropped (a warning)."""
         for e in self.vb.edges:
-            if e.id in self.degenerate:
+            if e.id not in self.degenerate:
+                self._edge_geometry(e)
+
+    def _edge_geometry(self, e: VEdge) -> None:
+        """`build_edge_geometry` for one edge (``geoms[e.id]`` set, or left out with a warning)."""
+        self.geoms.pop(e.id, None)
+        g = None
+        if e.id in self.curves:
+            g = self._curve_geom(e, self.curves[e.id])
+            if g is None:
+                self.warnings.append(f"edge {e.id}: its intersection curve could not be trimmed; fitted")
+        if g is None:
+            faces = sorted(e.faces, key=lambda f: f != self.fit_face.get(e.id, f))
+            for f in faces:
+                if f in self.surfaces:
+                    g = self._pcurve_geom(e, f)
+                    if g is not None:
+                        break
+        if g is not None and e.id in self.fit_face and g.face is not None:
+            self.fit_face[e.id] = g.face  # the nearer face's fit failed: the other one carries it
+        if g is None:
+            g = self._free_geom(e)
+        if g is None:
+            self.warnings.append(f"edge {e.id}: no geometry could be built; edge dropped")
+            return
+        self.geoms[e.id] = g
+
+    def refit_lens_loops(self) -> None:
+        """Step 4a': a face's loop of two edges between the same two vertices (a thin face whose far end the
+        image lost: the edges there were under a pixel) bounds nothing when both follow exact intersection curves:
+        two lines meet once, and alternating projection takes both vertices to where they cross. When the region
+        such a loop's geometry bounds in the face's (u, v) differs from the region its polylines bound (what the
+        face's mesh covers) by more than ``area_tol_rel``, its edges with exact curves are fitted on the face
+        along their polylines instead (as an edge without an intersection branch: ``fit_face``, the other face's
+        gap covered by `_cover_other_face`), its two vertices are placed on that face's surface alone
+        (``lens_vertices``: their VB-Rep positions projected onto it), and the edges at those vertices are built
+        again."""
+        moved: set[int] = set()
+        position = {v.id: v.position for v in self.vb.vertices}
+        for f in self.vb.faces:
+            s = self.surfaces.get(f.id)
+            if s is None:
                 continue
-            g = None
-            if e.id in self.curves:
-                g = self._curve_geom(e, self.curves[e.id])
+            for lp in f.loops:
+                if len(lp) != 2 or lp[0][0] == lp[1][0]:
+                    continue
+                ea, eb = (self.vb.edges[eid] for eid, _ in lp)
+                ends = {self.vid(ea.v0), self.vid(ea.v1)}
+                if ends != {self.vid(eb.v0), self.vid(eb.v1)} or len(ends) != 2 or ends & set(self.lens_vertices):
+                    continue
+                exact = [eid for eid, _ in lp if eid in self.curves and eid in self.geoms]
+                if not exact:
+                    continue
+                built, drawn = self._loop_uv_area(s, lp, True), self._loop_uv_area(s, lp, False)
+                if not (np.isfinite(built) and np.isfinite(drawn)) or drawn <= 0:
+                    continue
+                if abs(built - drawn) <= self.cfg.area_tol_rel * drawn:
+                    continue
+                for eid in exact:
+                    self.curves.pop(eid)
+                    self.fit_face[eid] = f.id
+                for v in ends:
+                    self.lens_vertices[v] = f.id
+                    self.vpos[v] = s.project(self.fmap.points(position[v])[None])[0]
+                moved |= ends
+        if not moved:
+            return
+        for v, rep in self.vertex_alias.items():
+            if rep in moved:
+                self.vpos[v] = self.vpos[rep]
+        for e in self.vb.edges:
+            if e.id not in self.degenerate and {self.vid(e.v0), self.vid(e.v1)} & moved:
+                self._edge_geometry(e)
+
+    def _loop_uv_area(self, s: AnalyticSurface, loop: list[tuple[int, bool]], built: bool, n: int = 33) -> float:
+        """The (u, v) area a loop bounds on surface ``s``: along its edges' geometry (``built``: `EdgeGeom`, NaN
+        when an edge has none) or along their VB-Rep polylines."""
+        pts = []
+        for eid, rev in loop:
+            if built:
+                g = self.geoms.get(eid)
                 if g is None:
-                    self.warnings.append(f"edge {e.id}: its intersection curve could not be trimmed; fitted")
-            if g is None:
-                faces = sorted(e.faces, key=lambda f: f != self.fit_face.get(e.id, f))
-                for f in faces:
-                    if f in self.surfaces:
-                        g = self._pcurve_geom(e, f)
-                        if g is not None:
-                            break
-            if g is not None and e.id in self.fit_face and g.face is not None:
-                self.fit_face[e.id] = g.face  # the nearer face's fit failed: the other one carries it
-            if g is None:
-                g = self._free_geom(e)
-            if g is None:
-                self.warnings.append(f"edge {e.id}: no geometry could be built; edge dropped")
-                continue
-            self.geoms[e.id] = g
+                    return float("nan")
+                ts = np.linspace(g.t0, g.t1, n)
+                if g.curve is not None:
+                    xyz = curve_points(g.curve, ts)
+                else:
+                    uv2 = np.array([[g.pcurve.Value(float(t)).X(), g.pcurve.Value(float(t)).Y()] for t in ts])
+                    xyz = self.surfaces[g.face].evaluate(uv2)
+            else:
+                xyz = self.fmap.points(np.asarray(self.vb.edges[eid].polyline, float).reshape(-1, 3))
+            pts.append(xyz[::-1] if rev else xyz)
+        uv = s.uv(np.concatenate(pts))
+        if not np.all(np.isfinite(uv)):
+            return float("nan")
+        return abs(signed_area(s.unwrap(uv)))
 
     def build_edges(self) -> dict[int, TopoDS_Edge]:
         """Step 4b: VEdge id -> TopoDS_Edge oriented from v0 to v1, on shared TopoDS_Vertex objects whose

@@ -105,3 +105,60 @@ def test_a_face_without_a_mesh_is_not_written_from_its_loops(tmp_path: Path) -> 
     # the full box is written whole
     rep_full = step.write(vb, tmp_path / "b.step", frame="camera")
     assert rep_full.n_faces == len(vb.faces) and not rep_full.skipped_faces
+
+
+def _lens_face():
+    """A thin planar face (face 0, plane z = 0.5 m) whose loop is two intersection edges between the same two
+    vertices: its sides meet at vertex 0 at 10 degrees, and its 3.5 mm far end, under a pixel in the image, was
+    lost, so both sides end at vertex 1 in the middle of it. Faces 1 and 2 are the planes through the sides."""
+    from v2c.vbrep.model import VBRep, VFace
+
+    def unit(v):
+        return np.asarray(v, float) / np.linalg.norm(v)
+
+    a = np.deg2rad(5.0)
+    va = np.array([0.0, 0.0, 0.5])
+    d1, d2 = np.array([np.cos(a), -np.sin(a), 0.0]), np.array([np.cos(a), np.sin(a), 0.0])
+    a1, a2 = va + 0.02 * d1, va + 0.02 * d2
+    vb_ = (a1 + a2) / 2
+    n1 = unit(0.8 * np.array([-np.sin(a), -np.cos(a), 0.0]) - 0.6 * np.array([0.0, 0.0, 1.0]))
+    n2 = unit(0.8 * np.array([-np.sin(a), np.cos(a), 0.0]) - 0.6 * np.array([0.0, 0.0, 1.0]))
+    K = np.array([[615.0, 0.0, 320.0], [0.0, 615.0, 240.0], [0.0, 0.0, 1.0]])
+
+    def pix(p):
+        q = K @ p
+        return q[:2] / q[2]
+
+    def plane(o, n):
+        return {"type": "plane", "params": {"origin": np.asarray(o).tolist(), "normal": np.asarray(n).tolist()}}
+
+    verts = [VVertex(0, VertexKind.CORNER, va, pix(va)), VVertex(1, VertexKind.OTHER, vb_, pix(vb_))]
+    edges = [
+        VEdge(0, EdgeType.INTERSECTION, 0.9, (0, 1), np.stack([va, a1, vb_]), 0, 1, None),
+        VEdge(1, EdgeType.INTERSECTION, 0.9, (0, 2), np.stack([vb_, a2, va]), 1, 0, None),
+    ]
+    mesh_v = np.stack([va, a1, vb_, a2])
+    mesh_t = np.array([[0, 1, 2], [0, 2, 3]])
+    empty_v, empty_t = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    faces = [
+        VFace(0, 1, plane(va, [0.0, 0.0, -1.0]), "Z", [[(0, False), (1, False)]], mesh_v, mesh_t, 0.9),
+        VFace(1, 2, plane(va, n1), "?", [], empty_v, empty_t, 0.9),
+        VFace(2, 3, plane(va, n2), "?", [], empty_v, empty_t, 0.9),
+    ]
+    return VBRep(faces, edges, verts, frame=np.eye(3), K=K, image_size=(640, 480), scale=0.02, meta={})
+
+
+def test_a_loop_of_two_exact_lines_is_written_along_its_polylines() -> None:
+    # Two lines meet once: with both sides on their exact intersection lines, vertex 1 went to where the lines
+    # cross (vertex 0) and face 0 was written from its loop as a sliver of almost no area, then fell back to its
+    # mesh outline. Its sides now follow their polylines on face 0's plane, and the face is written from its loop
+    # at the area of its mesh.
+    vb = _lens_face()
+    eb = EdgeBuilder(vb, CAMERA, BrepConfig()).run()
+    assert eb.fit_face == {0: 0, 1: 0}
+    built = build_brep(vb, CAMERA)
+    assert 0 not in built.fallback_faces and 0 in built.built_area
+    mesh_mm2 = 0.5 * 0.02 * 0.02 * np.sin(np.deg2rad(10.0)) * 1e6 / 2 * 2  # the quad vA, a1, vB, a2
+    assert abs(built.built_area[0] / built.mesh_area[0] - 1) <= 0.02
+    assert abs(built.mesh_area[0] / mesh_mm2 - 1) < 0.01
+    assert built.face_edges[0] == {0, 1}
