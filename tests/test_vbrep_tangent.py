@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from v2c.primitives import Cylinder, Plane, Sphere
+from v2c.primitives import Cone, Cylinder, Plane, Sphere
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.lift import points_on_curve, tangent_curve
 from v2c.vbrep.model import EdgeType
@@ -35,6 +35,22 @@ def test_tangent_curve_of_exact_blends() -> None:
     assert np.allclose(c["center"], [0.0, 0.1, 0.6])
     on = points_on_curve(c, pts)
     assert np.abs(sph.signed_distance(on)).max() < 1e-12 and np.abs(shaft.signed_distance(on)).max() < 1e-12
+    # a flat face run tangentially into a conical corner: the cone (apex at the origin point, half angle 10
+    # degrees) touches the plane y = r(z) along its ruling in the plane x = 0
+    a = np.deg2rad(10.0)
+    apex = np.array([0.0, 0.0, 0.4])
+    cone = Cone(apex, np.array([0.0, 0.0, 1.0]), a)
+    n = np.array([0.0, -np.cos(a), np.sin(a)])  # the plane's normal, across the ruling (0, sin a, cos a)
+    flat = Plane(apex, n)
+    pts = apex + np.array([[0.0, np.sin(a), np.cos(a)]]) * np.array([[0.02], [0.08]]) + [0.0005, 0.0, 0.0]
+    c = tangent_curve(flat, cone, pts, VBRepConfig().parallel_deg)
+    assert c["kind"] == "line" and c["tangent"]
+    assert np.allclose(c["direction"], [0.0, np.sin(a), np.cos(a)])
+    on = points_on_curve(c, pts)
+    assert np.abs(flat.signed_distance(on)).max() < 1e-12 and np.abs(cone.signed_distance(on)).max() < 1e-12
+    # ... and a plane crossing the cone at 20 degrees to that ruling is not tangent: no line of contact
+    steep = Plane(apex, np.array([0.0, -np.cos(a + np.deg2rad(20.0)), np.sin(a + np.deg2rad(20.0))]))
+    assert tangent_curve(steep, cone, pts, VBRepConfig().parallel_deg)["kind"] == "intersection"
 
 
 def _scan(tmp: Path, name: str):

@@ -207,6 +207,9 @@ def tangent_curve(pa: Primitive, pb: Primitive, pts: np.ndarray, parallel_deg: f
 
     - plane and cylinder with its axis parallel to the plane (a fillet): the line under the axis, on the plane;
     - plane normal to the axis of a torus (a rounded edge of a disc): the torus' major circle, on the plane;
+    - plane and cone whose normal makes the cone's half angle's complement with its axis (a flat face run
+      tangentially into a conical corner): the ruling from the apex along the axis' projection on the plane,
+      halfway between the apex and the plane;
     - sphere on the axis of a cylinder (a dome): the circle about the axis at the sphere's centre, radius the
       mean of both radii; torus and cylinder on one axis (a shoulder fillet): the circle at the torus' centre;
     - anything else: ``{"kind": "intersection"}`` (the polyline samples the contact, `contact_points`).
@@ -235,6 +238,14 @@ def tangent_curve(pa: Primitive, pb: Primitive, pts: np.ndarray, parallel_deg: f
             d = a if len(pts) < 2 or a @ (pts[-1] - pts[0]) >= 0 else -a
             foot = foot + ((pts[0] - foot) @ d) * d
             out = {"kind": "line", "origin": foot, "direction": d.copy()}
+    elif ta == "plane" and tb == "cone" and len(pts):
+        n, a, apex = pa.axis_vector, pb.axis_vector, np.asarray(pb.origin, float)
+        if abs(abs(n @ a) - np.sin(pb.half_angle)) <= sin_par:
+            r = a - (a @ n) * n
+            if np.linalg.norm(r) > 1e-9:
+                r = r / np.linalg.norm(r)
+                d = r if len(pts) < 2 or r @ (pts[-1] - pts[0]) >= 0 else -r
+                out = {"kind": "line", "origin": apex - 0.5 * float(n @ (apex - pa.origin)) * n, "direction": d}
     elif ta == "plane" and tb == "torus":
         n, a, c = pa.axis_vector, pb.axis_vector, np.asarray(pb.origin, float)
         if np.linalg.norm(np.cross(n, a)) <= sin_par:
