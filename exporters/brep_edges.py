@@ -376,12 +376,16 @@ class EdgeBuilder:
                     continue
                 ea, eb = (self.vb.edges[eid] for eid, _ in lp)
                 ends = {self.vid(ea.v0), self.vid(ea.v1)}
-                if ends != {self.vid(eb.v0), self.vid(eb.v1)} or len(ends) != 2 or ends & set(self.lens_vertices):
+                if (
+                    ends != {self.vid(eb.v0), self.vid(eb.v1)}
+                    or len(ends) != 2
+                    or not ends.isdisjoint(self.lens_vertices)
+                ):
                     continue
                 exact = [eid for eid, _ in lp if eid in self.curves and eid in self.geoms]
                 if not exact:
                     continue
-                built, drawn = self._loop_uv_area(s, lp, True), self._loop_uv_area(s, lp, False)
+                built, drawn = self._loop_built_area_uv(s, lp), abs(self.loop_area_uv(s, lp))
                 if not (np.isfinite(built) and np.isfinite(drawn)) or drawn <= 0:
                     continue
                 if abs(built - drawn) <= self.cfg.area_tol_rel * drawn:
@@ -402,28 +406,34 @@ class EdgeBuilder:
             if e.id not in self.degenerate and {self.vid(e.v0), self.vid(e.v1)} & moved:
                 self._edge_geometry(e)
 
-    def _loop_uv_area(self, s: AnalyticSurface, loop: list[tuple[int, bool]], built: bool, n: int = 33) -> float:
-        """The (u, v) area a loop bounds on surface ``s``: along its edges' geometry (``built``: `EdgeGeom`, NaN
-        when an edge has none) or along their VB-Rep polylines."""
+    def _loop_built_area_uv(self, s: AnalyticSurface, loop: list[tuple[int, bool]], n: int = 33) -> float:
+        """The (u, v) area a loop bounds on surface ``s`` along its edges' built geometry (`EdgeGeom`, each
+        sampled ``n`` times end to end); NaN when an edge has none."""
         pts = []
         for eid, rev in loop:
-            if built:
-                g = self.geoms.get(eid)
-                if g is None:
-                    return float("nan")
-                ts = np.linspace(g.t0, g.t1, n)
-                if g.curve is not None:
-                    xyz = curve_points(g.curve, ts)
-                else:
-                    uv2 = np.array([[g.pcurve.Value(float(t)).X(), g.pcurve.Value(float(t)).Y()] for t in ts])
-                    xyz = self.surfaces[g.face].evaluate(uv2)
+            g = self.geoms.get(eid)
+            if g is None:
+                return float("nan")
+            ts = np.linspace(g.t0, g.t1, n)
+            if g.curve is not None:
+                xyz = curve_points(g.curve, ts)
             else:
-                xyz = self.fmap.points(np.asarray(self.vb.edges[eid].polyline, float).reshape(-1, 3))
+                uv2 = np.array([[g.pcurve.Value(float(t)).X(), g.pcurve.Value(float(t)).Y()] for t in ts])
+                xyz = self.surfaces[g.face].evaluate(uv2)
             pts.append(xyz[::-1] if rev else xyz)
         uv = s.uv(np.concatenate(pts))
         if not np.all(np.isfinite(uv)):
             return float("nan")
         return abs(signed_area(s.unwrap(uv)))
+
+    def loop_area_uv(self, s: AnalyticSurface, loop: list[tuple[int, bool]]) -> float:
+        """Signed (u, v) area of a loop from its edges' polylines (positive: counter-clockwise)."""
+        pts = []
+        for eid, rev in loop:
+            poly = np.asarray(self.vb.edges[eid].polyline, float)
+            pts.append(poly[::-1] if rev else poly)
+        uv = s.uv(self.fmap.points(np.concatenate(pts)))
+        return signed_area(s.unwrap(uv))
 
     def build_edges(self) -> dict[int, TopoDS_Edge]:
         """Step 4b: VEdge id -> TopoDS_Edge oriented from v0 to v1, on shared TopoDS_Vertex objects whose

@@ -21,7 +21,7 @@ from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from exporters.occ_curves import curve_points
 from exporters.occ_surfaces import AnalyticSurface, distance_to_surface
-from exporters.polygons import polygon_crossings, signed_area
+from exporters.polygons import polygon_crossings
 
 if TYPE_CHECKING:
     from exporters.brep_edges import EdgeBuilder
@@ -57,6 +57,7 @@ class FaceBuilder:
         self.vpos = eb.vpos
         self.edges = eb.edges
         self.vid = eb.vid
+        self.loop_area_uv = eb.loop_area_uv
         self.degenerate = eb.degenerate
         self.warnings = eb.warnings
         self.bb = eb.bb
@@ -185,15 +186,6 @@ class FaceBuilder:
             self.bb.UpdateVertex(vx, tol)
         return BRepCheck_Analyzer(face).IsValid()
 
-    def _loop_area_uv(self, s: AnalyticSurface, loop: Loop) -> float:
-        """Signed (u, v) area of a loop from its edges' polylines (positive: counter-clockwise)."""
-        pts = []
-        for eid, rev in loop:
-            poly = np.asarray(self.vb.edges[eid].polyline, float)
-            pts.append(poly[::-1] if rev else poly)
-        uv = s.uv(self.fmap.points(np.concatenate(pts)))
-        return signed_area(s.unwrap(uv))
-
     def _fix_face(self, face: TopoDS_Face, ctx: ShapeBuild_ReShape | None = None) -> TopoDS_Face:
         fix = ShapeFix_Face(face)
         # Only the fixes that complete a boundary (pcurves, seams, periodic shifts, same-parameter, vertex
@@ -260,7 +252,7 @@ class FaceBuilder:
         self.bb.MakeFace(face, s.geom, self.cfg.fix_precision)
         for k, (w, lp) in enumerate(zip(wires, loops)):
             # OCCT wants the outer wire counter-clockwise in (u, v), holes clockwise.
-            area = self._loop_area_uv(s, lp)
+            area = self.loop_area_uv(s, lp)
             self.bb.Add(face, w.Reversed() if (area < 0) == (k == 0) else w)
         local = ShapeBuild_ReShape()
         try:
@@ -356,7 +348,7 @@ class FaceBuilder:
         s = self.surfaces[f.id]
 
         def by_area(loops: list[Loop]) -> list[Loop]:
-            return sorted(loops, key=lambda lp: -abs(self._loop_area_uv(s, lp)))
+            return sorted(loops, key=lambda lp: -abs(self.loop_area_uv(s, lp)))
 
         attempts: list[tuple[str, list[Loop]]] = [("", given)]
         if not all(self._loop_closed(lp) for lp in given):

@@ -158,7 +158,7 @@ def test_a_loop_of_two_exact_lines_is_written_along_its_polylines() -> None:
     assert eb.fit_face == {0: 0, 1: 0}
     built = build_brep(vb, CAMERA)
     assert 0 not in built.fallback_faces and 0 in built.built_area
-    mesh_mm2 = 0.5 * 0.02 * 0.02 * np.sin(np.deg2rad(10.0)) * 1e6 / 2 * 2  # the quad vA, a1, vB, a2
+    mesh_mm2 = 0.5 * 20.0 * 20.0 * np.sin(np.deg2rad(10.0))  # the triangle vA, a1, a2 (vB halfway from a1 to a2)
     assert abs(built.built_area[0] / built.mesh_area[0] - 1) <= 0.02
     assert abs(built.mesh_area[0] / mesh_mm2 - 1) < 0.01
     assert built.face_edges[0] == {0, 1}
