@@ -470,25 +470,6 @@ def _planes_along_crossings(
     return out
 
 
-def _robust_plane(x: np.ndarray, n0: np.ndarray, origin: np.ndarray, loss: str, f_scale: float) -> Plane:
-    """The plane through points ``x`` (N, 3) under the robust ``loss`` (knee ``f_scale``, metres), started from
-    normal ``n0`` through ``origin``: its normal tilted in the tangent plane of ``n0``, its offset free."""
-    from scipy.optimize import least_squares
-
-    from v2c.primitives.directions import tangent_basis
-
-    t = np.stack(tangent_basis(n0))
-    c = x.mean(axis=0)
-    y = x - c
-
-    def residuals(q: np.ndarray) -> np.ndarray:
-        return y @ unit(n0 + q[:2] @ t) - q[2]
-
-    q = least_squares(residuals, np.array([0.0, 0.0, float((origin - c) @ n0)]), loss=loss, f_scale=f_scale).x
-    n = unit(n0 + q[:2] @ t)
-    return Plane(c + q[2] * n, n)
-
-
 def _planes_toward_their_depth(
     prims: list[Primitive],
     order: list[int],
@@ -498,9 +479,9 @@ def _planes_toward_their_depth(
     config: FitConfig,
 ) -> list[Primitive]:
     """``prims`` (in ``order``'s instances) with each aligned plane of at least frame_tilt_min_points points whose
-    robust free plane (every point of its instance, the joint fit's loss) leaves it by at least frame_tilt_min_lift
-    over those points (5th to 95th percentile of the height between the two) turned toward that free plane by at
-    most frame_tilt_max_deg, through the median of its points.
+    robust free plane (`refine_primitive` on every point of its instance: the joint fit's loss) leaves it by at
+    least frame_tilt_min_lift over those points (5th to 95th percentile of the height between the two) turned
+    toward that free plane by at most frame_tilt_max_deg, through the median of its points.
 
     The shared frame holds a part's faces square, as a CAD model has them; a real sensor's depth of a real box
     does not: the YCB-Video cracker box's sides lie 83.5-87.4 degrees apart in its depth, the top 5.3 degrees off
@@ -512,7 +493,6 @@ def _planes_toward_their_depth(
     max_turn = float(np.deg2rad(config.frame_tilt_max_deg))
     if max_turn <= 0.0:
         return prims
-    f_scale = config.loss_scale * scale
     out = list(prims)
     for k, i in enumerate(order):  # loop over the fitted instances
         p = prims[k]
@@ -521,7 +501,7 @@ def _planes_toward_their_depth(
         if not isinstance(p, Plane) or k_axis is None or k_axis < 0 or len(x) < max(config.frame_tilt_min_points, 3):
             continue
         n0 = p.normal_vec
-        free = _robust_plane(x, n0, p.origin, config.loss, f_scale)
+        free = refine_primitive(p, x, scale, config)
         lo, hi = np.percentile(free.signed_distance(x) - p.signed_distance(x), [5.0, 95.0])
         n_free = free.normal_vec
         axis = np.cross(n0, n_free)
