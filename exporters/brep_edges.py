@@ -30,6 +30,7 @@ from exporters.occ_curves import (
     is_elementary,
     iso_curve,
     nearest_branch,
+    pcurve_points,
     project_on_curve,
 )
 from exporters.occ_surfaces import AnalyticSurface, distance_to_surface, make_surface
@@ -418,7 +419,7 @@ class EdgeBuilder:
             if g.curve is not None:
                 xyz = curve_points(g.curve, ts)
             else:
-                uv2 = np.array([[g.pcurve.Value(float(t)).X(), g.pcurve.Value(float(t)).Y()] for t in ts])
+                uv2 = pcurve_points(g.pcurve, ts)
                 xyz = self.surfaces[g.face].evaluate(uv2)
             pts.append(xyz[::-1] if rev else xyz)
         uv = s.uv(np.concatenate(pts))

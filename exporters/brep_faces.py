@@ -19,7 +19,7 @@ from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Vertex, TopoDS_Wire
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
-from exporters.occ_curves import curve_points
+from exporters.occ_curves import curve_points, pcurve_points
 from exporters.occ_surfaces import AnalyticSurface, distance_to_surface
 from exporters.polygons import polygon_crossings
 
@@ -91,10 +91,10 @@ class FaceBuilder:
                 return None
             ts = np.linspace(g.t0, g.t1, n)
             if g.curve is None and self.surfaces[g.face] is s:
-                uv = np.array([[g.pcurve.Value(t).X(), g.pcurve.Value(t).Y()] for t in ts])
+                uv = pcurve_points(g.pcurve, ts)
             else:
                 if g.curve is None:  # a pcurve on the edge's other face: through 3D
-                    uv2 = np.array([[g.pcurve.Value(t).X(), g.pcurve.Value(t).Y()] for t in ts])
+                    uv2 = pcurve_points(g.pcurve, ts)
                     xyz = self.surfaces[g.face].evaluate(uv2)
                 else:
                     xyz = curve_points(g.curve, ts)

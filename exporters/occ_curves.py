@@ -54,6 +54,15 @@ def curve_points(curve: Geom_Curve, params: np.ndarray) -> np.ndarray:
     return out
 
 
+def pcurve_points(pcurve: Geom2d_Curve, params: np.ndarray) -> np.ndarray:
+    """(N,) parameters of a curve in a surface's (u, v) -> (N, 2) (u, v) values."""
+    out = np.empty((len(params), 2))
+    for i, t in enumerate(params):
+        p = pcurve.Value(float(t))
+        out[i] = p.X(), p.Y()
+    return out
+
+
 def nearest_branch(curves: list[Geom_Curve], samples: np.ndarray) -> tuple[Geom_Curve | None, float]:
     """The branch closest to the sample points (N, 3) mm and its largest sample distance (mm)."""
     best, best_d = None, np.inf
