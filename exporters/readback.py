@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 from OCP.BRepAdaptor import BRepAdaptor_Curve
-from OCP.TopoDS import TopoDS
+from OCP.ShapeAnalysis import ShapeAnalysis_ShapeTolerance
+from OCP.TopAbs import TopAbs_SHAPE
+from OCP.TopoDS import TopoDS, TopoDS_Shape
 
 from exporters.brep import bounding_box, drawn_area, face_area, face_triangulation
 from exporters.brep_config import BrepConfig
@@ -66,8 +68,11 @@ class FaceArea:
 @dataclass
 class Readback:
     """The comparison. faces: per VB-Rep face; n_edges / untyped_edges: edges of the file and those whose name
-    carries no edge type; box_written / box_reconstructed: (lo, hi) mm in the file's frame; drawn: the file as
-    a VB-Rep in the camera frame (metres) for figures."""
+    carries no edge type; box_written / box_reconstructed: (lo, hi) mm in the file's frame; max_tolerance: the
+    largest tolerance of any vertex or edge of the file (mm; OCCT's precision, 1e-7 mm, where every edge meets its
+    faces and vertices exactly), a gap the file's topology bridges: two faces' edges meeting at a vertex this far
+    apart; part_size: the reconstruction's size in the file (mm); drawn: the file as a VB-Rep
+    in the camera frame (metres) for figures."""
 
     path: Path
     faces: list[FaceArea] = field(default_factory=list)
@@ -75,8 +80,15 @@ class Readback:
     untyped_edges: int = 0
     box_written: tuple[np.ndarray, np.ndarray] | None = None
     box_reconstructed: tuple[np.ndarray, np.ndarray] | None = None
+    max_tolerance: float = 0.0
+    part_size: float = float("nan")
     drawn: VBRep | None = None
     config: ReadbackConfig = field(default_factory=ReadbackConfig)
+
+    @property
+    def max_tolerance_rel(self) -> float:
+        """``max_tolerance`` in part sizes (NaN without a part size)."""
+        return self.max_tolerance / self.part_size if self.part_size > 0 else float("nan")
 
     def off_faces(self) -> list[FaceArea]:
         """Faces whose written area is off their reconstructed area by more than ``area_tol_rel``, or that the
@@ -132,7 +144,16 @@ class Readback:
             + f"; {self.untyped_edges} of {self.n_edges} edges untyped; bounding box "
             + ("matches" if self.box_ok else "differs from")
             + " the reconstruction's"
+            + f"; largest tolerance {self.max_tolerance:.3g} mm ({100 * self.max_tolerance_rel:.2g} % of the part)"
         )
+
+
+def largest_tolerance(shape: TopoDS_Shape) -> float:
+    """The largest tolerance of any vertex, edge or face of ``shape`` (its units): how far apart the geometry its
+    topology joins may lie (an edge's curve end off its vertex, an edge off a face's surface)."""
+    if shape is None or shape.IsNull():
+        return 0.0
+    return float(ShapeAnalysis_ShapeTolerance().Tolerance(shape, 1, TopAbs_SHAPE))
 
 
 def _inverse_points(fmap: FrameMap, p: np.ndarray) -> np.ndarray:
@@ -160,6 +181,8 @@ def check_written(
         rs = read_xcaf_step(path)
     out = Readback(path=path, config=cfg)
     size = max(fmap.length(vbrep.scale), 1.0)
+    out.part_size = size
+    out.max_tolerance = largest_tolerance(rs.shape)
     by_id = faces_by_id(rs.faces)
     written = {fid: sum(face_area(f) for f in fs) for fid, fs in by_id.items()}
     deflection = cfg.deflection_rel * size

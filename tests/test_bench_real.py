@@ -60,6 +60,7 @@ def test_format_table_rows_and_summary() -> None:
         "coverage_3mm_faces": 0.95,
         "seconds": 4.2,
         "cpu_seconds": 3.9,
+        "max_tolerance_mm": 0.0123,
     }
     report = {
         "frames": [row],
@@ -69,8 +70,8 @@ def test_format_table_rows_and_summary() -> None:
     }
     text = R.format_table(report)
     assert (
-        "| f1 | can | learned | 4 | 2.0 | radius 34.0 mm (+3.0 %) | 33.0 mm | 1.50 | 91.0 / 95.0 % | 4.2 (3.9) |"
-        in text
+        "| f1 | can | learned | 4 | 2.0 | radius 34.0 mm (+3.0 %) | 33.0 mm | 1.50 | 91.0 / 95.0 % | 0.0123 | "
+        "4.2 (3.9) |" in text
     )
     assert "can radius error 3.0 % (1 of 1 cans with a cylindrical face)" in text and "within 3 mm 91.0 %" in text
     # a can whose reconstruction has no cylindrical face is said so, and counted in the summary
@@ -115,6 +116,22 @@ def test_bench_real_one_frame(shared_data: Path, tmp_path: Path) -> None:
     assert 0.0 <= row["coverage_3mm"] <= 1.0 and 0.0 <= row["coverage_3mm_faces"] <= 1.0
     assert 0.0 <= row["coverage_3mm_object"] <= 1.0  # the frame has a mask polygon
     assert row["object_px"] > 1000 and row["depth_rms_mm"] > 0 and row["seconds"] > 0
+    # the widest gap the file's topology joins, measured on the STEP as read back
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from exporters import read_typed
+
+    shape = read_typed(row["step"]).shape
+    tols = []
+    for kind, cast in ((TopAbs_VERTEX, TopoDS.Vertex_s), (TopAbs_EDGE, TopoDS.Edge_s)):
+        ex = TopExp_Explorer(shape, kind)
+        while ex.More():
+            tols.append(BRep_Tool.Tolerance_s(cast(ex.Current())))
+            ex.Next()
+    assert row["max_tolerance_mm"] >= max(tols) >= 1e-7
     assert "lm_occluded_example | can | learned" in res.output
     assert data["summary"]["learned"]["frames"] == 1
 

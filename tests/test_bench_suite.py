@@ -139,11 +139,17 @@ def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
         ext_w = (back.box_written[1] - back.box_written[0]).max()
         ext_r = (back.box_reconstructed[1] - back.box_reconstructed[0]).max()
         assert row["step_box_ratio"] == pytest.approx(ext_w / ext_r)
+        # the widest gap the file's topology bridges, in part sizes
+        assert row["step_max_tol_rel"] == pytest.approx(back.max_tolerance / back.part_size)
     assert summ["corpus test"]["area_ok_faces"] == washer["step_area_ok_faces"] + gear["step_area_ok_faces"]
     assert summ["corpus test"]["box_ratio_max"] == max(washer["step_box_ratio"], gear["step_box_ratio"])
     assert summ["corpus test"]["fallback_faces"] == washer["step_fallback_faces"] + gear["step_fallback_faces"]
     assert summ["corpus test"]["step_faces"] == washer["step_faces"] + gear["step_faces"]
     assert summ["corpus test 30-100"]["fallback_faces"] == gear["step_fallback_faces"]
+    tols = [washer["step_max_tol_rel"], gear["step_max_tol_rel"]]
+    assert summ["corpus test"]["tol_rel_max"] == max(tols)
+    assert summ["corpus test"]["tol_rel_median"] == pytest.approx(np.median(tols))
+    assert summ["corpus test"]["tol_over"] == sum(t > S.TOLERANCE_GAP_REL for t in tols)
     assert all(summ[g]["failed"] == 0 and summ[g]["failures"] == [] for g in res["groups"])
     table = S.format_suite_tables(res)
     assert "| metric | corpus test | corpus test <30 | corpus test 30-100 | corpus test >100 |" in table

@@ -238,6 +238,32 @@ def test_broken_loop_falls_back_and_keeps_every_edge(tmp_path: Path) -> None:
     assert rb.untyped_edges == 0 and rb.box_inside(0.01)
 
 
+def test_readback_reports_the_largest_tolerance(tmp_path: Path) -> None:
+    """The read-back reports the widest gap the file's topology bridges: OCCT's precision (1e-7 mm) for a box
+    corner whose three planes meet exactly, and a vertex tolerance set on a solid is found as set."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopAbs import TopAbs_VERTEX
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from exporters.readback import check_written, largest_tolerance
+
+    vb = box_corner()
+    path = tmp_path / "corner.step"
+    report = step.write(vb, path)
+    rb = check_written(vb, path, report.frame_map)
+    assert rb.max_tolerance == pytest.approx(1e-7, abs=1e-9)
+    assert rb.part_size > 0 and rb.max_tolerance_rel < 1e-8
+    assert "largest tolerance" in rb.summary()
+
+    solid = BRepPrimAPI_MakeBox(10.0, 20.0, 30.0).Shape()
+    assert largest_tolerance(solid) == pytest.approx(1e-7)
+    vertex = TopoDS.Vertex_s(TopExp_Explorer(solid, TopAbs_VERTEX).Current())
+    BRep_Builder().UpdateVertex(vertex, 0.37)
+    assert largest_tolerance(solid) == pytest.approx(0.37)
+
+
 def test_write_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A failure while writing leaves an existing file untouched and no temporary file."""
     path = tmp_path / "out.step"

@@ -32,6 +32,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import statistics
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -58,6 +59,10 @@ UNSEEN_FAMILIES_SOURCE = ("v2c.synth.families", "LEAVE_OUT_FAMILIES")
 SUITE_GENERATOR = "v2c.bench.suite/1"  # bump when the way suite scans are drawn changes (invalidates the cache)
 
 CORPUS = "corpus"
+#: Part sizes: a STEP file whose largest vertex or edge tolerance exceeds this bridges a visible gap (faces that
+#: should meet lie this far apart); counted per group. Issue 16's bound for a tangent edge's place (1 % of the part
+#: size), not tuned.
+TOLERANCE_GAP_REL = 0.01
 FAMILY = "family"
 
 
@@ -414,6 +419,8 @@ def summarise_group(rows: list[dict[str, Any]], process_start_s: float = float("
     ``area_ok_faces`` / ``area_faces`` (faces read back within 2 % of their mesh area and meshed by OCCT / faces
     read back), ``unmeshed_faces`` (faces in the file that OCCT's mesher draws short: holes in a viewer),
     ``box_ratio_min`` / ``box_ratio_max`` (the STEP's largest bounding-box extent over the reconstruction's),
+    ``tol_rel_median`` / ``tol_rel_max`` (the file's largest vertex or edge tolerance in part sizes, median and
+    largest over scans) and ``tol_over`` (scans whose file bridges a gap over ``TOLERANCE_GAP_REL``),
     ``chamfer_max`` (the worst scan), ``failures`` (every failed scan: label and error)."""
     out = summarise(rows, process_start_s)
     ok = [r for r in rows if r.get("ok")]
@@ -429,6 +436,10 @@ def summarise_group(rows: list[dict[str, Any]], process_start_s: float = float("
     ratios = [r["step_box_ratio"] for r in read if math.isfinite(r.get("step_box_ratio", math.nan))]
     out["box_ratio_max"] = max(ratios) if ratios else float("nan")
     out["box_ratio_min"] = min(ratios) if ratios else float("nan")
+    tols = [r["step_max_tol_rel"] for r in read if math.isfinite(r.get("step_max_tol_rel", math.nan))]
+    out["tol_rel_median"] = float(statistics.median(tols)) if tols else float("nan")
+    out["tol_rel_max"] = max(tols) if tols else float("nan")
+    out["tol_over"] = sum(t > TOLERANCE_GAP_REL for t in tols)
     ch = [r["chamfer"] for r in ok if r.get("chamfer") is not None and math.isfinite(r["chamfer"])]
     out["chamfer_max"] = max(ch) if ch else float("nan")
     out["failures"] = [{"scan": r["label"], "error": r["error"]} for r in rows if not r.get("ok")]
@@ -497,10 +508,24 @@ def format_suite_tables(result: dict[str, Any]) -> str:
             + " | ".join(f"{_f2(summ[g]['box_ratio_min'])} - {_f2(summ[g]['box_ratio_max'])}" for g in groups)
             + " |"
         )
+        out.append(
+            "| STEP's largest vertex / edge tolerance, part sizes (median ; max over scans ; scans over "
+            f"{100 * TOLERANCE_GAP_REL:g} %) | "
+            + " | ".join(
+                f"{_f4(summ[g].get('tol_rel_median'))} ; {_f4(summ[g].get('tol_rel_max'))} ; "
+                f"{summ[g].get('tol_over', '')}"
+                for g in groups
+            )
+            + " |"
+        )
         out.append("| failures (scans that raised) | " + " | ".join(str(summ[g]["failed"]) for g in groups) + " |")
         out.append("| scans (parts) | " + " | ".join(f"{summ[g]['scans']} ({summ[g]['parts']})" for g in groups) + " |")
         out.append("")
     return "\n".join(out).rstrip()
+
+
+def _f4(v: Any) -> str:
+    return "" if v is None or not math.isfinite(v) else f"{v:.4f}"
 
 
 def _f2(v: Any) -> str:

@@ -162,7 +162,9 @@ def _readback_row(vbrep: VBRep, path: Path, report: Any) -> dict[str, Any]:
     faces compared), ``step_area_ok_faces`` (those whose written area is within the read-back's ``area_tol_rel``,
     2 %, of their mesh area, and that OCCT meshes), ``step_unmeshed_faces`` (faces OCCT's mesher draws short),
     ``step_area_share`` (written / reconstructed area over all faces) and
-    ``step_box_ratio`` (the file's largest bounding-box extent / the reconstruction's; NaN without either)."""
+    ``step_box_ratio`` (the file's largest bounding-box extent / the reconstruction's; NaN without either),
+    ``step_max_tol_rel`` (the file's largest vertex or edge tolerance in part sizes: the widest gap its
+    topology bridges)."""
     from exporters import check_written
 
     rb = check_written(vbrep, path, report.frame_map)
@@ -177,6 +179,7 @@ def _readback_row(vbrep: VBRep, path: Path, report: Any) -> dict[str, Any]:
         "step_unmeshed_faces": len(rb.unmeshed_faces()),
         "step_area_share": float(rb.area_share),
         "step_box_ratio": ratio,
+        "step_max_tol_rel": float(rb.max_tolerance_rel),
     }
 
 
