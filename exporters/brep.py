@@ -69,7 +69,7 @@ from exporters.polygons import connected_groups
 from v2c.labels import PrimitiveType
 
 if TYPE_CHECKING:
-    from v2c.vbrep.model import VBRep
+    from v2c.vbrep.model import VBRep, VFace
 
 
 @dataclass
@@ -254,6 +254,19 @@ def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None, defl
     return within(lo - deflection, hi + deflection)
 
 
+def _edge_off_face(eb: EdgeBuilder, f: VFace) -> tuple[int, float] | None:
+    """(VEdge id, mm) of an edge of ``f``'s loops fitted on its other face and lying farther than ``branch_tol``
+    off ``f``'s surface (`EdgeBuilder.off_surface`: a gap between the two faces), else None. Such a face is not
+    bounded by its loops: OCCT would take the edge onto it by raising its tolerance to that gap (a sugar box's side
+    bounded across 8.5 mm), so the file would join what the reconstruction leaves apart."""
+    for lp in f.loops:
+        for eid, _ in lp:
+            other, dist = eb.off_surface.get(eid, (None, 0.0))
+            if other == f.id and dist > eb.branch_tol:
+                return eid, dist
+    return None
+
+
 def _add_shell(bb: BRep_Builder, compound: TopoDS_Compound, faces: list[TopoDS_Face]) -> None:
     shell = TopoDS_Shell()
     bb.MakeShell(shell)
@@ -308,8 +321,11 @@ def build_brep(
         target = reconstructed_area(eb.surfaces[f.id], mesh_pts, f.mesh_triangles, cfg.outline_max_stretch)
         out.mesh_area[f.id] = target
         centre = mesh_centroid(mesh_pts, f.mesh_triangles)
-        made = fb.build_face(f, eb.edges) if f.id not in force_outline else None
+        off = _edge_off_face(eb, f)
+        made = fb.build_face(f, eb.edges) if f.id not in force_outline and off is None else None
         why = "boundary wire invalid" if f.id not in force_outline else "the STEP round trip changed its face"
+        if off is not None and f.id not in force_outline:
+            why = f"its edge {off[0]} lies {off[1]:.3g} mm off its surface (more than {eb.branch_tol:.3g} mm)"
         if made is not None:
             area = face_area(made[0])
             shift = 0.0 if centre is None else float(np.linalg.norm(face_centroid(made[0]) - centre))

@@ -440,13 +440,17 @@ class EdgeBuilder:
         """Step 4b: VEdge id -> TopoDS_Edge oriented from v0 to v1, on shared TopoDS_Vertex objects whose
         tolerance covers the gap to every edge end (mm)."""
         gap: dict[int, float] = defaultdict(float)
+        apart: dict[tuple[int, int], float] = {}  # (VEdge id, 0 | 1): an end beyond branch_tol of its vertex
         for e in self.vb.edges:
             g = self.geoms.get(e.id)
             if g is None:
                 continue
-            a, b = self.vid(e.v0), self.vid(e.v1)
-            gap[a] = max(gap[a], float(np.linalg.norm(g.end0 - self.vpos[a])))
-            gap[b] = max(gap[b], float(np.linalg.norm(g.end1 - self.vpos[b])))
+            for end, v, x in ((0, self.vid(e.v0), g.end0), (1, self.vid(e.v1), g.end1)):
+                d = float(np.linalg.norm(x - self.vpos[v]))
+                if d > self.branch_tol:
+                    apart[(e.id, end)] = d
+                else:
+                    gap[v] = max(gap[v], d)
         verts: dict[int, TopoDS_Vertex] = {}
         for vid, x in self.vpos.items():
             if vid in self.vertex_alias:
@@ -455,14 +459,24 @@ class EdgeBuilder:
             vx = TopoDS_Vertex()
             self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), tol)
             verts[vid] = vx
-            if gap[vid] > self.branch_tol:
-                self.warnings.append(f"vertex {vid}: edges end up to {gap[vid]:.2f} mm away from it")
+        for (eid, end), d in sorted(apart.items()):
+            e = self.vb.edges[eid]
+            self.warnings.append(
+                f"edge {eid}: ends {d:.2f} mm from vertex {e.v1 if end else e.v0} (more than "
+                f"{self.branch_tol:.2f} mm): it does not join it, so its faces' loops do not close there"
+            )
         edges: dict[int, TopoDS_Edge] = {}
         for e in self.vb.edges:
             g = self.geoms.get(e.id)
             if g is None:
                 continue
             va, vb = verts[self.vid(e.v0)], verts[self.vid(e.v1)]
+            # an end too far from its vertex gets a vertex of its own where it ends: a file joins faces only
+            # across gaps its tolerances state within branch_tol (a 27 mm vertex tolerance joined nothing real)
+            if (e.id, 0) in apart:
+                va = self._own_vertex(g.end0)
+            if (e.id, 1) in apart:
+                vb = self._own_vertex(g.end1)
             forward = g.t1 > g.t0
             lo, hi = (g.t0, g.t1) if forward else (g.t1, g.t0)
             v_lo, v_hi = (va, vb) if forward else (vb, va)
@@ -490,6 +504,12 @@ class EdgeBuilder:
             # Stored oriented from v0 to v1, so a loop entry (id, reversed) is this edge, reversed or not.
             edges[e.id] = edge if forward else TopoDS.Edge_s(edge.Reversed())
         return edges
+
+    def _own_vertex(self, x: np.ndarray) -> TopoDS_Vertex:
+        """A vertex at ``x`` (mm) of the minimum tolerance, for an edge end that joins no VB-Rep vertex."""
+        vx = TopoDS_Vertex()
+        self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), self.cfg.min_tolerance)
+        return vx
 
     def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex, n: int = 33) -> None:
         """An intersection edge fitted on one face (no intersection curve): measure how far it lies off the

@@ -162,3 +162,69 @@ def test_a_loop_of_two_exact_lines_is_written_along_its_polylines() -> None:
     assert abs(built.built_area[0] / built.mesh_area[0] - 1) <= 0.02
     assert abs(built.mesh_area[0] / mesh_mm2 - 1) < 0.01
     assert built.face_edges[0] == {0, 1}
+
+
+def _vertex_tolerances(eb: EdgeBuilder, eid: int) -> list[tuple[object, float]]:
+    """(vertex, tolerance) of the built edge ``eid``'s ends, from its VEdge's v0 to its v1."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopExp import TopExp
+
+    e = eb.edges[eid]
+    return [(v, BRep_Tool.Tolerance_s(v)) for v in (TopExp.FirstVertex_s(e, True), TopExp.LastVertex_s(e, True))]
+
+
+def test_an_edge_end_far_from_its_vertex_does_not_join_it() -> None:
+    """A vertex joins the edge ends within branch_tol of it, its tolerance covering that gap; an end farther off
+    gets a vertex of its own (the file states no gap wider than branch_tol as joined, a warning names the edge).
+    Box corner, its corner vertex 0 (where edges 0, 1 and 2 end) moved after the edges' geometry is fixed."""
+    vb = box_corner()
+    eb = EdgeBuilder(vb, CAMERA, BrepConfig()).run()
+    assert eb.branch_tol == 3.0  # max(2 mm, 3 % of the 100 mm part)
+    # exact corner: the three intersection edges share one vertex of the minimum tolerance
+    ends = [_vertex_tolerances(eb, e)[0] for e in (0, 1, 2)]
+    assert all(tol < 1e-3 for _, tol in ends)
+    shared = {e: _vertex_tolerances(eb, e)[0][0] for e in (0, 1, 2)}
+    assert shared[0].IsSame(shared[1]) and shared[0].IsSame(shared[2])
+
+    corner = eb.vpos[0].copy()
+    eb.vpos[0] = corner + np.array([1.0, 0.0, 0.0])  # 1 mm: within branch_tol, joined, its tolerance covers it
+    eb.warnings.clear()
+    eb.edges = eb.build_edges()
+    (v0, tol0), *_ = _vertex_tolerances(eb, 0)
+    assert 1.0 <= tol0 <= 1.1 and v0.IsSame(_vertex_tolerances(eb, 1)[0][0])
+    assert not any("does not join" in w for w in eb.warnings)
+
+    eb.vpos[0] = corner + np.array([10.0, 0.0, 0.0])  # 10 mm: beyond branch_tol, each edge ends on its own
+    eb.warnings.clear()
+    eb.edges = eb.build_edges()
+    starts = [_vertex_tolerances(eb, e)[0] for e in (0, 1, 2)]
+    assert all(tol <= eb.branch_tol for _, tol in starts)
+    assert not starts[0][0].IsSame(starts[1][0]) and not starts[1][0].IsSame(starts[2][0])
+    for e in (0, 1, 2):
+        assert any(w.startswith(f"edge {e}: ends 10.0") and "does not join it" in w for w in eb.warnings), e
+    # the far ends of those edges (vertices A, B, C) keep their shared vertices
+    assert _vertex_tolerances(eb, 0)[1][0].IsSame(_vertex_tolerances(eb, 3)[0][0])
+
+
+def test_a_face_an_edge_lies_off_by_more_than_branch_tol_is_not_bounded_by_it(tmp_path: Path) -> None:
+    """An intersection edge fitted on one face that lies farther than branch_tol off the other face's surface is a
+    gap between them: the other face is bounded by its mesh outline (a warning names the edge and the gap), not
+    by that edge with its tolerance raised to the gap. Within branch_tol the edge still bounds both faces. Box
+    corner (a 100 mm part: branch_tol 3 mm) with face 2's plane moved along its normal."""
+    from exporters.readback import check_written
+
+    for shift_mm, refused in ((1.0, False), (5.0, True)):
+        vb = box_corner()
+        params = vb.faces[2].primitive["params"]
+        params["origin"] = (np.asarray(params["origin"]) + shift_mm / 1000 * np.asarray(params["normal"])).tolist()
+        path = tmp_path / f"shift{shift_mm:g}.step"
+        report = step.write(vb, path, frame="camera")
+        mine = [w for w in report.warnings if w.startswith("face 2: its edge")]
+        if refused:
+            assert 2 in report.fallback_faces
+            assert len(mine) == 1 and "off its surface (more than 3 mm)" in mine[0], report.warnings
+            assert mine[0].startswith("face 2: its edge 1 lies 5.01 mm") or mine[0].startswith("face 2: its edge 2")
+        else:
+            assert mine == [] and 2 not in report.fallback_faces
+        back = check_written(vb, path, report.frame_map)
+        assert back.max_tolerance <= 1.05 * 3.0 + 1e-3
