@@ -134,6 +134,9 @@ def test_bench_real_one_frame(shared_data: Path, tmp_path: Path) -> None:
     assert row["max_tolerance_mm"] >= max(tols) >= 1e-7
     assert "lm_occluded_example | can | learned" in res.output
     assert data["summary"]["learned"]["frames"] == 1
+    from v2c.segment.learned import network_precision
+
+    assert data["network_precision"] == network_precision() in ("bf16", "fp32")  # it changes the figures
 
 
 def test_polygon_mask_rasterises_the_outline() -> None:

@@ -105,6 +105,7 @@ def test_unseen_suite_bands_and_counts(corpus: Path, tmp_path: Path) -> None:
     res = S.run_suite(cfg, progress=False)
     assert res["groups"] == ["corpus test", "corpus test <30", "corpus test 30-100", "corpus test >100"]
     summ = res["summary"]["oracle/full"]
+    assert res["config"]["bench"]["network_precision"] is None  # no network ran
     washer, gear = _row(res, WASHER), _row(res, GEAR)
     assert (washer["band"], washer["n_faces"], gear["band"], gear["n_faces"]) == ("<30", 4, "30-100", 51)
     assert washer["ok"] and gear["ok"], (washer.get("error"), gear.get("error"))

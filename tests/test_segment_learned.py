@@ -61,6 +61,45 @@ def test_shipped_weights_reach_stated_miou(fresh_scans: list[Path]) -> None:
     assert s["type_acc"] >= TYPE_ACC_MIN, s
 
 
+def test_network_precision_follows_the_config_then_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``LearnedConfig.bf16`` decides when set; else $V2C_PRECISION: auto follows the CPU, fp32 / bf16 are taken as
+    asked (case and spaces aside); another value, or bf16 on a CPU without it, is a clear error."""
+    import v2c.segment.learned as L
+
+    monkeypatch.setattr(L, "bf16_supported", lambda: True)
+    monkeypatch.delenv(L.PRECISION_ENV, raising=False)
+    assert L.network_precision() == "bf16" and L.network_precision(LearnedConfig(bf16=False)) == "fp32"
+    monkeypatch.setenv(L.PRECISION_ENV, " FP32 ")
+    assert L.network_precision() == "fp32" and L.network_precision(LearnedConfig(bf16=True)) == "bf16"
+    monkeypatch.setenv(L.PRECISION_ENV, "auto")
+    assert L.network_precision() == "bf16"
+    monkeypatch.setattr(L, "bf16_supported", lambda: False)
+    assert L.network_precision() == "fp32"
+    monkeypatch.setenv(L.PRECISION_ENV, "bf16")
+    with pytest.raises(ValueError, match="V2C_PRECISION=bf16: this CPU has no native bf16"):
+        L.network_precision()
+    monkeypatch.setenv(L.PRECISION_ENV, "half")
+    with pytest.raises(ValueError, match="V2C_PRECISION='half': expected one of auto, fp32, bf16"):
+        L.network_precision()
+
+
+def test_fp32_from_the_environment_is_the_fp32_network(
+    fresh_scans: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """V2C_PRECISION=fp32 runs exactly the fp32 network (the same arrays as ``LearnedConfig(bf16=False)``), and a
+    reconstruction records the arithmetic it used."""
+    from v2c.pipeline import reconstruct
+    from v2c.segment.learned import PRECISION_ENV
+
+    scan = load_scan(fresh_scans[1])
+    p32, b32 = predict(scan, LearnedConfig(bf16=False))
+    monkeypatch.setenv(PRECISION_ENV, "fp32")
+    p_env, b_env = predict(scan)
+    assert np.array_equal(p_env, p32) and np.array_equal(b_env, b32)
+    assert reconstruct(scan, segmentation="learned").meta["network_precision"] == "fp32"
+    assert "network_precision" not in reconstruct(scan, segmentation="oracle").meta
+
+
 def test_fp32_matches_bf16(fresh_scans: list[Path]) -> None:
     scan = load_scan(fresh_scans[0])
     p32, b32 = predict(scan, LearnedConfig(bf16=False))

@@ -3,7 +3,8 @@
 `reconstruct(scan)` is the one entry point (the CLI, `v2c.api`, the bench and fixtures_design all call it). It runs
 the stages in order with one `PipelineConfig` carrying each stage's settings down, and times each stage into
 ``vbrep.meta["timings"]`` (seconds): ``segment``, ``fit``, ``vbrep`` and ``total``; the fit's own sub-stage timings
-are in ``vbrep.meta["fit_timings"]``.
+are in ``vbrep.meta["fit_timings"]``; with the learned segmenter, ``vbrep.meta["network_precision"]`` ("bf16" or
+"fp32") says in which arithmetic the network ran.
 """
 
 from __future__ import annotations
@@ -111,6 +112,10 @@ def reconstruct(
     vbrep.meta["fit_timings"] = {k: float(v) for k, v in fit.timings.items()}
     vbrep.meta["ablation"] = ablation
     vbrep.meta["scan"] = str(scan.path or "")
+    if seg.method == "learned":  # the network's arithmetic changes its output (`segment.learned.network_precision`)
+        from v2c.segment.learned import network_precision
+
+        vbrep.meta["network_precision"] = network_precision()
     if return_stages:
         return vbrep, seg, fit
     return vbrep

@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from v2c.bench.tables import jsonable
-from v2c.bench.workers import error_text, process_start_seconds
+from v2c.bench.workers import error_text, precision_of, process_start_seconds
 
 if TYPE_CHECKING:
     from v2c.fit.result import FitResult
@@ -354,6 +354,7 @@ def real_bench(
             "segmentations": list(segmentations),
             "masks": masks,
             "weights": None if weights is None else str(weights),
+            "network_precision": precision_of(segmentations),
             "out_dir": str(out_dir),
             "near_mm": NEAR_MM,
             "process_start_s": start_s,

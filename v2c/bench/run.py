@@ -61,6 +61,7 @@ from v2c.bench.workers import (
     evaluate_dirs,
     evaluate_scan,
     limit_threads,
+    precision_of,
     process_start_seconds,
     segment_scan,
     warm_up,
@@ -128,6 +129,7 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True, log: Callable[[str], 
     }
     conf = asdict(cfg)
     conf.update(
+        network_precision=precision_of(cfg.segmentations),
         weights=weights,
         cad_dir=str(cfg.cad_dir) if cfg.cad_dir else None,
         cache_dir=str(scan_cache_dir(cfg)) if cfg.scans_dir is None else None,

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 from v2c.bench.cache import default_cache_dir, scan_complete
 from v2c.bench.config import GT, BenchConfig, columns_of
 from v2c.bench.tables import format_value, jsonable, summarise
-from v2c.bench.workers import error_text, evaluate_dirs, failed_rows, process_start_seconds
+from v2c.bench.workers import error_text, evaluate_dirs, failed_rows, precision_of, process_start_seconds
 from v2c.synth.corpus import SPLIT_FILE, CorpusPart, checked_files, default_corpus_dir, read_split
 
 if TYPE_CHECKING:
@@ -345,7 +345,11 @@ def run_suite(cfg: SuiteConfig, progress: bool = True) -> dict[str, Any]:
         for c in cols
     }
     conf = asdict(cfg)
-    conf["bench"].update(weights=weights, cache_dir=str(suite_root(scans)))
+    conf["bench"].update(
+        weights=weights,
+        cache_dir=str(suite_root(scans)),
+        network_precision=precision_of(cfg.bench.segmentations),
+    )
     conf["corpus_dir"] = str(cfg.corpus_dir or default_corpus_dir())
     conf["corpus_split"] = cfg.corpus_split
     return jsonable(

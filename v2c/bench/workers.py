@@ -196,6 +196,16 @@ def _save_figure(scan: Scan, seg: Segmentation, vbrep: VBRep, path: Path) -> str
         return None
 
 
+def precision_of(segmentations: Sequence[str]) -> str | None:
+    """The learned network's arithmetic ("bf16" / "fp32", `v2c.segment.learned.network_precision`) when
+    ``segmentations`` use it, else None: written beside every benchmark's figures, which it changes."""
+    if "learned" not in segmentations:
+        return None
+    from v2c.segment.learned import network_precision
+
+    return network_precision()
+
+
 def warm_up(segmentations: Sequence[str], weights: str | None = None) -> None:
     """Import what `v2c to-step` needs and load the learned model, so that per-scan times leave out the process
     start (measured once by `process_start_seconds`)."""

@@ -4,10 +4,17 @@ Weights default to ``v2c/segment/weights/unet.pt`` (see its MODEL_CARD.md). Infe
 (the network is fully convolutional) on the part's box (mask.png / ROI bounding box plus a context margin; the whole
 image when neither is given), averaged with its horizontal mirror (a label-safe flip, ``data.CachedScans.crop``);
 bf16 autocast where the CPU supports it. Outside the box the class is background and the boundary 0.
+
+The network's arithmetic (`network_precision`) changes its output enough to change a reconstruction: bf16 rounds
+to 8 bits of mantissa, and on real frames a pixel that moves from one instance to another changes the fits
+downstream (docs/segmentation.md, "The network's arithmetic"). ``V2C_PRECISION=fp32`` (or ``LearnedConfig.bf16``
+= False) gives every machine the fp32 network; the mode used is recorded in the VB-Rep's ``meta`` and the bench's
+JSON.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
@@ -24,6 +31,11 @@ from v2c.segment.refine import RefineConfig, absorb_fragments, refine_instances,
 from v2c.segment.types import Segmentation
 from v2c.segment.verify import VerifyConfig, needs_regions, verify_instances
 
+#: Environment variable choosing the network's arithmetic where ``LearnedConfig.bf16`` is None: "auto" (bf16
+#: where the CPU has it natively, else fp32), "fp32" or "bf16".
+PRECISION_ENV = "V2C_PRECISION"
+PRECISIONS = ("auto", "fp32", "bf16")
+
 WEIGHTS_DIR = Path(__file__).parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "unet.pt"
 
@@ -33,7 +45,7 @@ class LearnedConfig:
     """Settings of the learned segmenter: weights, inference, instance extraction and the geometric check."""
 
     weights: Path | None = None  # None = DEFAULT_WEIGHTS
-    bf16: bool | None = None  # None = where the CPU supports it
+    bf16: bool | None = None  # None = $V2C_PRECISION (`network_precision`; unset: where the CPU supports it)
     features: FeatureConfig = field(default_factory=FeatureConfig)
     instances: InstanceConfig = field(default_factory=InstanceConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)  # plane-outlier split, coplanar merge (refine.py)
@@ -44,6 +56,23 @@ class LearnedConfig:
     mirror_tta: bool = True  # average the prediction with that of the mirrored input (2x network time)
     ground_region: bool = True  # without mask.png: the part is what stands above the RANSAC ground inside the ROI
     # (`geometric.part_region`, as the geometric segmenter does), not the network's background class
+
+
+def network_precision(cfg: LearnedConfig | None = None) -> str:
+    """The arithmetic the network runs in with ``cfg``, "bf16" or "fp32". ``cfg.bf16`` decides when set; else
+    $V2C_PRECISION ("auto" when unset: bf16 where the CPU has it natively). Raises ValueError for another value of
+    the variable, or for "bf16" on a CPU without native bf16."""
+    if cfg is not None and cfg.bf16 is not None:
+        return "bf16" if cfg.bf16 else "fp32"
+    raw = os.environ.get(PRECISION_ENV, "auto")
+    want = raw.strip().lower()
+    if want not in PRECISIONS:
+        raise ValueError(f"{PRECISION_ENV}={raw!r}: expected one of {', '.join(PRECISIONS)}")
+    if want == "bf16" and not bf16_supported():
+        raise ValueError(f"{PRECISION_ENV}=bf16: this CPU has no native bf16 (use fp32 or auto)")
+    if want == "auto":
+        return "bf16" if bf16_supported() else "fp32"
+    return want
 
 
 def weights_available(path: Path | None = None) -> bool:
@@ -76,7 +105,7 @@ def predict_with_features(
     h, w = feat.shape[1:]
     y0, y1, x0, x1 = _box(scan, cfg.context_px, (h, w))
     x = torch.from_numpy(np.ascontiguousarray(feat[None, :, y0:y1, x0:x1]))
-    bf16 = bf16_supported() if cfg.bf16 is None else cfg.bf16
+    bf16 = network_precision(cfg) == "bf16"
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
         lab, bnd = model(x.contiguous(memory_format=torch.channels_last))
         prob = torch.softmax(lab[0].float(), dim=0)
