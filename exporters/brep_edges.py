@@ -82,7 +82,9 @@ class EdgeBuilder:
     surface is measured (``off_surface``: VEdge id -> (face id, mm)) and reported as a warning: covered by the
     edge's tolerance up to ``branch_tol``, a gap between the faces beyond it. A thin face's loop of two exact
     edges between the same two vertices is fitted so too (`refit_lens_loops`; ``lens_vertices``: VVertex id ->
-    the face whose surface alone places it).
+    the face whose surface alone places it). A vertex joins only the edge ends within ``branch_tol`` of it (its
+    tolerance covers them); an end farther off gets a vertex of its own and a warning (`build_edges`), so no join
+    of the file spans more than ``branch_tol``.
     """
 
     def __init__(self, vbrep: VBRep, fmap: FrameMap, config: BrepConfig) -> None:

@@ -59,11 +59,12 @@ UNSEEN_FAMILIES_SOURCE = ("v2c.synth.families", "LEAVE_OUT_FAMILIES")
 SUITE_GENERATOR = "v2c.bench.suite/1"  # bump when the way suite scans are drawn changes (invalidates the cache)
 
 CORPUS = "corpus"
+FAMILY = "family"
+
 #: Part sizes: a STEP file whose largest vertex or edge tolerance exceeds this bridges a visible gap (faces that
 #: should meet lie this far apart); counted per group. Issue 16's bound for a tangent edge's place (1 % of the part
 #: size), not tuned.
 TOLERANCE_GAP_REL = 0.01
-FAMILY = "family"
 
 
 @dataclass(frozen=True)
