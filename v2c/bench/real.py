@@ -32,6 +32,8 @@ Per frame and segmentation method (``learned``, ``geometric``):
   Distances: the read-back shape is tessellated (`synth.occ.tessellate`), each point's nearest mesh vertex
   (KD-tree) decides where it is clearly inside (< near) or clearly outside (> near + the longest triangle edge),
   and the exact point-to-triangle distance (trimesh) decides the rest.
+- ``max_tolerance_mm``: the largest tolerance of any vertex or edge of the STEP read back
+  (`exporters.readback.largest_tolerance`): the widest gap the file's topology joins.
 - ``mask`` (``masks=True``, `v2c bench --real --real-masks`): a frame whose entry in real_rois.json has a ``mask``
   polygon (the object's outline drawn on color.png, occluders left out) is reconstructed with that polygon
   rasterised (`polygon_mask`) as its mask.png, inside its ROI; its object pixels are then the ROI's object pixels
