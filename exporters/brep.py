@@ -255,14 +255,14 @@ def _inside(shape: TopoDS_Shape, box: tuple[np.ndarray, np.ndarray] | None, defl
 
 
 def _edge_off_face(eb: EdgeBuilder, f: VFace) -> tuple[int, float] | None:
-    """(VEdge id, mm) of an edge of ``f``'s loops fitted on its other face and lying farther than ``branch_tol``
+    """(VEdge id, mm) of an edge of ``f``'s loops fitted on its other face and lying farther than ``join_tol``
     off ``f``'s surface (`EdgeBuilder.off_surface`: a gap between the two faces), else None. Such a face is not
     bounded by its loops: OCCT would take the edge onto it by raising its tolerance to that gap (a sugar box's side
     bounded across 8.5 mm), so the file would join what the reconstruction leaves apart."""
     for lp in f.loops:
         for eid, _ in lp:
             other, dist = eb.off_surface.get(eid, (None, 0.0))
-            if other == f.id and dist > eb.branch_tol:
+            if other == f.id and dist > eb.join_tol:
                 return eid, dist
     return None
 
@@ -325,7 +325,7 @@ def build_brep(
         made = fb.build_face(f, eb.edges) if f.id not in force_outline and off is None else None
         why = "boundary wire invalid" if f.id not in force_outline else "the STEP round trip changed its face"
         if off is not None and f.id not in force_outline:
-            why = f"its edge {off[0]} lies {off[1]:.3g} mm off its surface (more than {eb.branch_tol:.3g} mm)"
+            why = f"its edge {off[0]} lies {off[1]:.3g} mm off its surface (more than {eb.join_tol:.3g} mm)"
         if made is not None:
             area = face_area(made[0])
             shift = 0.0 if centre is None else float(np.linalg.norm(face_centroid(made[0]) - centre))

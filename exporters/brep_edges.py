@@ -80,11 +80,11 @@ class EdgeBuilder:
     it still close without it. An intersection edge without an exact intersection curve is fitted on the face
     whose surface its polyline lies nearer (``fit_face``); how far the fitted edge then lies off the other face's
     surface is measured (``off_surface``: VEdge id -> (face id, mm)) and reported as a warning: covered by the
-    edge's tolerance up to ``branch_tol``, a gap between the faces beyond it. A thin face's loop of two exact
+    edge's tolerance up to ``join_tol``, a gap between the faces beyond it. A thin face's loop of two exact
     edges between the same two vertices is fitted so too (`refit_lens_loops`; ``lens_vertices``: VVertex id ->
-    the face whose surface alone places it). A vertex joins only the edge ends within ``branch_tol`` of it (its
+    the face whose surface alone places it). A vertex joins only the edge ends within ``join_tol`` of it (its
     tolerance covers them); an end farther off gets a vertex of its own and a warning (`build_edges`), so no join
-    of the file spans more than ``branch_tol``.
+    of the file spans more than ``join_tol`` (max(0.5 mm, 1 % of the part), `BrepConfig.join_tol_*`).
     """
 
     def __init__(self, vbrep: VBRep, fmap: FrameMap, config: BrepConfig) -> None:
@@ -93,6 +93,7 @@ class EdgeBuilder:
         self.cfg = config
         size = fmap.length(vbrep.scale) if vbrep.scale > 0 else 100.0
         self.branch_tol = max(config.branch_tol_abs, config.branch_tol_rel * size)
+        self.join_tol = max(config.join_tol_abs, config.join_tol_rel * size)
         self.fit_tol = max(config.fit_tol_abs, config.fit_tol_rel * size)
         self.pcurve_tol = max(config.pcurve_tol_abs, config.pcurve_tol_rel * size)
         self.warnings: list[str] = []
@@ -442,14 +443,14 @@ class EdgeBuilder:
         """Step 4b: VEdge id -> TopoDS_Edge oriented from v0 to v1, on shared TopoDS_Vertex objects whose
         tolerance covers the gap to every edge end (mm)."""
         gap: dict[int, float] = defaultdict(float)
-        apart: dict[tuple[int, int], float] = {}  # (VEdge id, 0 | 1): an end beyond branch_tol of its vertex
+        apart: dict[tuple[int, int], float] = {}  # (VEdge id, 0 | 1): an end beyond join_tol of its vertex
         for e in self.vb.edges:
             g = self.geoms.get(e.id)
             if g is None:
                 continue
             for end, v, x in ((0, self.vid(e.v0), g.end0), (1, self.vid(e.v1), g.end1)):
                 d = float(np.linalg.norm(x - self.vpos[v]))
-                if d > self.branch_tol:
+                if d > self.join_tol:
                     apart[(e.id, end)] = d
                 else:
                     gap[v] = max(gap[v], d)
@@ -465,7 +466,7 @@ class EdgeBuilder:
             e = self.vb.edges[eid]
             self.warnings.append(
                 f"edge {eid}: ends {d:.2f} mm from vertex {e.v1 if end else e.v0} (more than "
-                f"{self.branch_tol:.2f} mm): it does not join it, so its faces' loops do not close there"
+                f"{self.join_tol:.2f} mm): it does not join it, so its faces' loops do not close there"
             )
         edges: dict[int, TopoDS_Edge] = {}
         for e in self.vb.edges:
@@ -474,7 +475,7 @@ class EdgeBuilder:
                 continue
             va, vb = verts[self.vid(e.v0)], verts[self.vid(e.v1)]
             # an end too far from its vertex gets a vertex of its own where it ends: a file joins faces only
-            # across gaps its tolerances state within branch_tol (a 27 mm vertex tolerance joined nothing real)
+            # across gaps its tolerances state within join_tol (a 27 mm vertex tolerance joined nothing real)
             if (e.id, 0) in apart:
                 va = self._own_vertex(g.end0)
             if (e.id, 1) in apart:
@@ -516,7 +517,7 @@ class EdgeBuilder:
     def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex, n: int = 33) -> None:
         """An intersection edge fitted on one face (no intersection curve): measure how far it lies off the
         other face's surface (mm, ``off_surface``), warn, and raise the edge's (and its vertices') tolerance to
-        cover that gap when it is within ``branch_tol``; a larger gap is reported as a gap between the faces."""
+        cover that gap when it is within ``join_tol``; a larger gap is reported as a gap between the faces."""
         other = next((f for f in e.faces if f != self.fit_face[e.id]), None)
         if other is None or other not in self.surfaces:
             return
@@ -527,7 +528,7 @@ class EdgeBuilder:
         self.off_surface[e.id] = (other, off)
         if off <= self.cfg.min_tolerance:
             return
-        if off <= self.branch_tol:
+        if off <= self.join_tol:
             tol = 1.05 * off + self.cfg.min_tolerance
             self.bb.UpdateEdge(edge, max(tol, BRep_Tool.Tolerance_s(edge)))
             for vx in (va, vb):
@@ -539,5 +540,5 @@ class EdgeBuilder:
         else:
             self.warnings.append(
                 f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
-                f"{other}'s surface (more than {self.branch_tol:.2f} mm): a gap between the faces"
+                f"{other}'s surface (more than {self.join_tol:.2f} mm): a gap between the faces"
             )

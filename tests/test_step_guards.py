@@ -174,12 +174,12 @@ def _vertex_tolerances(eb: EdgeBuilder, eid: int) -> list[tuple[object, float]]:
 
 
 def test_an_edge_end_far_from_its_vertex_does_not_join_it() -> None:
-    """A vertex joins the edge ends within branch_tol of it, its tolerance covering that gap; an end farther off
-    gets a vertex of its own (the file states no gap wider than branch_tol as joined, a warning names the edge).
+    """A vertex joins the edge ends within join_tol of it, its tolerance covering that gap; an end farther off
+    gets a vertex of its own (the file states no gap wider than join_tol as joined, a warning names the edge).
     Box corner, its corner vertex 0 (where edges 0, 1 and 2 end) moved after the edges' geometry is fixed."""
     vb = box_corner()
     eb = EdgeBuilder(vb, CAMERA, BrepConfig()).run()
-    assert eb.branch_tol == 3.0  # max(2 mm, 3 % of the 100 mm part)
+    assert eb.join_tol == 1.0  # max(0.5 mm, 1 % of the 100 mm part)
     # exact corner: the three intersection edges share one vertex of the minimum tolerance
     ends = [_vertex_tolerances(eb, e)[0] for e in (0, 1, 2)]
     assert all(tol < 1e-3 for _, tol in ends)
@@ -187,18 +187,18 @@ def test_an_edge_end_far_from_its_vertex_does_not_join_it() -> None:
     assert shared[0].IsSame(shared[1]) and shared[0].IsSame(shared[2])
 
     corner = eb.vpos[0].copy()
-    eb.vpos[0] = corner + np.array([1.0, 0.0, 0.0])  # 1 mm: within branch_tol, joined, its tolerance covers it
+    eb.vpos[0] = corner + np.array([0.5, 0.0, 0.0])  # 0.5 mm: within join_tol, joined, its tolerance covers it
     eb.warnings.clear()
     eb.edges = eb.build_edges()
     (v0, tol0), *_ = _vertex_tolerances(eb, 0)
-    assert 1.0 <= tol0 <= 1.1 and v0.IsSame(_vertex_tolerances(eb, 1)[0][0])
+    assert 0.5 <= tol0 <= 0.55 and v0.IsSame(_vertex_tolerances(eb, 1)[0][0])
     assert not any("does not join" in w for w in eb.warnings)
 
-    eb.vpos[0] = corner + np.array([10.0, 0.0, 0.0])  # 10 mm: beyond branch_tol, each edge ends on its own
+    eb.vpos[0] = corner + np.array([10.0, 0.0, 0.0])  # 10 mm: beyond join_tol, each edge ends on its own
     eb.warnings.clear()
     eb.edges = eb.build_edges()
     starts = [_vertex_tolerances(eb, e)[0] for e in (0, 1, 2)]
-    assert all(tol <= eb.branch_tol for _, tol in starts)
+    assert all(tol <= eb.join_tol for _, tol in starts)
     assert not starts[0][0].IsSame(starts[1][0]) and not starts[1][0].IsSame(starts[2][0])
     for e in (0, 1, 2):
         assert any(w.startswith(f"edge {e}: ends 10.0") and "does not join it" in w for w in eb.warnings), e
@@ -206,14 +206,15 @@ def test_an_edge_end_far_from_its_vertex_does_not_join_it() -> None:
     assert _vertex_tolerances(eb, 0)[1][0].IsSame(_vertex_tolerances(eb, 3)[0][0])
 
 
-def test_a_face_an_edge_lies_off_by_more_than_branch_tol_is_not_bounded_by_it(tmp_path: Path) -> None:
-    """An intersection edge fitted on one face that lies farther than branch_tol off the other face's surface is a
+def test_a_face_an_edge_lies_off_by_more_than_join_tol_is_not_bounded_by_it(tmp_path: Path) -> None:
+    """An intersection edge fitted on one face that lies farther than join_tol off the other face's surface is a
     gap between them: the other face is bounded by its mesh outline (a warning names the edge and the gap), not
-    by that edge with its tolerance raised to the gap. Within branch_tol the edge still bounds both faces. Box
-    corner (a 100 mm part: branch_tol 3 mm) with face 2's plane moved along its normal."""
+    by that edge with its tolerance raised to the gap. Within join_tol the edge still bounds both faces. Box
+    corner (a 100 mm part: join_tol 1 mm, branch_tol 3 mm) with face 2's plane moved along its normal: at 0.5 mm
+    the edges are the planes' exact intersections, at 5 mm they are fitted on faces 0 and 1."""
     from exporters.readback import check_written
 
-    for shift_mm, refused in ((1.0, False), (5.0, True)):
+    for shift_mm, refused in ((0.5, False), (5.0, True)):
         vb = box_corner()
         params = vb.faces[2].primitive["params"]
         params["origin"] = (np.asarray(params["origin"]) + shift_mm / 1000 * np.asarray(params["normal"])).tolist()
@@ -222,9 +223,9 @@ def test_a_face_an_edge_lies_off_by_more_than_branch_tol_is_not_bounded_by_it(tm
         mine = [w for w in report.warnings if w.startswith("face 2: its edge")]
         if refused:
             assert 2 in report.fallback_faces
-            assert len(mine) == 1 and "off its surface (more than 3 mm)" in mine[0], report.warnings
+            assert len(mine) == 1 and "off its surface (more than 1 mm)" in mine[0], report.warnings
             assert mine[0].startswith("face 2: its edge 1 lies 5.01 mm") or mine[0].startswith("face 2: its edge 2")
         else:
             assert mine == [] and 2 not in report.fallback_faces
         back = check_written(vb, path, report.frame_map)
-        assert back.max_tolerance <= 1.05 * 3.0 + 1e-3
+        assert back.max_tolerance <= 1.05 * 1.0 + 1e-3
