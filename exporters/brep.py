@@ -321,11 +321,12 @@ def build_brep(
         target = reconstructed_area(eb.surfaces[f.id], mesh_pts, f.mesh_triangles, cfg.outline_max_stretch)
         out.mesh_area[f.id] = target
         centre = mesh_centroid(mesh_pts, f.mesh_triangles)
-        off = _edge_off_face(eb, f)
-        made = fb.build_face(f, eb.edges) if f.id not in force_outline and off is None else None
-        why = "boundary wire invalid" if f.id not in force_outline else "the STEP round trip changed its face"
-        if off is not None and f.id not in force_outline:
-            why = f"its edge {off[0]} lies {off[1]:.3g} mm off its surface (more than {eb.join_tol:.3g} mm)"
+        if f.id in force_outline:
+            made, why = None, "the STEP round trip changed its face"
+        elif (off := _edge_off_face(eb, f)) is not None:
+            made, why = None, f"its edge {off[0]} lies {off[1]:.3g} mm off its surface (more than {eb.join_tol:.3g} mm)"
+        else:
+            made, why = fb.build_face(f, eb.edges), "boundary wire invalid"
         if made is not None:
             area = face_area(made[0])
             shift = 0.0 if centre is None else float(np.linalg.norm(face_centroid(made[0]) - centre))

@@ -458,10 +458,7 @@ class EdgeBuilder:
         for vid, x in self.vpos.items():
             if vid in self.vertex_alias:
                 continue
-            tol = max(self.cfg.min_tolerance, 1.05 * gap[vid] + self.cfg.min_tolerance)
-            vx = TopoDS_Vertex()
-            self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), tol)
-            verts[vid] = vx
+            verts[vid] = self._vertex(x, max(self.cfg.min_tolerance, 1.05 * gap[vid] + self.cfg.min_tolerance))
         for (eid, end), d in sorted(apart.items()):
             e = self.vb.edges[eid]
             self.warnings.append(
@@ -477,9 +474,9 @@ class EdgeBuilder:
             # an end too far from its vertex gets a vertex of its own where it ends: a file joins faces only
             # across gaps its tolerances state within join_tol (a 27 mm vertex tolerance joined nothing real)
             if (e.id, 0) in apart:
-                va = self._own_vertex(g.end0)
+                va = self._vertex(g.end0, self.cfg.min_tolerance)
             if (e.id, 1) in apart:
-                vb = self._own_vertex(g.end1)
+                vb = self._vertex(g.end1, self.cfg.min_tolerance)
             forward = g.t1 > g.t0
             lo, hi = (g.t0, g.t1) if forward else (g.t1, g.t0)
             v_lo, v_hi = (va, vb) if forward else (vb, va)
@@ -508,10 +505,10 @@ class EdgeBuilder:
             edges[e.id] = edge if forward else TopoDS.Edge_s(edge.Reversed())
         return edges
 
-    def _own_vertex(self, x: np.ndarray) -> TopoDS_Vertex:
-        """A vertex at ``x`` (mm) of the minimum tolerance, for an edge end that joins no VB-Rep vertex."""
+    def _vertex(self, x: np.ndarray, tol: float) -> TopoDS_Vertex:
+        """A new vertex at ``x`` (mm) of tolerance ``tol`` (mm)."""
         vx = TopoDS_Vertex()
-        self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), self.cfg.min_tolerance)
+        self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), tol)
         return vx
 
     def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex, n: int = 33) -> None:
