@@ -12,9 +12,10 @@ Output frame millimetres (see `exporters.frames`). Steps 1-4 are `exporters.brep
    the gap left to every edge end (an empty gap for exact corners).
 4. Edges: intersection curves trimmed at their vertices' parameters (the polyline decides which arc of a
    closed curve); other edges (and intersection edges whose curve could not be found) as a 2D curve in their
-   face's (u, v) space (iso line, segment, arc or spline fitted to the polyline's projection onto the
-   surface), so they lie on that face exactly, with the 3D curve built from it. One `TopoDS_Edge` per VB-Rep
-   edge, shared by both faces.
+   face's (u, v) space (iso line, segment, arc or spline fitted to the polyline moved along the camera rays
+   onto the surface), so they lie on that face exactly, with the 3D curve built from it. One `TopoDS_Edge` per
+   VB-Rep edge, shared by both faces; where an edge fitted on one face lies farther than ``join_tol`` off the
+   other, that face gets a copy of its own on its surface (``BuiltBRep.copied_edges``).
 5. Faces: the surface bounded by its loops (outer first), pcurves completed by ShapeFix_Face, oriented so the
    normal faces the camera (every face of one view is seen from its outside). Loops that do not bound a valid
    face are chained again or reduced (a warning). The file must be the reconstruction: a face whose loops
@@ -78,7 +79,9 @@ class BuiltBRep:
 
     shape: compound of the open shells and the free edges. faces: VFace id -> the face as placed in a shell.
     edges: VEdge id -> its edge(s) (one unless ShapeFix had to split it). free_edges: VEdge ids on no face.
-    face_edges: VFace id -> the VEdge ids its boundary holds.
+    face_edges: VFace id -> the VEdge ids its boundary holds (the shared edge, or its own copy of it).
+    copied_edges: VEdge id -> the faces bounded by a copy of their own (`EdgeBuilder._face_copies`: an edge
+    fitted on its other face, farther than ``join_tol`` off theirs); ``edges`` lists the copies too.
     fallback_faces: faces bounded by their mesh outline (`exporters.brep_outline`); face_parts: for those, every
     piece of the outline as its own face (``faces`` holds the largest); outline_edges: VFace id -> its outline's
     edges, each with the VEdge id it is named after (-1: none). skipped_faces: faces that could not be built at
@@ -94,6 +97,7 @@ class BuiltBRep:
     edges: dict[int, list[TopoDS_Edge]] = field(default_factory=dict)
     free_edges: list[int] = field(default_factory=list)
     face_edges: dict[int, set[int]] = field(default_factory=dict)
+    copied_edges: dict[int, list[int]] = field(default_factory=dict)
     fallback_faces: list[int] = field(default_factory=list)
     skipped_faces: list[int] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -262,7 +266,7 @@ def _edge_off_face(eb: EdgeBuilder, f: VFace) -> tuple[int, float] | None:
     for lp in f.loops:
         for eid, _ in lp:
             other, dist = eb.off_surface.get(eid, (None, 0.0))
-            if other == f.id and dist > eb.join_tol:
+            if other == f.id and dist > eb.join_tol and (f.id, eid) not in eb.copies:
                 return eid, dist
     return None
 
@@ -365,8 +369,13 @@ def build_brep(
     # ShapeFix may have replaced edges (recorded in the shared context): follow the replacements.
     for eid, ed in eb.edges.items():
         out.edges[eid] = edges_of(fb.ctx.Apply(ed))
+    copied = sorted((fid, eid) for (fid, eid) in eb.copies if eid in face_edges.get(fid, ()))
+    for fid, eid in copied:
+        out.copied_edges.setdefault(eid, []).append(fid)
+    # shells join faces through the edges they share, not through copies
+    shared = {fid: {eid for eid in es if (fid, eid) not in eb.copies} for fid, es in face_edges.items()}
     eb.bb.MakeCompound(out.shape)
-    for shell_faces in connected_groups(face_edges):
+    for shell_faces in connected_groups(shared):
         if len(shell_faces) == 1 and shell_faces[0] in out.face_parts:
             # an outline face's pieces share no edge: one shell each (a shell must be connected)
             fid = shell_faces[0]
@@ -379,7 +388,7 @@ def build_brep(
             out.faces[fid] = TopoDS.Face_s(fb.ctx.Apply(faces[fid]))
             shell.append(out.faces[fid])
         _add_shell(eb.bb, out.shape, shell)
-    used = set().union(*face_edges.values()) if face_edges else set()
+    used = set().union(*shared.values()) if shared else set()
     outlined = set(out.face_parts)
     faces_by_edge = {e.id: set(e.faces) for e in vbrep.edges}
     # the VEdge names the outline faces' edges carry (`brep_outline`: each after the face's nearest VB-Rep edge)
@@ -390,6 +399,9 @@ def build_brep(
         if faces_by_edge.get(eid, set()) & outlined and eid in carried:
             out.dropped_edges.append(eid)  # the outline's edges carry its name
             continue
+        if eid in out.copied_edges:
+            out.dropped_edges.append(eid)  # a face's copy of it carries its name
+            continue
         if not all(_inside(ed, out.box) for ed in out.edges[eid]):
             out.dropped_edges.append(eid)
             eb.warnings.append(f"edge {eid}: lies outside the part's box; not written")
@@ -399,6 +411,8 @@ def build_brep(
             eb.bb.Add(out.shape, ed)
     for eid in out.dropped_edges:
         out.edges.pop(eid, None)
+    for fid, eid in copied:
+        out.edges.setdefault(eid, []).extend(edges_of(fb.ctx.Apply(eb.copies[(fid, eid)])))
     out.face_edges = face_edges
     out.warnings = eb.warnings
     return out
@@ -418,6 +432,7 @@ def translate_built(built: BuiltBRep, shift: np.ndarray) -> BuiltBRep:
         edges={eid: [TopoDS.Edge_s(tr.ModifiedShape(e)) for e in es] for eid, es in built.edges.items()},
         free_edges=list(built.free_edges),
         face_edges={k: set(v) for k, v in built.face_edges.items()},
+        copied_edges={k: list(v) for k, v in built.copied_edges.items()},
         fallback_faces=list(built.fallback_faces),
         skipped_faces=list(built.skipped_faces),
         warnings=list(built.warnings),

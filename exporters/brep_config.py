@@ -26,6 +26,14 @@ class BrepConfig:
     # 186 -> 190 of 448
     join_tol_abs: float = 0.5
     join_tol_rel: float = 0.01
+    # ... and such a face is bounded by its own copy of the edge instead, on its surface where the camera rays
+    # through the edge's polyline meet it (where its loop mesh has the edge, `EdgeBuilder._face_copies`); the
+    # copy's ends join that face's other edges at a vertex of their own when the shared vertex is beyond
+    # join_tol. False: such a face is written from its mesh outline. Chosen on the validation sets (2026-11-29
+    # session 24, with vertex_move_*, pcurve_along_rays and the ShapeFix cap): outline faces in-family seed 9000
+    # learned 132 -> 118 of 372, oracle 190 -> 181 of 448, corpus-val oracle 395 -> 389 of 532, learned 115 -> 106
+    # of 220
+    face_copies: bool = True
     fit_tol_abs: float = 0.05  # B-spline fit tolerance of polylines ...
     fit_tol_rel: float = 0.002  # ... or this fraction of the part size, whichever is larger
     # Edges fitted in a face's (u, v) (not on an exact intersection curve) follow their polyline within this,
@@ -34,14 +42,34 @@ class BrepConfig:
     # moves the written face off its mesh: on the oracle VB-Reps of the 30 corpus validation scans (loop meshes,
     # the arc check of `fit_pcurve`), 0.2 % of the part size (about 0.3 px there) left 129 of 307 loop-bounded
     # faces within 2 % of their mesh area, 0.05 % (at least 0.01 mm) 137 of 309 (and 2 fewer outline faces)
+    # An edge fitted in a face's (u, v) follows its polyline moved onto the face along the camera rays through it
+    # (the face's loop mesh lifts its loops so, `v2c.vbrep.loop_mesh`), not its closest points on the surface: an
+    # occluded edge's polyline on the nearer surface projects onto the farther one a parallax away in the image
+    pcurve_along_rays: bool = True
+    # ... a point moving at most this many times its distance off the surface (plus fit_tol): farther, its ray
+    # grazes the surface and meets it elsewhere (a torus's contour generator), and it is projected as before.
+    # 4: a ray 75 degrees off the surface's normal; not tuned
+    ray_move_factor: float = 4.0
     pcurve_tol_abs: float = 0.01
     pcurve_tol_rel: float = 0.0005
     max_fit_points: int = 120  # polylines are subsampled to at most this many points before fitting
     branch_samples: int = 16  # polyline samples used to pick and trim an intersection branch
     vertex_iterations: int = 30  # alternating-projection steps placing a vertex on its curves/surfaces
+    # ... which move it at most this far (mm, or this fraction of the part size, whichever is larger) from the
+    # VB-Rep's vertex: near-parallel curves draw the projection along them (on the corpus validation oracle
+    # VB-Reps 13 of 1,102 vertices went more than 5 % of the part, two more than half of it, and the edges
+    # trimmed there ran their faces out that far); the last step within it is kept. 3 % chosen there over 1 %
+    # and 5 % (faces bounded by their outline 398 -> 400 / 394 / 395 of 537: at 1 % exact corners of faces
+    # bounded by their loops were cut short)
+    vertex_move_abs: float = 0.5
+    vertex_move_rel: float = 0.03
     min_tolerance: float = 1e-4  # smallest vertex tolerance set
     fix_precision: float = 1e-4  # ShapeFix working precision
-    fix_max_tolerance: float = 5.0  # ShapeFix may raise tolerances up to this
+    # ShapeFix may raise tolerances up to this, and never past 1.05 join_tol (the largest an edge's own tolerance
+    # may cover, `EdgeBuilder._cover_other_face`); before 2026-11-29 session 24 it raised one vertex of a
+    # face bounded by its own copies to 1.13 % of the part (in-family seed 9000, learned, scan 13) and one of a
+    # corpus validation scan to 1.14 % (learned), past join_tol
+    fix_max_tolerance: float = 5.0
     # A vertex reaches this far (the larger of the two, and of twice the farthest a loop edge lies off the face's
     # surface): loop edges that cross within it of a vertex meet there (`exporters.brep_faces`) ...
     vertex_reach_fit_tols: float = 3.0  # ... this many fit tolerances (``fit_tol_*``) ...

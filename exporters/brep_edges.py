@@ -37,6 +37,7 @@ from exporters.occ_surfaces import AnalyticSurface, distance_to_surface, make_su
 from exporters.polygons import signed_area, subsample
 from v2c.labels import PrimitiveType
 from v2c.vbrep.model import EdgeType
+from v2c.vbrep.raycast import as_primitive, intersect, sheet_depth
 
 if TYPE_CHECKING:
     from exporters.brep_config import BrepConfig
@@ -82,9 +83,13 @@ class EdgeBuilder:
     surface is measured (``off_surface``: VEdge id -> (face id, mm)) and reported as a warning: covered by the
     edge's tolerance up to ``join_tol``, a gap between the faces beyond it. A thin face's loop of two exact
     edges between the same two vertices is fitted so too (`refit_lens_loops`; ``lens_vertices``: VVertex id ->
-    the face whose surface alone places it). A vertex joins only the edge ends within ``join_tol`` of it (its
-    tolerance covers them); an end farther off gets a vertex of its own and a warning (`build_edges`), so no join
-    of the file spans more than ``join_tol`` (max(0.5 mm, 1 % of the part), `BrepConfig.join_tol_*`).
+    the face whose surface alone places it). Where the gap is wider than ``join_tol``, the other face gets a copy
+    of the edge of its own, on its surface (``copies``: (VFace id, VEdge id) -> edge; `_face_copies`). A vertex
+    joins only the edge ends within ``join_tol`` of it (its tolerance covers them); an end farther off gets a
+    vertex of its own (shared with the other such ends on the same face's surface, `_own_vertices`) and a warning
+    (`build_edges`), so no join of the file spans more than ``join_tol`` (max(0.5 mm, 1 % of the part),
+    `BrepConfig.join_tol_*`); a vertex's alternating projection stops within ``vertex_move_*`` of the VB-Rep's
+    vertex (`place_vertices`).
     """
 
     def __init__(self, vbrep: VBRep, fmap: FrameMap, config: BrepConfig) -> None:
@@ -107,6 +112,10 @@ class EdgeBuilder:
         self.fit_face: dict[int, int] = {}
         self.off_surface: dict[int, tuple[int, float]] = {}
         self.lens_vertices: dict[int, int] = {}
+        # (VFace id, VEdge id) -> that face's own copy of an edge fitted on its other face and lying farther than
+        # join_tol off this one (`build_edges`): on this face's surface, where its loop mesh has it
+        self.copy_geoms: dict[tuple[int, int], EdgeGeom] = {}
+        self.copies: dict[tuple[int, int], TopoDS_Edge] = {}
         self.bb = BRep_Builder()
 
     def run(self) -> EdgeBuilder:
@@ -225,7 +234,8 @@ class EdgeBuilder:
 
     def place_vertices(self) -> None:
         """Step 3: each vertex's position ``vpos`` (mm): alternating projection onto its incident intersection
-        curves (the exact corner where three surfaces meet), else onto its faces' surfaces."""
+        curves (the exact corner where three surfaces meet), else onto its faces' surfaces; a step that would take
+        it farther than ``vertex_move_*`` from the VB-Rep's vertex is not taken (`BrepConfig`)."""
         inc_curves: dict[int, list[Geom_Curve]] = defaultdict(list)
         inc_surfs: dict[int, set[int]] = defaultdict(set)
         for e in self.vb.edges:
@@ -235,10 +245,12 @@ class EdgeBuilder:
                 if e.id in self.curves:
                     inc_curves[v].append(self.curves[e.id])
                 inc_surfs[v].update(f for f in e.faces if f in self.surfaces)
+        size = self.fmap.length(self.vb.scale) if self.vb.scale > 0 else 100.0
+        reach = max(self.cfg.vertex_move_abs, self.cfg.vertex_move_rel * size)
         for v in self.vb.vertices:
             if v.id in self.vertex_alias:
                 continue
-            x = self.fmap.points(v.position)
+            x = x0 = self.fmap.points(v.position)
             for _ in range(self.cfg.vertex_iterations):
                 if inc_curves[v.id]:
                     proj = []
@@ -253,6 +265,8 @@ class EdgeBuilder:
                 if not proj:
                     break
                 nx = np.mean(proj, axis=0)
+                if np.linalg.norm(nx - x0) > reach:
+                    break  # drawn along near-parallel curves: the last step within reach of the VB-Rep's vertex
                 done = np.linalg.norm(nx - x) < 1e-9
                 x = nx
                 if done or len(proj) == 1:
@@ -288,9 +302,13 @@ class EdgeBuilder:
         ends = curve_points(curve, np.array([ta, tb]))
         return EdgeGeom(curve=curve, t0=float(ta), t1=float(tb), end0=ends[0], end1=ends[1])
 
-    def _pcurve_geom(self, e: VEdge, face: int) -> EdgeGeom | None:
+    def _pcurve_geom(self, e: VEdge, face: int, poly: np.ndarray | None = None) -> EdgeGeom | None:
+        """The edge as a curve in ``face``'s (u, v) through its polyline (or ``poly``, (K, 3) mm) projected onto
+        the surface, from its v0 to its v1."""
         s = self.surfaces[face]
-        poly = self.fmap.points(e.polyline)
+        if poly is None and self.cfg.pcurve_along_rays:
+            poly = self._polyline_on_face(e, face)
+        poly = self.fmap.points(e.polyline) if poly is None else poly
         poly = subsample(poly, self.cfg.max_fit_points)
         pts = np.concatenate([self.vpos[e.v0][None], poly[1:-1], self.vpos[e.v1][None]])
         uv = s.uv(pts)
@@ -439,19 +457,81 @@ class EdgeBuilder:
         uv = s.uv(self.fmap.points(np.concatenate(pts)))
         return signed_area(s.unwrap(uv))
 
+    def _geom_points(self, g: EdgeGeom, n: int = 33) -> np.ndarray:
+        """(n, 3) mm points along an edge geometry, before it is an edge."""
+        ts = np.linspace(g.t0, g.t1, n)
+        if g.curve is not None:
+            return curve_points(g.curve, ts)
+        return self.surfaces[g.face].evaluate(pcurve_points(g.pcurve, ts))
+
+    def _polyline_on_face(self, e: VEdge, face: int) -> np.ndarray | None:
+        """(K, 3) mm: the edge's polyline moved along the camera rays through it onto ``face``'s sheet (as
+        `v2c.vbrep.loop_mesh` lifts the face's loops; `_along_rays`), or None."""
+        poly = np.asarray(e.polyline, float).reshape(-1, 3)
+        if len(poly) < 2:
+            return None
+        return self._along_rays(poly, face)
+
+    def _along_rays(self, poly: np.ndarray, face: int) -> np.ndarray | None:
+        """(K, 3) camera-frame metres -> (K, 3) mm: the points moved along the camera rays through them onto
+        ``face``'s sheet (`v2c.vbrep.raycast`), the crossing nearest their own depth. A point stays where it is when
+        its ray misses the surface or meets it more than ``ray_move_factor`` times its distance off the surface
+        (plus ``fit_tol``) away: a contour generator's point, whose ray grazes the surface there and crosses it
+        elsewhere. None when a point lies behind the camera or gets no finite depth."""
+        if np.any(poly[:, 2] <= 0):
+            return None
+        rays = poly / poly[:, 2:3]
+        prim = next(f.primitive for f in self.vb.faces if f.id == face)
+        sheet = int(self.vb.meta.get("faces", {}).get(str(face), {}).get("sheet", 0))
+        window = (0.5 * float(poly[:, 2].min()), 2.0 * float(poly[:, 2].max()))
+        hits = intersect(prim, rays, window)
+        z = sheet_depth(hits, sheet, poly[:, 2])
+        if not np.all(np.isfinite(z)) or np.any(z <= 0):
+            return None
+        out = rays * z[:, None]
+        off = np.abs(as_primitive(prim).signed_distance(poly))
+        reach = self.cfg.ray_move_factor * off + self.fit_tol / self.fmap.scale
+        keep = ~np.isfinite(hits.depths).any(axis=1) | (np.linalg.norm(out - poly, axis=1) > reach)
+        out[keep] = poly[keep]
+        return self.fmap.points(out)
+
+    def _face_copies(self) -> None:
+        """``copy_geoms``: for each intersection edge fitted on one face (no exact intersection curve) that lies
+        farther than ``join_tol`` off its other face's surface, that face's own copy of it, on its surface along the
+        camera rays through the polyline (`_polyline_on_face`). The faces do not meet there in the
+        reconstruction, so the file does not join them: each is bounded where its own mesh ends."""
+        if not self.cfg.face_copies:
+            return
+        for e in self.vb.edges:
+            g = self.geoms.get(e.id)
+            if g is None or e.id not in self.fit_face:
+                continue
+            other = next((f for f in e.faces if f != self.fit_face[e.id]), None)
+            if other is None or other not in self.surfaces:
+                continue
+            if float(distance_to_surface(self.surfaces[other], self._geom_points(g)).max()) <= self.join_tol:
+                continue
+            poly = self._polyline_on_face(e, other)
+            g2 = None if poly is None else self._pcurve_geom(e, other, poly)
+            if g2 is not None:
+                self.copy_geoms[(other, e.id)] = g2
+
     def build_edges(self) -> dict[int, TopoDS_Edge]:
         """Step 4b: VEdge id -> TopoDS_Edge oriented from v0 to v1, on shared TopoDS_Vertex objects whose
         tolerance covers the gap to every edge end (mm)."""
+        self._face_copies()
         gap: dict[int, float] = defaultdict(float)
-        apart: dict[tuple[int, int], float] = {}  # (VEdge id, 0 | 1): an end beyond join_tol of its vertex
-        for e in self.vb.edges:
-            g = self.geoms.get(e.id)
+        # (VEdge id, 0 | 1, copy's VFace id or -1): an end beyond join_tol of its vertex
+        apart: dict[tuple[int, int, int], float] = {}
+        placed = [(e, self.geoms.get(e.id), -1) for e in self.vb.edges]
+        placed += [(self.vb.edges[eid], g, fid) for (fid, eid), g in sorted(self.copy_geoms.items())]
+        for e, g, fid in placed:
             if g is None:
                 continue
             for end, v, x in ((0, self.vid(e.v0), g.end0), (1, self.vid(e.v1), g.end1)):
                 d = float(np.linalg.norm(x - self.vpos[v]))
                 if d > self.join_tol:
-                    apart[(e.id, end)] = d
+                    apart[(e.id, end, fid)] = d
                 else:
                     gap[v] = max(gap[v], d)
         verts: dict[int, TopoDS_Vertex] = {}
@@ -459,24 +539,22 @@ class EdgeBuilder:
             if vid in self.vertex_alias:
                 continue
             verts[vid] = self._vertex(x, max(self.cfg.min_tolerance, 1.05 * gap[vid] + self.cfg.min_tolerance))
-        for (eid, end), d in sorted(apart.items()):
+        for (eid, end, fid), d in sorted(apart.items()):
             e = self.vb.edges[eid]
             self.warnings.append(
-                f"edge {eid}: ends {d:.2f} mm from vertex {e.v1 if end else e.v0} (more than "
-                f"{self.join_tol:.2f} mm): it does not join it, so its faces' loops do not close there"
+                f"edge {eid}{'' if fid < 0 else f' (face {fid} copy)'}: ends {d:.2f} mm from vertex "
+                f"{e.v1 if end else e.v0} (more than {self.join_tol:.2f} mm): it does not join it"
             )
+        own = self._own_vertices(placed, apart)
         edges: dict[int, TopoDS_Edge] = {}
-        for e in self.vb.edges:
-            g = self.geoms.get(e.id)
+        for e, g, fid in placed:
             if g is None:
                 continue
             va, vb = verts[self.vid(e.v0)], verts[self.vid(e.v1)]
             # an end too far from its vertex gets a vertex of its own where it ends: a file joins faces only
             # across gaps its tolerances state within join_tol (a 27 mm vertex tolerance joined nothing real)
-            if (e.id, 0) in apart:
-                va = self._vertex(g.end0, self.cfg.min_tolerance)
-            if (e.id, 1) in apart:
-                vb = self._vertex(g.end1, self.cfg.min_tolerance)
+            va = own.get((e.id, 0, fid), va)
+            vb = own.get((e.id, 1, fid), vb)
             forward = g.t1 > g.t0
             lo, hi = (g.t0, g.t1) if forward else (g.t1, g.t0)
             v_lo, v_hi = (va, vb) if forward else (vb, va)
@@ -499,11 +577,47 @@ class EdgeBuilder:
                 self.bb.UpdateEdge(
                     edge, g.pcurve, self.surfaces[g.face].geom, TopLoc_Location(), BRep_Tool.Tolerance_s(edge)
                 )
+            oriented = edge if forward else TopoDS.Edge_s(edge.Reversed())
+            if fid >= 0:
+                self.copies[(fid, e.id)] = oriented
+                continue
             if e.id in self.fit_face:
                 self._cover_other_face(e, edge, va, vb)
             # Stored oriented from v0 to v1, so a loop entry (id, reversed) is this edge, reversed or not.
-            edges[e.id] = edge if forward else TopoDS.Edge_s(edge.Reversed())
+            edges[e.id] = oriented
         return edges
+
+    def _own_vertices(
+        self, placed: list[tuple[VEdge, EdgeGeom | None, int]], apart: dict[tuple[int, int, int], float]
+    ) -> dict[tuple[int, int, int], TopoDS_Vertex]:
+        """The vertices of the edge ends in ``apart`` (VEdge id, end, copy's face or -1), each beyond join_tol of
+        its VB-Rep vertex. The ends at one VB-Rep vertex that lie on one face's surface (edges fitted in that
+        face's (u, v), and that face's copies) share a vertex when they lie within join_tol of their mean, so that
+        face's loop still closes there (a face bounded by its own copies, off the corner its neighbours share);
+        any other such end gets a vertex of its own."""
+        groups: dict[tuple[int, int], list[tuple[tuple[int, int, int], np.ndarray]]] = defaultdict(list)
+        out: dict[tuple[int, int, int], TopoDS_Vertex] = {}
+        for e, g, fid in placed:
+            if g is None:
+                continue
+            for end, v, x in ((0, e.v0, g.end0), (1, e.v1, g.end1)):
+                key = (e.id, end, fid)
+                if key not in apart:
+                    continue
+                if g.face is None or (g.curve is not None and g.pcurve is None):
+                    out[key] = self._vertex(x, self.cfg.min_tolerance)
+                else:
+                    groups[(self.vid(v), g.face)].append((key, x))
+        for members in groups.values():
+            pts = np.array([x for _, x in members])
+            mid = pts.mean(axis=0)
+            spread = float(np.linalg.norm(pts - mid, axis=1).max())
+            if len(members) > 1 and spread <= self.join_tol:
+                vx = self._vertex(mid, max(self.cfg.min_tolerance, 1.05 * spread + self.cfg.min_tolerance))
+                out.update({key: vx for key, _ in members})
+            else:
+                out.update({key: self._vertex(x, self.cfg.min_tolerance) for key, x in members})
+        return out
 
     def _vertex(self, x: np.ndarray, tol: float) -> TopoDS_Vertex:
         """A new vertex at ``x`` (mm) of tolerance ``tol`` (mm)."""
@@ -538,4 +652,5 @@ class EdgeBuilder:
             self.warnings.append(
                 f"edge {e.id}: fitted on face {self.fit_face[e.id]}, {off:.2f} mm off face "
                 f"{other}'s surface (more than {self.join_tol:.2f} mm): a gap between the faces"
+                + (f"; face {other} is bounded by its own copy" if (other, e.id) in self.copy_geoms else "")
             )

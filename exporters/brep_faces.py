@@ -54,6 +54,11 @@ class FaceBuilder:
         self.fit_tol = eb.fit_tol
         self.surfaces = eb.surfaces
         self.geoms = eb.geoms
+        self.copy_geoms = eb.copy_geoms
+        # ShapeFix raises no tolerance past what the file may join (`BrepConfig.join_tol_*`; a face it cannot
+        # close within that is not bounded by its loops)
+        self.max_tolerance = min(self.cfg.fix_max_tolerance, 1.05 * eb.join_tol + self.cfg.min_tolerance)
+        self.copies = eb.copies
         self.vpos = eb.vpos
         self.edges = eb.edges
         self.vid = eb.vid
@@ -80,13 +85,14 @@ class FaceBuilder:
         s: AnalyticSurface,
         loop: Loop,
         n: int = 40,
+        fid: int | None = None,
     ) -> tuple[np.ndarray, float] | None:
         """The loop's built edges sampled in the surface's (u, v) ((M, 2), periodic parameters made
         continuous) and their largest distance off the surface (mm, for edges carried by the other face); None
         when an edge is missing or the loop winds around a periodic surface (no closed polygon)."""
         pts, dev = [], 0.0
         for eid, rev in loop:
-            g = self.geoms.get(eid)
+            g = self.copy_geoms.get((fid, eid), self.geoms.get(eid))  # face ``fid``'s own copy, if it has one
             if g is None:
                 return None
             ts = np.linspace(g.t0, g.t1, n)
@@ -119,11 +125,11 @@ class FaceBuilder:
             2 * max((d for _, d in sampled), default=0.0),
         )
 
-    def _boundaries_cross(self, s: AnalyticSurface, loops: list[Loop]) -> tuple[bool, float]:
+    def _boundaries_cross(self, s: AnalyticSurface, loops: list[Loop], fid: int | None = None) -> tuple[bool, float]:
         """Whether the loops' edges cross each other away from their vertices (sampled in (u, v)), and the
         vertices' reach (mm, `_vertex_reach`); crossings within a vertex's reach (as BRepCheck tolerates them
         once `_cover_vertex_crossings` has run) and loops that cannot be sampled do not count."""
-        sampled = [self._loop_uv_polygon(s, lp) for lp in loops]
+        sampled = [self._loop_uv_polygon(s, lp, fid=fid) for lp in loops]
         if any(p is None for p in sampled):
             return False, self._vertex_reach([])
         reach = self._vertex_reach(sampled)
@@ -206,7 +212,7 @@ class FaceBuilder:
         wire.FixLackingMode = 0
         fix.SetContext(ctx if ctx is not None else self.ctx)
         fix.SetPrecision(self.cfg.fix_precision)
-        fix.SetMaxTolerance(self.cfg.fix_max_tolerance)
+        fix.SetMaxTolerance(self.max_tolerance)
         fix.Perform()
         return fix.Face()
 
@@ -245,7 +251,7 @@ class FaceBuilder:
         wires = [self._wire(lp, edges) for lp in loops]
         if not wires or any(w is None for w in wires):
             return None
-        crossed, reach = self._boundaries_cross(s, loops)
+        crossed, reach = self._boundaries_cross(s, loops, f.id)
         if crossed:
             return None  # BRepCheck would say so too, at a hundred times the cost
         face = TopoDS_Face()
@@ -346,6 +352,8 @@ class FaceBuilder:
         if not given:
             return None
         s = self.surfaces[f.id]
+        # edges this face holds a copy of of its own (`EdgeBuilder._face_copies`): those, not the shared ones
+        edges = {**edges, **{eid: ed for (fid, eid), ed in self.copies.items() if fid == f.id}}
 
         def by_area(loops: list[Loop]) -> list[Loop]:
             return sorted(loops, key=lambda lp: -abs(self.loop_area_uv(s, lp)))

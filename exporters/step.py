@@ -139,7 +139,8 @@ class StepExportError(V2cError, RuntimeError):
 @dataclass
 class StepReport:
     """What `write` did. seconds: wall time of the whole write (build + XCAF + file), s. frame_map: camera
-    metres -> the file's millimetres. face_edges: VFace id -> the VEdge ids its boundary holds in the file.
+    metres -> the file's millimetres. face_edges: VFace id -> the VEdge ids its boundary holds in the file;
+    copied_edges: VEdge id -> the faces that hold a copy of it of their own (`exporters.brep.BuiltBRep`).
     shape_valid: BRepCheck of the whole assembled shape. fallback_faces: faces bounded by their mesh outline;
     dropped_edges: VEdge ids on no face not written (an outline carries their name, or they lie outside the
     part's box)."""
@@ -156,6 +157,7 @@ class StepReport:
     seconds: float
     frame_map: FrameMap | None = None
     face_edges: dict[int, set[int]] = field(default_factory=dict)
+    copied_edges: dict[int, list[int]] = field(default_factory=dict)
     shape_valid: bool = True
     dropped_edges: list[int] = field(default_factory=list)
 
@@ -309,6 +311,7 @@ def write(
         seconds=time.perf_counter() - t0,
         frame_map=built.fmap,
         face_edges=built.face_edges,
+        copied_edges=built.copied_edges,
         shape_valid=shape_valid,
         dropped_edges=built.dropped_edges,
     )
