@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
-from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
 from OCP.BRepLib import BRepLib
 from OCP.Geom import Geom_Curve
@@ -112,6 +111,7 @@ class EdgeBuilder:
         self.fit_face: dict[int, int] = {}
         self.off_surface: dict[int, tuple[int, float]] = {}
         self.lens_vertices: dict[int, int] = {}
+        self.vfaces = {f.id: f for f in vbrep.faces}
         # (VFace id, VEdge id) -> that face's own copy of an edge fitted on its other face and lying farther than
         # join_tol off this one (`build_edges`): on this face's surface, where its loop mesh has it
         self.copy_geoms: dict[tuple[int, int], EdgeGeom] = {}
@@ -481,7 +481,7 @@ class EdgeBuilder:
         if np.any(poly[:, 2] <= 0):
             return None
         rays = poly / poly[:, 2:3]
-        prim = next(f.primitive for f in self.vb.faces if f.id == face)
+        prim = self.vfaces[face].primitive
         sheet = int(self.vb.meta.get("faces", {}).get(str(face), {}).get("sheet", 0))
         window = (0.5 * float(poly[:, 2].min()), 2.0 * float(poly[:, 2].max()))
         hits = intersect(prim, rays, window)
@@ -495,13 +495,9 @@ class EdgeBuilder:
         out[keep] = poly[keep]
         return self.fmap.points(out)
 
-    def _face_copies(self) -> None:
-        """``copy_geoms``: for each intersection edge fitted on one face (no exact intersection curve) that lies
-        farther than ``join_tol`` off its other face's surface, that face's own copy of it, on its surface along the
-        camera rays through the polyline (`_polyline_on_face`). The faces do not meet there in the
-        reconstruction, so the file does not join them: each is bounded where its own mesh ends."""
-        if not self.cfg.face_copies:
-            return
+    def _measure_off_surface(self) -> None:
+        """``off_surface``: for each intersection edge fitted on one face (no exact intersection curve), its other
+        face and how far (mm) its geometry lies off that face's surface."""
         for e in self.vb.edges:
             g = self.geoms.get(e.id)
             if g is None or e.id not in self.fit_face:
@@ -509,16 +505,31 @@ class EdgeBuilder:
             other = next((f for f in e.faces if f != self.fit_face[e.id]), None)
             if other is None or other not in self.surfaces:
                 continue
-            if float(distance_to_surface(self.surfaces[other], self._geom_points(g)).max()) <= self.join_tol:
+            self.off_surface[e.id] = (
+                other,
+                float(distance_to_surface(self.surfaces[other], self._geom_points(g)).max()),
+            )
+
+    def _face_copies(self) -> None:
+        """``copy_geoms``: for each edge of ``off_surface`` farther than ``join_tol`` off its other face, that
+        face's own copy of it, on its surface along the camera rays through the polyline (`_polyline_on_face`).
+        The faces do not meet there in the reconstruction, so the file does not join them: each is bounded where
+        its own mesh ends."""
+        if not self.cfg.face_copies:
+            return
+        for eid, (other, off) in self.off_surface.items():
+            if off <= self.join_tol:
                 continue
+            e = self.vb.edges[eid]
             poly = self._polyline_on_face(e, other)
             g2 = None if poly is None else self._pcurve_geom(e, other, poly)
             if g2 is not None:
-                self.copy_geoms[(other, e.id)] = g2
+                self.copy_geoms[(other, eid)] = g2
 
     def build_edges(self) -> dict[int, TopoDS_Edge]:
         """Step 4b: VEdge id -> TopoDS_Edge oriented from v0 to v1, on shared TopoDS_Vertex objects whose
         tolerance covers the gap to every edge end (mm)."""
+        self._measure_off_surface()
         self._face_copies()
         gap: dict[int, float] = defaultdict(float)
         # (VEdge id, 0 | 1, copy's VFace id or -1): an end beyond join_tol of its vertex
@@ -625,18 +636,13 @@ class EdgeBuilder:
         self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), tol)
         return vx
 
-    def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex, n: int = 33) -> None:
-        """An intersection edge fitted on one face (no intersection curve): measure how far it lies off the
-        other face's surface (mm, ``off_surface``), warn, and raise the edge's (and its vertices') tolerance to
-        cover that gap when it is within ``join_tol``; a larger gap is reported as a gap between the faces."""
-        other = next((f for f in e.faces if f != self.fit_face[e.id]), None)
-        if other is None or other not in self.surfaces:
+    def _cover_other_face(self, e: VEdge, edge: TopoDS_Edge, va: TopoDS_Vertex, vb: TopoDS_Vertex) -> None:
+        """An intersection edge fitted on one face (no intersection curve), ``off`` mm off the other face's surface
+        (``off_surface``): warn, and raise the edge's (and its vertices') tolerance to cover that gap when it is
+        within ``join_tol``; a larger gap is reported as a gap between the faces."""
+        if e.id not in self.off_surface:
             return
-        c = BRepAdaptor_Curve(edge)
-        ts = np.linspace(c.FirstParameter(), c.LastParameter(), n)
-        pts = np.array([c.Value(float(t)).Coord() for t in ts])
-        off = float(distance_to_surface(self.surfaces[other], pts).max())
-        self.off_surface[e.id] = (other, off)
+        other, off = self.off_surface[e.id]
         if off <= self.cfg.min_tolerance:
             return
         if off <= self.join_tol:

@@ -55,10 +55,10 @@ class FaceBuilder:
         self.surfaces = eb.surfaces
         self.geoms = eb.geoms
         self.copy_geoms = eb.copy_geoms
+        self.copies = eb.copies
         # ShapeFix raises no tolerance past what the file may join (`BrepConfig.join_tol_*`; a face it cannot
         # close within that is not bounded by its loops)
         self.max_tolerance = min(self.cfg.fix_max_tolerance, 1.05 * eb.join_tol + self.cfg.min_tolerance)
-        self.copies = eb.copies
         self.vpos = eb.vpos
         self.edges = eb.edges
         self.vid = eb.vid
@@ -352,7 +352,7 @@ class FaceBuilder:
         if not given:
             return None
         s = self.surfaces[f.id]
-        # edges this face holds a copy of of its own (`EdgeBuilder._face_copies`): those, not the shared ones
+        # edges this face holds its own copy of (`EdgeBuilder._face_copies`): those, not the shared ones
         edges = {**edges, **{eid: ed for (fid, eid), ed in self.copies.items() if fid == f.id}}
 
         def by_area(loops: list[Loop]) -> list[Loop]:
