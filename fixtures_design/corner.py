@@ -44,12 +44,29 @@ class CornerParams:
     length: float = 40.0  # mm: block length along the edge
     end_margin: float = 2.0  # mm: kept free at each end of the edge
     leg_fraction: float = 0.8  # of the face's reach from the edge: the most a leg covers
+    leg_end_margin: float = 3.0  # mm: a leg ends at least this far short of where its face ends, along the block's
+    # whole length (the face's narrowest reach there, `DihedralReference.reach`): a wall rising where a ledge ends
+    # stays clear of the leg after the part is pushed home
+    min_leg: float = 2.0  # mm: a shorter leg does not locate; the edge is refused
 
 
 def corner_profile(leg_a: float, leg_b: float, p: CornerParams) -> np.ndarray:
     """(6, 2) L profile in the edge's local (x, y), mm (see the module docstring)."""
     c, t = p.clearance, p.wall
     return np.array([(c, -leg_a), (c + t, -leg_a), (c + t, c + t), (-leg_b, c + t), (-leg_b, c), (c, c)])
+
+
+def _narrowest_reach(ref: DihedralReference, i: int, lo_mm: float, hi_mm: float, fmap: FrameMap) -> float:
+    """The least reach (metres) of face ``i`` from the edge over the bins of ``ref.reach`` that meet [lo_mm, hi_mm]
+    (output millimetres from the edge's start); ``ref.depths[i]`` where no bin there holds its mesh (a reference
+    made without bins)."""
+    at, reach = np.asarray(ref.reach_at, float), np.asarray(ref.reach[i], float)
+    if not len(at):
+        return float(ref.depths[i])
+    half = 0.5 * (at[1] - at[0]) if len(at) > 1 else float(ref.length)
+    lo, hi = lo_mm / fmap.scale, hi_mm / fmap.scale
+    sel = (at + half >= lo) & (at - half <= hi) & np.isfinite(reach)
+    return float(reach[sel].min()) if sel.any() else float(ref.depths[i])
 
 
 def design_corner(ref: DihedralReference, fmap: FrameMap, params: CornerParams = CornerParams()) -> Fixture:
@@ -69,9 +86,20 @@ def design_corner(ref: DihedralReference, fmap: FrameMap, params: CornerParams =
         raise ValueError(
             f"edge e{ref.edge_id} is {edge_len:.1f} mm long: too short for end margins of {params.end_margin} mm"
         )
-    # depths[0] is how far face A reaches from the edge (along -y), depths[1] face B (along -x).
-    leg_a = min(params.leg, params.leg_fraction * fmap.length(ref.depths[0]))
-    leg_b = min(params.leg, params.leg_fraction * fmap.length(ref.depths[1]))
+    # depths[0] is how far face A reaches from the edge (along -y), depths[1] face B (along -x); over the block's
+    # span (centred on the edge) the narrowest reach of each face bounds its leg.
+    legs = []
+    for i, name in enumerate("AB"):
+        reach = fmap.length(_narrowest_reach(ref, i, edge_len / 2 - length / 2, edge_len / 2 + length / 2, fmap))
+        leg = min(params.leg, params.leg_fraction * reach, reach - params.leg_end_margin)
+        if leg < params.min_leg:
+            raise ValueError(
+                f"edge e{ref.edge_id}: face {name} (f{ref.faces[i]}) reaches only {reach:.1f} mm from the edge over "
+                f"the block's span: a leg ending {params.leg_end_margin:g} mm short of it is under "
+                f"{params.min_leg:g} mm"
+            )
+        legs.append(leg)
+    leg_a, leg_b = legs
     plane = local_plane(0.5 * (p0 + p1), a, z)
     local = prism(corner_profile(leg_a, leg_b, params), -length / 2, length / 2)
     solid = place(local, plane)

@@ -25,7 +25,7 @@ from fixtures_design.references import (
     SelectionConfig,
     select_references,
 )
-from fixtures_design.verify import EvidenceConfig, observed_inside, part_inside_share
+from fixtures_design.verify import EvidenceConfig, hole_opening, observed_inside, part_inside_share, wall_inside
 from v2c.vbrep.model import VBRep
 
 Params = CornerParams | PinParams | CradleParams | NestParams
@@ -125,6 +125,44 @@ DEFAULT_PARAMS: dict[FixtureKind, Params] = {
 }
 
 
+def evidence_refusal(fx: Fixture, points: np.ndarray, evidence: EvidenceConfig) -> str | None:
+    """Why the scan's observed points of the part (camera frame, metres, (N, 3)) refuse the design ``fx``, or None.
+
+    Any kind: more than ``evidence.max_points`` of them lie inside it beyond the depth noise (`observed_inside`).
+    A pin besides: it is wider than the opening its hole's plane shows by more than ``opening_tol_mm`` +
+    ``opening_tol_rel`` x the hole's radius (`hole_opening`), or more than ``max_wall_share`` (and at least
+    ``min_wall_points``) of the hole's wall points lie inside it beyond their radial noise (`wall_inside`): the hole
+    is fitted too wide, or narrower somewhere than its fit (a counterbore's step).
+    """
+    ref, fmap = fx.reference, fx.fmap
+    n_in, deepest = observed_inside(fx, points, evidence)
+    if n_in > evidence.max_points:
+        return (
+            f"e{ref.edge_id}: the {fx.kind.value} would hold {n_in} of the scan's points of the part, up to "
+            f"{deepest:.1f} mm deep (more than {evidence.max_points} beyond {evidence.n_sigma:g} sigma of "
+            "depth noise): the reconstruction there is not what the depth shows"
+        )
+    if fx.kind is not FixtureKind.PIN:
+        return None
+    pin_r = fx.notes["pin_radius_mm"]
+    opening = hole_opening(ref.center, ref.axis, ref.radius, points, evidence)
+    tol = evidence.opening_tol_mm + evidence.opening_tol_rel * fmap.length(ref.radius)
+    if opening is not None and pin_r > fmap.length(opening) + tol:
+        return (
+            f"e{ref.edge_id}: the pin (radius {pin_r:.2f} mm) is wider than the opening the hole's plane shows "
+            f"(radius {fmap.length(opening):.2f} mm) by more than {tol:.2f} mm: the hole is fitted too wide"
+        )
+    depth = (fx.notes["depth_mm"] + fx.params.clearance) / fmap.scale
+    n_in, n_wall = wall_inside(ref.center, ref.axis, ref.radius, pin_r / fmap.scale, depth, points, evidence)
+    if n_in >= evidence.min_wall_points and n_in > evidence.max_wall_share * n_wall:
+        return (
+            f"e{ref.edge_id}: {n_in} of the hole's {n_wall} wall points lie inside the pin (radius {pin_r:.2f} mm) "
+            f"beyond {evidence.n_sigma:g} sigma of their noise (more than {100 * evidence.max_wall_share:g} %): the "
+            "hole is narrower than its fit somewhere"
+        )
+    return None
+
+
 def design_fixture(
     vbrep: VBRep,
     kind: FixtureKind | str,
@@ -157,11 +195,12 @@ def design_fixture(
     this share of points sampled on the VB-Rep's face meshes is refused (None: no check).
     points: the scan's observed points of the part (camera frame, metres, (N, 3); e.g. the valid pixels of its
     mask): a corner, pin or cradle holding more than ``evidence.max_points`` of them deeper than the depth noise
-    (`fixtures_design.verify.observed_inside`) is refused with the reason, and the next reference tried (a given
-    ``reference`` raises ValueError). None: no check (a VB-Rep or STEP without its scan). bias_mm: the scan's
-    depth-offset 1-sigma in the default clearance (`sigma_clearance`). A pin's default clearance is instead
-    ``pin_k`` (None: PIN_CLEARANCE_K) times the hole radius's 1-sigma (`pin_clearance`, HOLE_RADIUS_SIGMA_MM;
-    ``clearance_k`` and ``bias_mm`` do not apply to it).
+    (`fixtures_design.verify.observed_inside`), or a pin its hole's plane or wall points say is too wide
+    (`evidence_refusal`), is refused with the reason, and the next reference tried (a given ``reference`` raises
+    ValueError). None: no check (a VB-Rep or STEP without its scan). bias_mm: the scan's depth-offset 1-sigma in
+    the default clearance (`sigma_clearance`). A pin's default clearance is instead ``pin_k`` (None:
+    PIN_CLEARANCE_K) times the hole radius's 1-sigma (`pin_clearance`, HOLE_RADIUS_SIGMA_MM; ``clearance_k`` and
+    ``bias_mm`` do not apply to it).
     """
     kind = FixtureKind(kind)
     evidence = evidence or EvidenceConfig()
@@ -201,13 +240,8 @@ def design_fixture(
             errors.append(str(exc))
             continue
         if points is not None:
-            n_in, deepest = observed_inside(fx, points, evidence)
-            if n_in > evidence.max_points:
-                msg = (
-                    f"e{ref.edge_id}: the {kind.value} would hold {n_in} of the scan's points of the part, up to "
-                    f"{deepest:.1f} mm deep (more than {evidence.max_points} beyond {evidence.n_sigma:g} sigma of "
-                    "depth noise): the reconstruction there is not what the depth shows"
-                )
+            msg = evidence_refusal(fx, points, evidence)
+            if msg is not None:
                 if reference is not None:
                     raise ValueError(msg)
                 errors.append(msg)

@@ -60,6 +60,8 @@ class SelectionConfig:
     # loses its edge pixels). From the 26 hole rims of the training scans (seed 7100, 24 scans): the ring at 1.05 x
     # radius lay all on the plane on 1 of them (so every other pin got a flange over the opening only); by
     # 1.2-1.3 x radius 25 of 26 rings lay on it in >= 94 % of the directions
+    reach_bin_frac: float = 0.02  # fraction of VBRep.scale: bin length along a dihedral edge over which each face's
+    # reach from the edge is measured (`DihedralReference.reach`)
 
 
 @dataclass(frozen=True)
@@ -68,7 +70,10 @@ class DihedralReference:
 
     start, end: (3,) the edge's end points. normals: the two faces' outward unit normals, in the order of ``faces``.
     depths: how far each face reaches away from the edge inside its plane (metres), over the edge's span.
-    angle_deg: angle between the two normals (90 for a right-angle edge).
+    angle_deg: angle between the two normals (90 for a right-angle edge). reach_at: (k,) centres of the bins along
+    the edge (metres from ``start``, `SelectionConfig.reach_bin_frac`); reach: for each face, (k,) how far it
+    reaches from the edge in each bin (metres; NaN where the bin holds none of its mesh): a face narrower in
+    places than ``depths`` (a ledge, a step rising beside it) is where a locator's leg must stop.
     """
 
     edge_id: int
@@ -80,6 +85,8 @@ class DihedralReference:
     depths: tuple[float, float]
     angle_deg: float
     kind: ReferenceKind = ReferenceKind.DIHEDRAL
+    reach_at: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    reach: tuple[np.ndarray, np.ndarray] = field(default_factory=lambda: (np.zeros(0), np.zeros(0)))
 
     @property
     def direction(self) -> np.ndarray:
@@ -160,6 +167,31 @@ def face_samples(face: VFace, subdivisions: int = 4) -> np.ndarray:
     ij = np.array([(i, j) for i in range(k + 1) for j in range(k + 1 - i)], float) / k
     bary = np.column_stack([ij, 1.0 - ij.sum(axis=1)])
     return np.einsum("bk,tkd->tbd", bary, v[t]).reshape(-1, 3)
+
+
+def _off_edge(
+    pts: np.ndarray, a: np.ndarray, d: np.ndarray, length: float, margin: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(along, distance) of the points ``pts`` (N, 3) beside the segment from ``a`` along unit ``d`` (``length``,
+    within ``margin`` of its ends): how far along it each lies and how far from its line (metres)."""
+    rel = pts - a
+    along = rel @ d
+    inside = (along >= -margin) & (along <= length + margin)
+    return along[inside], np.linalg.norm(rel[inside] - np.outer(along[inside], d), axis=1)
+
+
+def _subdivisions(face: VFace, bin_length: float, most_samples: int = 200_000) -> int:
+    """Barycentric subdivisions (`face_samples`) that put a face's samples at most half ``bin_length`` apart along
+    its longest triangle edge, with at most about ``most_samples`` samples in all (at least 1)."""
+    v = _face_points(face)
+    t = np.asarray(face.mesh_triangles, int).reshape(-1, 3)
+    if not len(t) or not bin_length > 0:
+        return 1
+    tri = v[t]
+    longest = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max())
+    k = int(np.ceil(2.0 * longest / bin_length))
+    cap = int(np.sqrt(2.0 * most_samples / len(t)))
+    return max(1, min(k, cap))
 
 
 def _basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -253,14 +285,31 @@ def _dihedral(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> DihedralReference | 
     if not (s0 < -margin and s1 < -margin):
         return "concave or ambiguous (a face lies in front of the other's plane)"
     d = _unit(b - a)
-    depths = []
-    for pts in (p0, p1):
-        rel = pts - a
-        along = rel @ d
-        inside = (along >= -margin) & (along <= length + margin)
-        perp = rel[inside] - np.outer(along[inside], d)
-        depths.append(float(np.linalg.norm(perp, axis=1).max()) if inside.any() else 0.0)
-    return DihedralReference(e.id, float(e.confidence), (f0.id, f1.id), a, b, (n0, n1), (depths[0], depths[1]), angle)
+    n_bins = max(1, int(np.ceil(length / (cfg.reach_bin_frac * vb.scale))))
+    bins = np.linspace(0.0, length, n_bins + 1)
+    depths, reach = [], []
+    for face, pts in ((f0, p0), (f1, p1)):
+        _, dist = _off_edge(pts, a, d, length, margin)
+        depths.append(float(dist.max()) if len(dist) else 0.0)
+        # Per bin, from points over the face's triangles at most half a bin apart (a ground-truth mesh has its
+        # vertices at its corners only, a reconstructed one on the pixel grid).
+        along, dist = _off_edge(face_samples(face, _subdivisions(face, length / n_bins)), a, d, length, margin)
+        k = np.clip(np.searchsorted(bins, along, side="right") - 1, 0, n_bins - 1)
+        r = np.full(n_bins, -np.inf)
+        np.maximum.at(r, k, dist)
+        reach.append(np.where(np.isfinite(r), r, np.nan))
+    return DihedralReference(
+        e.id,
+        float(e.confidence),
+        (f0.id, f1.id),
+        a,
+        b,
+        (n0, n1),
+        (depths[0], depths[1]),
+        angle,
+        reach_at=0.5 * (bins[:-1] + bins[1:]),
+        reach=(reach[0], reach[1]),
+    )
 
 
 def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:

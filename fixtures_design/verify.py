@@ -94,6 +94,26 @@ class EvidenceConfig:
     noise_coeff_per_m: float = 0.0015  # the depth noise law sigma = coeff * z^2 (z in metres; the sensor's)
     n_sigma: float = 3.0  # a point counts when it lies deeper inside the fixture than this many noise sigmas
     max_points: int = 10  # designs with more such points are refused (flying pixels, speckle tolerated)
+    opening_tol_mm: float = 0.95  # mm: a pin may be at most this much wider than the opening its hole's plane shows
+    opening_tol_rel: float = 0.015  # ... plus this share of the hole's radius (`hole_opening`; the rim's pixels reach
+    # further into a large hole's opening). From the training and validation pins (fixture bench seeds 7100 and
+    # 7200, corpus train and validation splits; docs/fixtures.md, "Pins: the opening the plane shows"): the pins
+    # that seated were at most 0.68 mm wider than the opening on holes under 20 mm radius and 0.9-1.3 mm on holes
+    # of 54-94 mm; the pins fitted 2-2.6 mm too wide were 1.03-1.98 mm wider (the 1.03 mm one stays)
+    opening_level_sigmas: float = 2.0  # the opening is bounded by the points within this many depth-noise sigmas of
+    # the hole's plane, along its axis (the plane round the rim, the wall's top)
+    opening_step_m: float = 0.00025  # metres: grid step of the largest-empty-circle search
+    wall_skip_m: float = 0.001  # metres below the rim where a hole's wall points start (`wall_inside`; the rim's
+    # mixed pixels above)
+    wall_band_rel: float = 0.5  # wall points lie within this share of the hole's radius inside it ...
+    wall_band_m: float = 0.003  # ... and this many metres outside it
+    wall_min_sigma_m: float = 5e-5  # metres: the least radial noise sigma of a wall point
+    max_wall_share: float = 0.10  # a pin whose hole's wall points lie deeper inside it than n_sigma of their
+    # radial noise in more than this share (and at least min_wall_points of them) is refused. Training and
+    # validation pins (as opening_tol_mm): the pins that seated had at most 7.4 % of their wall points there (27
+    # points), the pins too wide for a narrower section (a counterbore's step the fit merged, a hole fitted
+    # 0.5-3.4 mm too wide) 9-13 %
+    min_wall_points: int = 4  # (count)
 
 
 def observed_inside(
@@ -133,3 +153,86 @@ def observed_inside(
     margin = config.n_sigma * config.noise_coeff_per_m * z[sub] ** 2 * fixture.fmap.scale
     deep = depth > margin
     return int(round(deep.sum() * len(idx) / len(sub))), float(depth[deep].max()) if deep.any() else 0.0
+
+
+def _along_axis(
+    center: np.ndarray, axis: np.ndarray, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(unit axis, the points in front of the camera (N, 3), their offsets from ``center`` (N, 3), their heights
+    along the axis (N,)); camera frame, metres."""
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    p = np.asarray(points, float).reshape(-1, 3)
+    p = p[p[:, 2] > 0]
+    v = p - np.asarray(center, float)
+    return a, p, v, v @ a
+
+
+def hole_opening(
+    center: np.ndarray, axis: np.ndarray, radius: float, points: np.ndarray, config: EvidenceConfig = EvidenceConfig()
+) -> float | None:
+    """Radius (metres) of the largest circle on a hole's plane that holds none of the scan's points lying at the
+    plane's level, its centre within ``radius`` of the hole's axis: how wide the opening is as the depth shows it.
+
+    center: (3,) the rim's centre on the plane; axis: (3,) unit, into the hole; radius: the fitted hole's radius
+    (metres); points: the scan's observed points of the part (camera frame, metres, (N, 3)). A point counts when it
+    lies within ``config.opening_level_sigmas`` depth-noise sigmas of the plane along the axis: the plane round the
+    rim and the wall's top edge bound the opening, and a hole fitted too wide (a short arc of its wall seen) has
+    them inside its rim. The rim's own pixels reach up to about a pixel into the opening, so the value errs small
+    by that much; where the plane round the hole is not seen it errs large. None: no point at the plane's level
+    within three radii of the axis.
+    """
+    from scipy.spatial import cKDTree
+
+    a, p, v, t = _along_axis(center, axis, points)
+    sigma = config.noise_coeff_per_m * p[:, 2] ** 2
+    x = np.cross(a, [1.0, 0.0, 0.0])
+    if np.linalg.norm(x) < 0.1:
+        x = np.cross(a, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(a, x)
+    q = np.c_[v @ x, v @ y][np.abs(t) <= config.opening_level_sigmas * sigma]
+    q = q[np.linalg.norm(q, axis=1) <= 3.0 * radius]
+    if not len(q):
+        return None
+    g = np.arange(-radius, radius + 0.5 * config.opening_step_m, config.opening_step_m)
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    grid = grid[np.linalg.norm(grid, axis=1) <= radius]
+    dist, _ = cKDTree(q).query(grid)
+    return float(dist.max())
+
+
+def wall_inside(
+    center: np.ndarray,
+    axis: np.ndarray,
+    radius: float,
+    pin_radius: float,
+    depth: float,
+    points: np.ndarray,
+    config: EvidenceConfig = EvidenceConfig(),
+) -> tuple[int, int]:
+    """(inside, wall): how many of a hole's wall points lie inside a pin of ``pin_radius`` on its axis by more
+    than ``config.n_sigma`` sigmas of their radial noise, of how many wall points (camera frame, metres).
+
+    Wall points: the scan's points from ``wall_skip_m`` below the rim (``center``, on the plane) to ``depth`` along
+    ``axis``, between (1 - ``wall_band_rel``) x ``radius`` and ``radius`` + ``wall_band_m`` from the axis. A point's
+    radial noise is its depth noise (``noise_coeff_per_m`` z^2) along its camera ray, projected on the direction
+    away from the axis (at least ``wall_min_sigma_m``): a wall seen along the axis is measured across it far better
+    than along the ray. A fitted cylinder that merged a counterbore with the narrower hole below, or a hole fitted
+    too wide from a short arc of its wall, leaves the wall's own points inside the pin.
+    """
+    a, p, v, t = _along_axis(center, axis, points)
+    radial = v - np.outer(t, a)
+    rad = np.linalg.norm(radial, axis=1)
+    wall = (
+        (t > config.wall_skip_m)
+        & (t < depth)
+        & (rad > (1.0 - config.wall_band_rel) * radius)
+        & (rad < radius + config.wall_band_m)
+    )
+    if not wall.any():
+        return 0, 0
+    p, rad, radial = p[wall], rad[wall], radial[wall]
+    ray = p / np.linalg.norm(p, axis=1, keepdims=True)
+    along = np.abs(np.sum(ray * radial, axis=1)) / np.maximum(rad, 1e-12)
+    sigma = np.maximum(config.noise_coeff_per_m * p[:, 2] ** 2 * along, config.wall_min_sigma_m)
+    return int(np.sum(rad < pin_radius - config.n_sigma * sigma)), int(len(p))

@@ -128,3 +128,33 @@ def test_fixture_kinds_choose_what_is_designed(tmp_path: Path) -> None:
     assert {d["kind"] for row in r["rows"] for d in row["designs"]} == {"cradle"}
     assert set(r["summary"]["1"]) == {"cradle", "all"} and r["summary"]["1"]["cradle"]["designs"] == 1
     assert "| 1 | cradle | 1 |" in res.output and "| corner |" not in res.output
+
+
+def test_stage_fixtures_on_a_corpus_split(tmp_path: Path) -> None:
+    """--suite corpus-val --n 1: the first scan of the corpus validation split as the suites render it (a real CAD
+    part, view 0, 320 x 240, oracle segmentation): its corner is designed and, pushed home, holds the true part
+    without cutting it; the suites' own options and --families refuse."""
+    from v2c.synth.corpus import SPLIT_FILE, read_split
+
+    if not (Path(__file__).resolve().parents[2] / "shared" / "data" / "cad_corpus").is_dir():
+        pytest.skip("CAD corpus not found (../shared/data/cad_corpus next to the repository)")
+    out = tmp_path / "fx.json"
+    args = ["bench", "--stage", "fixtures", "--suite", "corpus-val", "--n", "1", "--size", "320x240"]
+    args += ["--segmentation", "oracle", "--fixture-kinds", "corner", "--cache", str(tmp_path / "cache")]
+    res = CliRunner().invoke(main, [*args, "--json", str(out), "-q"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    assert "1 scans of the corpus-val split's corpus parts" in res.output
+    r = json.loads(out.read_text())
+    assert r["config"]["suite"] == "corpus-val"
+    (row,) = r["rows"]
+    assert row["family"] == "cad"
+    scan = Path(row["scan"])
+    val = {Path(p.file).stem for p in read_split(SPLIT_FILE) if p.split == "val"}
+    assert scan.name == "scan_00000" and scan.parent.name.rsplit("_", 1)[0] in val
+    (d,) = row["designs"]
+    # The part's corner (oracle segmentation), pushed home: it holds the true part without cutting it.
+    assert d["kind"] == "corner" and d["ok"] and d["seat_ok"]
+    assert d["seated_touches"] and not d["seated_cuts"] and d["seated_mating_median_mm"] < 0.5
+    for extra in (["--families", "train"], ["--views", "3"]):
+        res = CliRunner().invoke(main, ["bench", "--stage", "fixtures", "--suite", "corpus-val", *extra])
+        assert res.exit_code == 2 and "does not apply to --stage fixtures" in res.output

@@ -172,3 +172,47 @@ def test_cradle_refuses_a_cylinder_standing_in_a_plate_and_keeps_a_lying_rod():
     assert resting_plane(vb, fx.reference, fx.fmap, up_vector(vb, fx.fmap)) is None
     truth = transformed(rod, camera_mm_matrix(fx.fmap))
     assert interference(fx, truth)[1] < 1e-3
+
+
+def _ledge_block() -> object:
+    """A 60 x 40 x 20 mm block (its own frame, Z up) with a 15 mm riser on its top whose front wall runs askew,
+    leaving a ledge along the front edge (Y = -20) that narrows from 20 mm (X = -30) to 6 mm (X = +30)."""
+    from build123d import Box, Plane, Polyline, Pos, extrude, make_face
+
+    base = Pos(0, 0, 10) * Box(60, 40, 20)
+    outline = Polyline((-30, 0), (30, -14), (30, 20), (-30, 20), close=True)
+    riser = extrude(make_face(Plane.XY.offset(20) * outline), 15)
+    return base + riser
+
+
+def test_a_corner_leg_stops_short_of_where_its_ledge_narrows():
+    """The corner on the ledge's front edge (ground-truth VB-Rep, the kind's own 0.2 mm clearance): its ledge leg
+    ends 3 mm short of the ledge's narrowest width over the block's span (40 mm centred: 8.3 mm at X = +20), so the
+    locator clears the riser and, pushed home, holds the true part without cutting it; with the leg from the
+    ledge's widest reach anywhere along the edge (the design before) it runs 15 mm into the riser's wall."""
+    from dataclasses import replace
+
+    from fixtures_design.references import select_references
+    from fixtures_design.seat import seat_part
+
+    from scenes.truth import posed_part, vbrep_from_shape
+
+    part, axes = posed_part(_ledge_block(), elevation_deg=35.0, azimuth_deg=-70.0)
+    vb = vbrep_from_shape(part, axes)
+    # The ledge's front edge: along X, between the ledge (facing up) and the front face (facing -Y).
+    (ref,) = [
+        r
+        for r in select_references(vb, ["dihedral"])
+        if abs(r.direction @ axes[0]) > 0.99
+        and sorted(round(2 * n @ axes[2] + n @ axes[1]) for n in r.normals) == [-1, 2]
+    ]
+    fx = design_fixture(vb, "corner", reference=ref, clearance_k=0.0)
+    ledge = next(i for i, n in enumerate(ref.normals) if n @ axes[2] > 0.99)
+    assert fx.notes["leg_mm"][ledge] == pytest.approx(20 - 14 * 50 / 60 - 3.0, abs=0.3)
+    truth = transformed(part, camera_mm_matrix(fx.fmap))
+    assert interference(fx, truth)[1] < 1e-3
+    seat = seat_part(fx, truth)
+    assert seat.ok and seat.move_mm < 0.5
+    before = design_fixture(vb, "corner", reference=replace(ref, reach_at=np.zeros(0)), clearance_k=0.0)
+    assert before.notes["leg_mm"][ledge] == pytest.approx(15.0)
+    assert interference(before, truth)[1] > 0.01

@@ -5,12 +5,14 @@ The corner of a generated bracket (320 x 240, ground-truth VB-Rep) is moved 3 mm
 would put it: designed on that reference the locator cuts into the true part (gt/part.step); given the scan's own
 points of the part, `design_fixture` refuses it, and still designs the corner on the true reference, which does
 not cut. A block's nest on a ground height read 2 mm too high cuts with a floor at the ground, not with the default
-floor gap.
+floor gap. A flange's bolt hole fitted too wide gives a pin that cuts and cannot be seated: the plane round the rim
+or the wall's own points lie inside it, and it is refused; the true hole's pin is kept and seats.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,12 +29,17 @@ from scenes.truth import synthetic_scan, vbrep_from_scan
 OFFSET_M = 0.003
 
 
-@pytest.fixture(scope="module")
-def bracket(tmp_path_factory: pytest.TempPathFactory) -> tuple:
-    path = synthetic_scan(tmp_path_factory.mktemp("evidence_scans"), "bracket", 1)
+def _truth_and_points(folder: Path, family: str, seed: int) -> tuple:
+    """(ground-truth VB-Rep, true part in the camera frame, the scan's observed points) of a generated scan."""
+    path = synthetic_scan(folder, family, seed)
     vb, truth_cam = vbrep_from_scan(path)
     scan = load_scan(path)
     return vb, truth_cam, scan.points()[scan.valid]
+
+
+@pytest.fixture(scope="module")
+def bracket(tmp_path_factory: pytest.TempPathFactory) -> tuple:
+    return _truth_and_points(tmp_path_factory.mktemp("evidence_scans"), "bracket", 1)
 
 
 def test_a_reference_moved_into_the_part_cuts_and_is_refused(bracket: tuple) -> None:
@@ -78,3 +85,49 @@ def test_a_nest_on_a_ground_read_too_high_does_not_cut(tmp_path_factory: pytest.
     fx = design_fixture(vb, "nest", NestParams(), ground_height=ground)
     assert interference(fx, truth)[1] < 1e-3
     assert check_mating(fx, truth, max_points_per_face=8).median < 1.0
+
+
+@pytest.fixture(scope="module")
+def flange(tmp_path_factory: pytest.TempPathFactory) -> tuple:
+    return _truth_and_points(tmp_path_factory.mktemp("evidence_pins"), "flange", 0)
+
+
+@pytest.mark.parametrize(
+    ("radius_error_mm", "refusal"),
+    [(2.0, "wider than the opening the hole's plane shows"), (1.5, "wall points lie inside the pin")],
+)
+def test_a_hole_fitted_too_wide_gives_a_pin_that_is_refused(
+    flange: tuple, radius_error_mm: float, refusal: str
+) -> None:
+    """A generated flange's bolt hole (ground-truth VB-Rep) fitted 2 mm / 1.5 mm too wide, as a short arc of its
+    wall can fit it: its pin cuts into the true part and no move seats the part on it. Given the scan's points, the
+    plane round the rim lies inside the pin (2 mm), or the wall's own points do (1.5 mm), and the pin is refused."""
+    from fixtures_design.seat import seat_part
+
+    vb, truth_cam, points = flange
+    ref = design_fixture(vb, "pin", points=points).reference
+    wrong = replace(ref, radius=ref.radius + radius_error_mm / 1000.0)
+    bad = design_fixture(vb, "pin", reference=wrong)
+    truth = transformed(truth_cam, camera_mm_matrix(bad.fmap))
+    assert interference(bad, truth)[1] > 0.05
+    assert not seat_part(bad, truth).ok
+    with pytest.raises(ValueError, match=refusal):
+        design_fixture(vb, "pin", reference=wrong, points=points)
+
+
+def test_the_true_hole_keeps_its_pin_which_seats(flange: tuple) -> None:
+    from fixtures_design.seat import seat_part
+    from fixtures_design.verify import hole_opening, wall_inside
+
+    vb, truth_cam, points = flange
+    fx = design_fixture(vb, "pin", points=points)
+    ref = fx.reference
+    opening = hole_opening(ref.center, ref.axis, ref.radius, points)
+    assert opening is not None and abs(opening - ref.radius) < 0.001  # the plane's opening is the hole, within 1 mm
+    n_in, n_wall = wall_inside(
+        ref.center, ref.axis, ref.radius, fx.notes["pin_radius_mm"] / 1000.0, fx.notes["depth_mm"] / 1000.0, points
+    )
+    assert n_wall > 0 and n_in == 0
+    truth = transformed(truth_cam, camera_mm_matrix(fx.fmap))
+    assert seat_part(fx, truth).ok
+    assert interference(fx, truth)[1] < 1e-3

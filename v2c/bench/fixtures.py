@@ -56,7 +56,7 @@ def _default_k() -> tuple[float, ...]:
 class FixtureBenchConfig:
     """One run of the fixture bench. Lengths in millimetres, angles in degrees, areas in pixels."""
 
-    n: int = 20  # scans
+    n: int | None = 20  # scans (with a ``suite``: the first n of its scans, None every one)
     seed: int = 7100  # generator seed (a training seed: never 0, the benchmarks' seed)
     families: tuple[str, ...] = ("block", "shaft", "flange", "knob", "turned", "bracket")  # drawn uniformly
     noise: str = "sensor"
@@ -81,6 +81,9 @@ class FixtureBenchConfig:
     probe_rel: float = 0.05  # ... and this share of the radius (fraction)
     probe_directions: int = 36  # directions round the axis probed for a hole's closure (count)
     cache_dir: Path | None = None  # None: v2c.bench.cache.default_cache_dir()
+    suite: str | None = None  # a CAD corpus split instead of the generated ``families``: "corpus-train",
+    # "corpus-val" (the splits one may look at) or "unseen" (the test split's parts only; its leave-out families are
+    # ``families="leave-out"``), rendered as `v2c.bench.suite` renders them (two views per part, the suites' cache)
     seat_clearance_factor: float = 3.0  # a seat moving the true part more than this x the clearance + seat_bound_mm
     seat_bound_mm: float = 2.0  # (mm; + a nest's floor gap) fails the design: the lead's rule for issue 18, not tuned
 
@@ -102,12 +105,32 @@ def cache_folder(cfg: FixtureBenchConfig) -> Path:
     return (cfg.cache_dir or default_cache_dir()) / name
 
 
+FIXTURE_SUITES = ("corpus-train", "corpus-val", "unseen")  # `FixtureBenchConfig.suite`'s values
+
+
 def prepare_scans(cfg: FixtureBenchConfig, log: Callable[[str], None] | None = None) -> list[Path]:
     """The ``n`` scan folders of a run, rendering the missing ones (one process; scan i is a function of
-    (seed, i, families))."""
+    (seed, i, families)); with ``cfg.suite`` the corpus split's scans as `v2c.bench.suite` plans them (a part
+    that cannot be rendered is left out and logged)."""
     from v2c.bench.cache import scan_complete
     from v2c.synth.dataset import SynthConfig, generate_scan, scan_name
 
+    if cfg.suite is not None:
+        from v2c.bench.config import BenchConfig
+        from v2c.bench.suite import CORPUS, SuiteConfig, plan_scans, render_missing
+
+        if cfg.suite not in FIXTURE_SUITES:
+            raise ValueError(f"suite {cfg.suite!r}: expected one of {', '.join(FIXTURE_SUITES)}")
+        bench = BenchConfig(noise=cfg.noise, size=cfg.size, cache_dir=cfg.cache_dir, ablations=("full",))
+        planned, _ = plan_scans(SuiteConfig(suite=cfg.suite, bench=bench, families=()))
+        planned = [s for s in planned if s.source == CORPUS][: cfg.n]
+        errors = render_missing(planned, jobs=1, progress=log is not None)
+        for label, err in errors.items():
+            if log:
+                log(f"{label}: not rendered: {err}")
+        return [s.path for s in planned if s.label not in errors]
+    if cfg.n is None:
+        raise ValueError("n: generated families need a number of scans (None is for a suite's every scan)")
     folder = cache_folder(cfg)
     synth = SynthConfig(width=cfg.size[0], height=cfg.size[1], noise=cfg.noise, families=tuple(cfg.families))
     dirs = []

@@ -166,7 +166,8 @@ def _size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, 
     "--ablation); vbrep: Chamfer and edge-type accuracy (matched, strict, coverage) per part family. "
     "Without scans: synth: the scan generator's speed (--n timed scans of --size, --noise, --families); "
     "parts: the feature-based part builder (--n parts of --families: valid share, parts per second). "
-    "fixtures: --n generated scans of --families, each kind of fixture designed with the default settings on "
+    "fixtures: --n generated scans of --families (or, with --suite corpus-train / corpus-val / unseen, the "
+    "corpus split's scans), each kind of fixture designed with the default settings on "
     "the reconstruction and checked against the true part (cut rate, touch rate, pin / cradle "
     "qualification).",
 )
@@ -320,7 +321,7 @@ def command(
         raise click.UsageError("--fixture-kinds belongs to --stage fixtures")
     if stage != "pipeline":
         for name, flag in (("real_dir", "--real"), ("suite", "--suite"), ("reliability", "--reliability")):
-            if given(name):
+            if given(name) and not (name == "suite" and stage == "fixtures"):
                 raise click.UsageError(f"{flag} belongs to --stage pipeline, not --stage {stage}")
     if stage in ("fit", "vbrep", "synth", "parts"):
         for name, flag in (("weights", "--weights"), ("figure_dir", "--figures"), ("no_step", "--no-step")):
@@ -335,13 +336,22 @@ def command(
             ("figure_dir", "--figures"),
             ("no_step", "--no-step"),
             ("ablation", "--ablation"),
+            ("views", "--views"),
+            ("corpus_dir", "--corpus"),
+            ("parts", "--parts"),
+            ("unseen_families", "--unseen-families"),
+            ("family_scans", "--family-scans"),
+            ("appearance", "--appearance"),
         ):
             if given(name):
                 raise click.UsageError(f"{flag} does not apply to --stage fixtures (it renders its own scans)")
         if len(segmentation) != 1:
             raise click.UsageError("--stage fixtures takes one --segmentation method")
+        if suite != "family" and given("families"):
+            raise click.UsageError(f"--families does not apply to --stage fixtures --suite {suite} (a corpus split)")
         _fixtures_stage(
-            n=n,
+            n=n if suite == "family" or given("n") else None,
+            suite=None if suite == "family" else suite,
             seed=seed,
             noise=noise,
             size=size,
@@ -670,7 +680,8 @@ def _family_names(stage: str, families: str) -> tuple[str, ...]:
 
 def _fixtures_stage(
     *,
-    n: int,
+    n: int | None,
+    suite: str | None,
     seed: int,
     noise: str,
     size: tuple[int, int],
@@ -683,7 +694,8 @@ def _fixtures_stage(
     json_out: Path | None,
     progress: bool,
 ) -> None:
-    """``--stage fixtures``: `v2c.bench.fixtures.run` on --n scans of --families."""
+    """``--stage fixtures``: `v2c.bench.fixtures.run` on --n scans of --families, or on a corpus split's scans
+    (``--suite corpus-train`` / ``corpus-val`` / ``unseen``: the first --n, or every one)."""
     from v2c.bench import fixtures as F
     from v2c.bench import run
 
@@ -708,6 +720,7 @@ def _fixtures_stage(
         extra["clearance_k"] = ks
     cfg = F.FixtureBenchConfig(
         n=n,
+        suite=suite,
         seed=seed,
         families=families,
         noise=noise,
@@ -719,8 +732,9 @@ def _fixtures_stage(
     )
     result = F.run(cfg, F.stderr_log if progress else None)
     sha = result["weights_sha1"]
+    what = f"the {suite} split's corpus parts" if suite else ", ".join(families)
     click.echo(
-        f"{result['scans']} scans of {', '.join(families)} ({result['failed_scans']} failed), seed {seed}, {noise} "
+        f"{result['scans']} scans of {what} ({result['failed_scans']} failed), seed {seed}, {noise} "
         f"noise, {size[0]}x{size[1]}, segmentation {segmentation}"
         + (f" (weights sha1 {sha[:10]})" if segmentation == "learned" and sha else "")
     )
