@@ -102,7 +102,8 @@ class EvidenceConfig:
     # of 54-94 mm; the pins fitted 2-2.6 mm too wide were 1.03-1.98 mm wider (the 1.03 mm one stays)
     opening_level_sigmas: float = 2.0  # the opening is bounded by the points within this many depth-noise sigmas of
     # the hole's plane, along its axis (the plane round the rim, the wall's top)
-    opening_step_m: float = 0.00025  # metres: grid step of the largest-empty-circle search
+    opening_step_m: float = 0.00025  # metres: grid step of the largest-empty-circle search ...
+    opening_max_steps: int = 400  # ... at least the radius over this many steps (count; a hole fitted huge)
     wall_skip_m: float = 0.001  # metres below the rim where a hole's wall points start (`wall_inside`; the rim's
     # mixed pixels above)
     wall_band_rel: float = 0.5  # wall points lie within this share of the hole's radius inside it ...
@@ -194,7 +195,8 @@ def hole_opening(
     q = q[np.linalg.norm(q, axis=1) <= 3.0 * radius]
     if not len(q):
         return None
-    g = np.arange(-radius, radius + 0.5 * config.opening_step_m, config.opening_step_m)
+    step = max(config.opening_step_m, radius / config.opening_max_steps)
+    g = np.arange(-radius, radius + 0.5 * step, step)
     grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
     grid = grid[np.linalg.norm(grid, axis=1) <= radius]
     dist, _ = cKDTree(q).query(grid)
