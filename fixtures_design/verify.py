@@ -97,7 +97,7 @@ class EvidenceConfig:
     opening_tol_mm: float = 0.95  # mm: a pin may be at most this much wider than the opening its hole's plane shows
     opening_tol_rel: float = 0.015  # ... plus this share of the hole's radius (`hole_opening`; the rim's pixels reach
     # further into a large hole's opening). From the training and validation pins (fixture bench seeds 7100 and
-    # 7200, corpus train and validation splits; docs/fixtures.md, "Pins: the opening the plane shows"): the pins
+    # 7200, corpus train and validation splits; docs/fixtures.md, "Pins that the scan contradicts"): the pins
     # that seated were at most 0.68 mm wider than the opening on holes under 20 mm radius and 0.9-1.3 mm on holes
     # of 54-94 mm; the pins fitted 2-2.6 mm too wide were 1.03-1.98 mm wider (the 1.03 mm one stays)
     opening_level_sigmas: float = 2.0  # the opening is bounded by the points within this many depth-noise sigmas of
