@@ -436,12 +436,7 @@ class EdgeBuilder:
             g = self.geoms.get(eid)
             if g is None:
                 return float("nan")
-            ts = np.linspace(g.t0, g.t1, n)
-            if g.curve is not None:
-                xyz = curve_points(g.curve, ts)
-            else:
-                uv2 = pcurve_points(g.pcurve, ts)
-                xyz = self.surfaces[g.face].evaluate(uv2)
+            xyz = self._geom_points(g, n)
             pts.append(xyz[::-1] if rev else xyz)
         uv = s.uv(np.concatenate(pts))
         if not np.all(np.isfinite(uv)):

@@ -203,8 +203,9 @@ def _basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(axis, u)
 
 
-def _polar(points: np.ndarray, center: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """(N, 2) coordinates of points in the plane through ``center`` normal to ``axis`` (``_basis`` axes)."""
+def plane_coords(points: np.ndarray, center: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(N, 2) coordinates of points in the plane through ``center`` normal to the unit ``axis`` (``_basis``
+    axes)."""
     u, w = _basis(axis)
     rel = np.asarray(points, float) - center
     return np.stack([rel @ u, rel @ w], axis=1)
@@ -337,7 +338,7 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     pc = face_samples(cyl)
     if not len(pc) or not len(pln.mesh_triangles):
         return "a face has no mesh: hole or boss unknown"
-    xy = _polar(pc, center, axis)
+    xy = plane_coords(pc, center, axis)
     ang_c = np.arctan2(xy[:, 1], xy[:, 0])
     nbins = 36
     bins_c = np.unique(np.floor((ang_c + np.pi) / (2 * np.pi) * nbins).astype(int) % nbins)
@@ -348,7 +349,7 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     front = bool(np.median(h) > 0)  # the wall stands in front of the plane (outside the material)
     # Probe the plane face just inside and just outside the rim, at the angles the cylinder face covers.
     tri = np.asarray(pln.mesh_triangles, int).reshape(-1, 3)
-    v2 = _polar(_face_points(pln), center, axis)
+    v2 = plane_coords(_face_points(pln), center, axis)
     phis = (bins_c + 0.5) * 2 * np.pi / nbins - np.pi
     ring = np.stack([np.cos(phis), np.sin(phis)], axis=1) * radius
     inner = sum(int(_inside_triangles(ring * (1 - f), v2[tri]).sum()) for f in cfg.rim_probes)

@@ -12,6 +12,7 @@ from build123d import Face, Shape, Vertex
 from OCP.BRepExtrema import BRepExtrema_DistShapeShape
 
 from fixtures_design.model import Fixture, common_volume, sample_face, sample_triangles
+from fixtures_design.references import plane_coords
 from v2c.vbrep.model import VBRep
 
 
@@ -184,14 +185,9 @@ def hole_opening(
     """
     from scipy.spatial import cKDTree
 
-    a, p, v, t = _along_axis(center, axis, points)
+    a, p, _, t = _along_axis(center, axis, points)
     sigma = config.noise_coeff_per_m * p[:, 2] ** 2
-    x = np.cross(a, [1.0, 0.0, 0.0])
-    if np.linalg.norm(x) < 0.1:
-        x = np.cross(a, [0.0, 1.0, 0.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(a, x)
-    q = np.c_[v @ x, v @ y][np.abs(t) <= config.opening_level_sigmas * sigma]
+    q = plane_coords(p, center, a)[np.abs(t) <= config.opening_level_sigmas * sigma]
     q = q[np.linalg.norm(q, axis=1) <= 3.0 * radius]
     if not len(q):
         return None
