@@ -7,7 +7,7 @@ import numpy as np
 from build123d import Shape
 from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
-from OCP.GeomAbs import GeomAbs_Circle, GeomAbs_Cylinder, GeomAbs_Line, GeomAbs_Plane
+from OCP.GeomAbs import GeomAbs_Circle, GeomAbs_Cone, GeomAbs_Cylinder, GeomAbs_Line, GeomAbs_Plane, GeomAbs_Torus
 from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
@@ -45,9 +45,14 @@ def face_mesh(face: object) -> tuple[np.ndarray, np.ndarray]:
     return v, t
 
 
-def face_primitive(face: object) -> dict | None:
-    """Primitive dict (camera frame, metres) of a planar or cylindrical face; None for other types."""
+def face_primitive(face: object, curved: bool = False) -> dict | None:
+    """Primitive dict (camera frame, metres) of a planar or cylindrical face; with ``curved`` also of a torus or
+    cone face (the scan generator's parameters, `v2c.synth.occ.face_primitive`); None for other types."""
     s = BRepAdaptor_Surface(face)
+    if curved and s.GetType() in (GeomAbs_Torus, GeomAbs_Cone):
+        from v2c.synth.occ import face_primitive as generator_primitive
+
+        return generator_primitive(face, M_PER_MM)
     if s.GetType() == GeomAbs_Plane:
         ax = s.Plane().Axis()
         n = _xyz(ax.Direction())

@@ -11,6 +11,10 @@ never references them. Among intersection edges with ``confidence >= min_confide
   hole's wall lies behind the plane (on its material side) and the plane's face lies outside the circle; a boss's
   wall lies in front of the plane (the boss's base) or behind it with the plane's face inside the circle (the boss's
   end cap).
+- **boss** also: a circle where a convex cylinder meets a coaxial torus, cone or cylinder (``site`` "shoulder"):
+  a shaft's filleted or chamfered end, or a step to a coaxial section. A cradle needs the cylinder's axis, radius
+  and the end its seen length starts from, which such a circle gives as well as a plane's; a turned part seldom
+  shows a flat end face to the camera.
 
 Everything here is in the VB-Rep's camera frame (OpenCV: x right, y down, z forward), metres. Plane normals are
 oriented outwards, i.e. towards the camera: a face the camera sees has its outward normal facing the viewer.
@@ -60,6 +64,8 @@ class SelectionConfig:
     # loses its edge pixels). From the 26 hole rims of the training scans (seed 7100, 24 scans): the ring at 1.05 x
     # radius lay all on the plane on 1 of them (so every other pin got a flange over the opening only); by
     # 1.2-1.3 x radius 25 of 26 rings lay on it in >= 94 % of the directions
+    shoulder_axis_tol_rel: float = 0.15  # fraction of the cylinder's radius: how far a torus', cone's or second
+    # cylinder's axis may pass from the cylinder's axis (at the circle) for their circle to be a shoulder
     reach_bin_frac: float = 0.02  # fraction of VBRep.scale: bin length along a dihedral edge over which each face's
     # reach from the edge is measured (`DihedralReference.reach`)
 
@@ -102,15 +108,17 @@ class DihedralReference:
 
 @dataclass(frozen=True)
 class CircleReference:
-    """A circle where a cylinder meets a plane (camera frame, metres).
+    """A circle where a cylinder meets a plane, or a boss's shoulder (camera frame, metres).
 
     center: (3,) the circle's centre (on the plane). axis: (3,) unit, from the circle into the cylinder's extent
     (into a hole; along a boss's body). radius: metres. plane_normal: (3,) the plane's outward unit normal.
     extent: how far the cylinder face reaches from the circle along ``axis`` (metres; a lower bound of a hole's
     depth or a boss's length, from what the view shows). site: where on the feature the circle is: "rim" (a
-    hole's opening), "floor" (a blind hole's bottom), "base" (where a boss stands on the plane) or "cap" (a boss's
-    end face). land: for a hole's rim, the distance from the axis (metres) out to which the plane face surrounds
-    the rim all round (where a pin's flange may rest); the radius otherwise.
+    hole's opening), "floor" (a blind hole's bottom), "base" (where a boss stands on the plane), "cap" (a boss's
+    end face) or "shoulder" (where a convex cylinder meets a coaxial torus, cone or cylinder; ``plane_face`` is
+    then that face and ``plane_normal`` the axis pointing away from the cylinder). land: for a hole's rim, the
+    distance from the axis (metres) out to which the plane face surrounds the rim all round (where a pin's flange
+    may rest); the radius otherwise.
     """
 
     edge_id: int
@@ -384,6 +392,74 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     return CircleReference(e.id, float(e.confidence), kind, cyl.id, pln.id, center, into, radius, n, extent, site, land)
 
 
+def _shoulder(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
+    """A boss reference where a convex cylinder meets a coaxial torus, cone or cylinder (module docstring), or why
+    the edge is none. With two cylinders, each is tried and the one seen longer from the circle is taken."""
+    faces = [vb.faces[int(i)] for i in e.faces]
+    out: list[CircleReference] = []
+    why = ""
+    for cyl, other in ((faces[0], faces[1]), (faces[1], faces[0])):
+        if _ptype(cyl) != "cylinder":
+            continue
+        r = _shoulder_of(e, cyl, other, cfg)
+        if isinstance(r, str):
+            why = why or r
+        else:
+            out.append(r)
+    if not out:
+        return why or "no cylinder"
+    return max(out, key=lambda r: r.extent)
+
+
+def _shoulder_of(e: VEdge, cyl: VFace, other: VFace, cfg: SelectionConfig) -> CircleReference | str:
+    cp = cyl.primitive["params"]
+    axis, o, radius = _unit(cp["axis"]), np.asarray(cp["origin"], float), float(cp["radius"])
+    op = other.primitive["params"]
+    oa, oo = _unit(op["axis"]), np.asarray(op["origin"], float)
+    tilt = float(np.degrees(np.arccos(min(1.0, abs(axis @ oa)))))
+    if tilt > cfg.coaxial_tol_deg:
+        return f"the {_ptype(other)}'s axis is {tilt:.1f} deg off the cylinder's: not a shoulder circle"
+    pts = np.asarray(e.polyline, float).reshape(-1, 3)
+    if not len(pts):
+        return "the edge has no samples"
+    center = o + axis * float(np.median((pts - o) @ axis))
+    rel = center - oo
+    off = float(np.linalg.norm(rel - (rel @ oa) * oa))  # the other axis' distance from the cylinder's at the circle
+    if off > cfg.shoulder_axis_tol_rel * radius:
+        return f"the {_ptype(other)}'s axis passes {1000 * off:.1f} mm from the cylinder's: not a shoulder circle"
+    pc = face_samples(cyl)
+    if not len(pc) or not len(cyl.mesh_triangles):
+        return "the cylinder face has no mesh"
+    q = pc - o
+    radial = q - np.outer(q @ axis, axis)
+    radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
+    to_cam = -pc / np.maximum(np.linalg.norm(pc, axis=1, keepdims=True), 1e-12)
+    if float(np.median(np.sum(radial * to_cam, axis=1))) <= 0:  # a hole's wall shows its far side
+        return "the cylinder is concave (a hole's wall): a shoulder needs a boss"
+    xy = plane_coords(pc, center, axis)
+    bins = np.unique(np.floor((np.arctan2(xy[:, 1], xy[:, 0]) + np.pi) / (2 * np.pi) * 36).astype(int) % 36)
+    span = 10.0 * len(bins)
+    if span < cfg.min_arc_deg:
+        return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a boss"
+    h = (pc - center) @ axis
+    into = axis if float(np.median(h)) > 0 else -axis
+    extent = float(np.abs(h).max())
+    return CircleReference(
+        e.id,
+        float(e.confidence),
+        ReferenceKind.BOSS,
+        cyl.id,
+        other.id,
+        center,
+        into,
+        radius,
+        -into,
+        extent,
+        "shoulder",
+        radius,
+    )
+
+
 def _select(
     vb: VBRep, wanted: set[ReferenceKind], min_confidence: float, cfg: SelectionConfig
 ) -> tuple[list[Reference], _Audit]:
@@ -405,6 +481,8 @@ def _select(
             r: Reference | str = _dihedral(vb, e, cfg)
         elif types == ["cylinder", "plane"]:
             r = _circle(vb, e, cfg)
+        elif ReferenceKind.BOSS in wanted and "cylinder" in types and set(types) <= {"cylinder", "torus", "cone"}:
+            r = _shoulder(vb, e, cfg)
         else:
             r = f"faces are {'/'.join(types)}: neither a plane/plane line nor a cylinder/plane circle"
         if isinstance(r, str):

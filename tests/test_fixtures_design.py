@@ -216,3 +216,78 @@ def test_a_corner_leg_stops_short_of_where_its_ledge_narrows():
     before = design_fixture(vb, "corner", reference=replace(ref, reach_at=np.zeros(0)), clearance_k=0.0)
     assert before.notes["leg_mm"][ledge] == pytest.approx(15.0)
     assert interference(before, truth)[1] > 0.01
+
+
+def _seen_meshes(vb):
+    """``vb`` with each face's mesh cut to the triangles that face the camera (outward winding), as a
+    reconstruction's meshes are: a ground-truth VB-Rep meshes whole faces, the far side of a rod too."""
+    from dataclasses import replace
+
+    faces = []
+    for f in vb.faces:
+        v, t = np.asarray(f.mesh_vertices), np.asarray(f.mesh_triangles).reshape(-1, 3)
+        n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+        faces.append(replace(f, mesh_triangles=t[(n * v[t].mean(axis=1)).sum(axis=1) < 0]))
+    return replace(vb, faces=faces)
+
+
+def _filleted_rod(radius_mm: float = 15.0, length_mm: float = 80.0, fillet_mm: float = 3.0, chamfer: bool = False):
+    """A round rod (its own frame, mm) lying on Z = 0 along X, its two end circles filleted (or chamfered): the
+    cylinder meets a torus (a cone) at each end, and no plane."""
+    from build123d import chamfer as chamfer_edges
+    from build123d import fillet
+
+    from scenes.truth import lying_rod
+
+    rod = lying_rod(length_mm, 2 * radius_mm)
+    ends = rod.edges().filter_by(lambda e: e.geom_type.name == "CIRCLE")
+    return chamfer_edges(ends, fillet_mm) if chamfer else fillet(ends, fillet_mm)
+
+
+@pytest.mark.parametrize("chamfer", [False, True])
+def test_a_cradle_takes_a_shafts_filleted_or_chamfered_end_as_its_boss(chamfer):
+    """A lying rod whose ends are filleted (chamfered) shows no cylinder/plane circle: its cylinder meets a torus
+    (a cone) at each end. That circle is a boss reference of site "shoulder" (the cylinder's radius, the axis into
+    its body, its seen length), and the cradle designed from it (ground-truth VB-Rep, default clearance) does not
+    cut the rod and, pushed home, holds it with its groove within the clearance."""
+    from fixtures_design.references import select_references
+    from fixtures_design.seat import seat_part
+
+    from scenes.truth import posed_part, vbrep_from_shape
+
+    rod, axes = posed_part(_filleted_rod(chamfer=chamfer), elevation_deg=30.0, azimuth_deg=-60.0)
+    vb = _seen_meshes(vbrep_from_shape(rod, axes, curved=True))
+    other = "cone" if chamfer else "torus"
+    assert {f.primitive["type"] for f in vb.faces} >= {"cylinder", other}
+    refs = select_references(vb, ["boss"])
+    assert refs and all(r.site == "shoulder" for r in refs)
+    for r in refs:
+        assert r.radius == pytest.approx(0.015, abs=1e-6)
+        assert abs(r.axis @ axes[0]) == pytest.approx(1.0, abs=1e-6)  # along the rod
+        assert 0.07 < r.extent < 0.08  # from one end circle to the other: 80 mm less the two blends
+    fx = design_fixture(vb, "cradle", frame="part")
+    assert fx.reference.site == "shoulder"
+    truth = transformed(rod, camera_mm_matrix(fx.fmap))
+    assert interference(fx, truth)[1] < 1e-3
+    seat = seat_part(fx, truth)
+    assert seat.ok and seat.move_mm < fx.params.clearance + 0.05
+
+
+def test_a_filleted_holes_rim_is_no_shoulder():
+    """A plate's vertical hole filleted at its rim: the hole's wall (concave, the camera sees its far side) meets
+    the fillet's torus coaxially, but a shoulder needs a boss, so it is no cradle reference."""
+    from build123d import Axis, Box, Cylinder, Pos, fillet
+
+    from fixtures_design import NoReferenceError
+    from fixtures_design.references import explain_edges, select_references
+
+    from scenes.truth import posed_part, vbrep_from_shape
+
+    plate = Pos(0, 0, 10) * Box(80, 80, 20) - Pos(0, 0, 10) * Cylinder(15, 20)
+    rim = plate.edges().filter_by(lambda e: e.geom_type.name == "CIRCLE").sort_by(Axis.Z)[-1]
+    part, axes = posed_part(fillet(rim, 3.0), elevation_deg=60.0, azimuth_deg=-60.0)
+    vb = _seen_meshes(vbrep_from_shape(part, axes, curved=True))
+    assert any(f.primitive["type"] == "torus" for f in vb.faces)
+    with pytest.raises(NoReferenceError, match="the cylinder is concave"):
+        select_references(vb, ["boss"])
+    assert "concave (a hole's wall)" in explain_edges(vb)

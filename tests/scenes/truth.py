@@ -38,12 +38,14 @@ def vbrep_from_shape(
     confidence: float = 0.95,
     part_size_m: float | None = None,
     deflection_mm: float = 0.2,
+    curved: bool = False,
 ) -> VBRep:
     """A ground-truth VB-Rep of ``shape`` (camera frame, millimetres) seen from the camera at the origin.
 
     axes_cam: (3, 3) rows = the part's X, Y, Z axes in the camera frame (the VB-Rep's ``frame``).
     visible: 0-based ``TopExp_Explorer`` indices of the faces seen (gt/faces.png - 1); default: every planar or
-    cylindrical face with a triangle facing the camera. Faces of other surface types are left out.
+    cylindrical face with a triangle facing the camera (with ``curved``, torus and cone faces too). Faces of other
+    surface types are left out.
     confidence: given to every face and intersection edge. Returns a VB-Rep in metres.
     """
     BRepMesh_IncrementalMesh(shape.wrapped, deflection_mm, False, 0.3, True)
@@ -55,7 +57,7 @@ def vbrep_from_shape(
     for i, f in enumerate(occ):
         fmap.Add(f)
         v, t = face_mesh(f)
-        prim = face_primitive(f)
+        prim = face_primitive(f, curved)
         if prim is None or (seen is not None and i not in seen) or (seen is None and not faces_the_camera(v, t)):
             continue
         d = np.asarray(prim["params"].get("normal", prim["params"].get("axis")), float)
