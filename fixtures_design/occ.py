@@ -47,12 +47,33 @@ def face_mesh(face: object) -> tuple[np.ndarray, np.ndarray]:
 
 def face_primitive(face: object, curved: bool = False) -> dict | None:
     """Primitive dict (camera frame, metres) of a planar or cylindrical face; with ``curved`` also of a torus or
-    cone face (the scan generator's parameters, `v2c.synth.occ.face_primitive`); None for other types."""
+    cone face (the parameters of the scan generator's primitives.json: a cone's origin is its apex, its axis points
+    from the apex towards the face); None for other types."""
     s = BRepAdaptor_Surface(face)
-    if curved and s.GetType() in (GeomAbs_Torus, GeomAbs_Cone):
-        from v2c.synth.occ import face_primitive as generator_primitive
-
-        return generator_primitive(face, M_PER_MM)
+    if curved and s.GetType() == GeomAbs_Torus:
+        t = s.Torus()
+        return {
+            "type": "torus",
+            "params": {
+                "origin": (_xyz(t.Axis().Location()) * M_PER_MM).tolist(),
+                "axis": _xyz(t.Axis().Direction()).tolist(),
+                "radius": t.MajorRadius() * M_PER_MM,
+                "minor_radius": t.MinorRadius() * M_PER_MM,
+            },
+        }
+    if curved and s.GetType() == GeomAbs_Cone:
+        c = s.Cone()
+        apex, axis = _xyz(c.Apex()), _xyz(c.Axis().Direction())
+        # the axis from the apex towards the face (OCCT's cone runs through its apex onto the other nappe)
+        mid = s.Value(
+            0.5 * (s.FirstUParameter() + s.LastUParameter()), 0.5 * (s.FirstVParameter() + s.LastVParameter())
+        )
+        if (_xyz(mid) - apex) @ axis < 0:
+            axis = -axis
+        return {
+            "type": "cone",
+            "params": {"origin": (apex * M_PER_MM).tolist(), "axis": axis.tolist(), "half_angle": abs(c.SemiAngle())},
+        }
     if s.GetType() == GeomAbs_Plane:
         ax = s.Plane().Axis()
         n = _xyz(ax.Direction())
