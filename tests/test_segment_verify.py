@@ -197,3 +197,36 @@ def test_a_curved_strip_whose_depth_is_not_flat_keeps_its_face() -> None:
     seg = _seg(learned, [0, PLANE_Z, CYL_Z], [0, 0.6, 0.65])
     out = verify_instances(seg, depth_seg, depth, K)
     assert out.num_instances == 2 and np.array_equal(out.instances, learned)
+
+
+def test_an_instance_no_one_primitive_explains_is_split_and_one_surface_is_not() -> None:
+    """One learned instance over a can's side and the plane behind it, seen on both sides of the can (the network
+    missed their boundaries): no one primitive holds 85 % of its points within the noise, so it is cut into the
+    can's side, within a few pixels of the truth, and the plane's two pieces left and right of it, each its own
+    instance, undecided planes of score 0 (their type is not the label's). The can's side alone, and the plane
+    alone, are each one surface and stay whole."""
+    from v2c.segment.verify import split_unexplained
+
+    rng = np.random.default_rng(11)
+    can = _can_side(rng)
+    on_can = can > 0
+    # a plane 30 mm behind the can's axis fills the columns the can leaves
+    plane = np.full((H, W), CAN_Z + 0.03) + rng.normal(0.0, NOISE_M, (H, W))
+    depth = np.where(on_can, can, plane)
+    one = _seg(np.ones((H, W), np.int32), [0, CYL_Z], [0, 0.7])
+    out = split_unexplained(one, depth, K_CAN)
+    assert out.num_instances == 3
+    first = out.instances == out.instances[H // 2, int(K_CAN[0, 2])]
+    assert np.count_nonzero(first ^ on_can) < 0.03 * on_can.sum()
+    for col in (2, W - 3):  # the plane's pieces left and right of the can
+        piece = out.instances[H // 2, col]
+        assert out.labels[piece] == PLANE_U and out.scores[piece] == 0.0
+        assert (depth[out.instances == piece] > CAN_Z + 0.02).all()
+    assert out.labels[out.instances[H // 2, int(K_CAN[0, 2])]] == CYL_Z  # the can's piece keeps its label
+    # one surface each: nothing to split
+    alone = _seg(on_can.astype(np.int32), [0, CYL_Z], [0, 0.7])
+    assert split_unexplained(alone, can, K_CAN) is alone
+    flat = _seg(np.ones((H, W), np.int32), [0, PLANE_Z], [0, 0.9])
+    assert split_unexplained(flat, _tilted_plane(rng), K) is flat
+    # off: the instance stays whole
+    assert split_unexplained(one, depth, K_CAN, VerifyConfig(explain_split=False)) is one

@@ -29,7 +29,7 @@ from v2c.segment.instances import InstanceConfig, extract_instances, feature_evi
 from v2c.segment.net import UNet, bf16_supported, load_weights
 from v2c.segment.refine import RefineConfig, absorb_fragments, refine_instances, remerge
 from v2c.segment.types import Segmentation
-from v2c.segment.verify import VerifyConfig, needs_regions, verify_instances
+from v2c.segment.verify import VerifyConfig, needs_regions, split_unexplained, verify_instances
 
 #: Environment variable choosing the network's arithmetic where ``LearnedConfig.bf16`` is None: "auto" (bf16
 #: where the CPU has it natively, else fp32), "fp32" or "bf16".
@@ -170,15 +170,17 @@ def segment_learned(
         region = part_region(scan, GeometricConfig())[0]
     seg = instances_from_prediction(scan, probs, bnd, cfg.instances, feat=feat, part=region)
     seg = refine_instances(seg, scan.depth, scan.K, probs, cfg.refine, normals=feat[3:6], ransac=ransac)
-    if not needs_regions(seg, scan.depth, scan.K, cfg.verify):
-        return seg
-    from v2c.segment.geometric import segment_geometric
+    if needs_regions(seg, scan.depth, scan.K, cfg.verify):
+        from v2c.segment.geometric import segment_geometric
 
-    seg = verify_instances(seg, segment_geometric(scan), scan.depth, scan.K, cfg.verify, ransac)
-    # the pieces that verification left (pieces it cut off, instances it did not merge) are judged once more
-    if cfg.refine.remerge:
-        return remerge(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
-    return absorb_fragments(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
+        seg = verify_instances(seg, segment_geometric(scan), scan.depth, scan.K, cfg.verify, ransac)
+        # the pieces that verification left (pieces it cut off, instances it did not merge) are judged once more
+        if cfg.refine.remerge:
+            seg = remerge(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
+        else:
+            seg = absorb_fragments(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
+    # last: an instance that no one primitive explains holds two surfaces (docs/segmentation.md)
+    return split_unexplained(seg, scan.depth, scan.K, cfg.verify, ransac)
 
 
 def instances_from_prediction(

@@ -32,6 +32,10 @@ the depth says one surface, whatever is printed on it. This step uses those regi
   ``merge_curved_score`` stay out (a knob's torus blend beside its cylinder), and a region holding two cylinders
   the network is sure of merges nothing (a shaft's coaxial sections a small radius step apart).
 
+- **instances no one primitive explains** (``explain_split``, `split_unexplained`, after the rest): an instance
+  that no one primitive holds within the noise is cut into the best primitive's inliers and the rest (the curved
+  instances the plane regions cannot split: a watering can's body, a boss and the flange it stands on).
+
 A region counts when it holds ``region_min_px`` valid pixels and is labelled a plane, or its own plane explains it
 within the noise (robust residual sigma within ``region_sigma`` sensor sigmas). Sensor sigma =
 ``noise_sigma_coeff`` z^2 (z in metres), the refine step's noise law. The depth regions cost a run of the
@@ -47,7 +51,7 @@ Merged instances keep the largest plane-labelled member's label (`refine._relabe
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -99,6 +103,16 @@ class VerifyConfig:
     # 296 px; the corpus-val split changes on one scan either way
     cylinder_label_score: float = 0.6  # ... and the merged instance, a cylinder label, scores at least this
     # ([0, 1]; FitConfig.label_score_min: a label the fit stage keeps)
+    explain_split: bool = True  # split an instance that no one primitive explains (`split_unexplained`)
+    explain_min_px: int = 300  # ... instances with fewer valid pixels are left alone (pixels)
+    explain_share: float = 0.85  # ... one primitive (its label's type, else the best of every type) that holds
+    # this share of its valid points within explain_sigma sensor sigmas + explain_floor_m explains it (fraction)
+    explain_sigma: float = 2.5  # ... (sensor sigmas)
+    explain_floor_m: float = 0.0005  # ... (metres; the sensor's slow warp bends a face by about this)
+    explain_piece_px: int = 60  # a piece the split leaves with fewer valid pixels joins the largest piece (pixels)
+    explain_min_part: float = 0.25  # the best primitive must explain at least this share of the instance, so the
+    # split is a surface and the rest (fraction)
+    explain_depth: int = 2  # pieces are tested again down to this many splits (count)
     gate_far_sigma: float = 3.0  # the depth regions are computed only when some plane-labelled instance has more
     gate_far_share: float = 0.0  # ... than this share of its points further than gate_far_sigma sensor sigmas from
     # its own plane (fraction): the geometric segmenter costs about 0.5-1 s per scan, and a scan whose plane
@@ -478,3 +492,103 @@ def verify_instances(
         if cylinders:
             seg = merge_by_cylinder_regions(seg, cylinders, pts, valid, cfg)
     return seg
+
+
+def split_unexplained(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    cfg: VerifyConfig = VerifyConfig(),
+    ransac: RansacConfig | None = None,
+) -> Segmentation:
+    """Instances that no one primitive explains are split (issue 15 item 4, "an instance whose residuals show two
+    surfaces is split"). An instance of at least ``explain_min_px`` valid pixels is explained when one primitive
+    holds ``explain_share`` of its points within ``explain_sigma`` sensor sigmas + ``explain_floor_m``: first its
+    label's type, else the best of every type, each a RANSAC whose inlier band is that tolerance (the fit stage's
+    band, 3 % of the part, holds two surfaces a few millimetres apart). Otherwise the best primitive's inliers
+    (their largest 4-connected piece after a 1-px opening) become one instance and what is left another (each
+    4-connected piece of at least ``explain_piece_px`` valid pixels its own; smaller ones and the pixels without
+    depth join the nearest piece). The pieces left are tested again, down to ``explain_depth`` splits. The first
+    piece keeps the label when its type is the label's; the others are undecided planes of score 0, so the fit
+    stage searches their type."""
+    if not cfg.explain_split:
+        return seg
+    ransac = ransac or RansacConfig()
+    inst = np.asarray(seg.instances).astype(np.int32).copy()
+    valid = (np.asarray(depth) > 0) & (inst > 0)
+    if not valid.any():
+        return seg
+    pts, size = scan_geometry(depth, K, inst, ransac)
+    labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores, np.float32))
+    undecided = label_of("plane", "U")
+    todo = [(int(i), 0) for i in seg.instance_ids()]
+    changed = False
+    while todo:
+        i, level = todo.pop(0)
+        m = (inst == i) & valid
+        if int(m.sum()) < cfg.explain_min_px or level >= cfg.explain_depth:
+            continue
+        ip = instance_points(pts, m, inst, np.array([i]), ransac).get(i)
+        if ip is None:
+            continue
+        x = ip.points
+        tol = cfg.explain_sigma * cfg.noise_sigma_coeff * x[:, 2] ** 2 + cfg.explain_floor_m
+        tight = replace(ransac, d_inlier=float(np.median(tol)) / size)
+        lab = int(labels[i]) if i < len(labels) else 0
+        own = TYPE_NAMES[int(TYPE_OF_LABEL[lab])] if 1 <= lab <= 17 else None
+        rng = np.random.default_rng([cfg.seed, i, level])
+        best_type, best_in = None, np.zeros(len(x), bool)
+        for t in [own] + [u for u in ("plane", "cylinder", "cone", "sphere", "torus") if u != own]:
+            if t is None:
+                continue
+            got = ransac_fit(t, x, ip.normals, size, tight, rng)
+            if got is None:
+                continue
+            inl = np.abs(got.primitive.signed_distance(x)) < tol
+            if inl.sum() > best_in.sum():
+                best_type, best_in = t, inl
+            if best_in.mean() >= cfg.explain_share:
+                break
+        if best_type is None or best_in.mean() >= cfg.explain_share or best_in.mean() < cfg.explain_min_part:
+            continue
+        h, w = inst.shape
+        core = np.zeros(h * w, np.uint8)
+        core[ip.pixels[best_in]] = 1
+        core = cv2.morphologyEx(core.reshape(h, w), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        n, comp = cv2.connectedComponents(core, connectivity=4)
+        if n <= 1:
+            continue
+        sizes = np.bincount(comp[m], minlength=n)
+        sizes[0] = 0
+        first = (comp == int(np.argmax(sizes))) & m
+        rest = m & ~first
+        n2, comp2 = cv2.connectedComponents(rest.astype(np.uint8), connectivity=4)
+        pieces = [comp2 == k for k in range(1, n2) if int(np.count_nonzero(comp2 == k)) >= cfg.explain_piece_px]
+        if not pieces:
+            continue
+        changed = True
+        keep = best_type == own
+        whole = inst == i  # every pixel of the instance, with or without depth
+        inst[whole] = 0
+        inst[first] = i
+        if not keep:
+            labels[i], scores[i] = undecided, np.float32(0.0)
+        for piece in pieces:
+            inst[piece] = len(labels)
+            labels.append(undecided)
+            scores.append(np.float32(0.0))
+            todo.append((len(labels) - 1, level + 1))
+        # the small pieces and the pixels without depth join the nearest of the instance's pieces
+        left = whole & (inst == 0)
+        if left.any():
+            seeds = np.where(whole & (inst > 0), inst, 0)
+            _, idx = cv2.distanceTransformWithLabels(
+                (seeds == 0).astype(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL
+            )
+            ys, xs = np.nonzero(seeds)
+            lut = np.zeros(int(idx.max()) + 1, np.int32)
+            lut[idx[ys, xs]] = seeds[ys, xs]
+            inst[left] = lut[idx[left]]
+    if not changed:
+        return seg
+    return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
