@@ -138,6 +138,30 @@ def test_logistic_calibration_recovers_known_error_rates() -> None:
     assert expected_calibration_error(cmap.apply("intersection", None, low), ok_low) < 0.06
 
 
+def test_the_raw_scores_weight_is_never_negative() -> None:
+    """Edges whose chance of being right falls as the raw score rises, the segmentation score fixed (as a refit on
+    correlated factors can make it): the unconstrained fit gives the raw score a negative weight; the shipped fit
+    (`non_negative` = the raw score) fixes it at 0 and refits the rest, so the probability never falls with the raw
+    score, and the other feature keeps its positive weight."""
+    rng = np.random.default_rng(3)
+    q = _quantities(4000, rng)
+    for x in q:
+        x["seg_score_min"] = float(rng.uniform(0.3, 1.0))
+        x["type"] = "intersection"
+    lr = np.array([np.log(x["raw"] / (1 - x["raw"])) for x in q])
+    s = np.array([x["seg_score_min"] for x in q])
+    ok = rng.uniform(0, 1, len(q)) < 1.0 / (1.0 + np.exp(-(-3.0 - 0.8 * lr + 6.0 * s)))
+    for x, k in zip(q, ok):
+        x["ok"] = int(k)
+    features = ("logit_raw", "seg_score_min")
+    free = fit_calibration(q, features, l2=0.01, non_negative=()).models["intersection"]
+    assert free.coef[0] < -0.3
+    kept = fit_calibration(q, features, l2=0.01).models["intersection"]
+    assert kept.coef[0] == 0.0 and kept.coef[1] > 0.5
+    p = [float(kept.probability(dict(q[0], raw=r))[0]) for r in np.linspace(0.01, 0.99, 11)]
+    assert np.all(np.diff(p) >= 0)
+
+
 def test_fit_logistic_and_source_weights() -> None:
     # a known law recovered: 20000 draws, coefficients within a few standard errors
     rng = np.random.default_rng(2)

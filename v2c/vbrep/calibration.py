@@ -359,12 +359,17 @@ def fit_calibration(
     l2: float = 1.0,
     min_edges: int = 20,
     meta: dict[str, Any] | None = None,
+    non_negative: tuple[str, ...] = ("logit_raw",),
 ) -> CalibrationMap:
     """Logistic model per edge type from labelled edges (rows: the recorded quantities of each edge with its
     ``type`` and ``ok`` (1: right, 0: wrong)). Per type, the features that apply to it (not NaN on every edge and
     not constant) are standardised (training mean and standard deviation; NaN filled with the training median).
     ``source_key``: a row field naming where the edge came from; every source then weighs the same in the fit
-    (`source_weights`). A type with fewer than ``min_edges`` edges gets no model (keeps its raw value)."""
+    (`source_weights`). A type with fewer than ``min_edges`` edges gets no model (keeps its raw value).
+    ``non_negative``: features whose weight may not be negative (an edge's probability never falls as its raw
+    score rises, the rest fixed): one the fit gives a negative weight is fixed at 0 and the rest refitted (an
+    active set; the raw score and its own factors are correlated, and a refit on other edges can tip its weight
+    below 0)."""
     models = {}
     for t in EdgeType:
         r = [x for x in rows if x["type"] == t.value]
@@ -383,8 +388,17 @@ def fit_calibration(
         mean = X.mean(0)
         y = np.array([x["ok"] for x in r], float)
         w = source_weights(np.array([x[source_key] for x in r])) if source_key else None
-        b, coef = fit_logistic((X - mean) / std, y, w, l2)
         names = tuple(n for n, k in zip(features, keep) if k)
+        Z = (X - mean) / std
+        free = np.ones(len(names), bool)
+        while True:
+            b, sub = fit_logistic(Z[:, free], y, w, l2)
+            coef = np.zeros(len(names))
+            coef[free] = sub
+            neg = [j for j, n in enumerate(names) if n in non_negative and free[j] and coef[j] < 0]
+            if not neg:
+                break
+            free[neg] = False
         models[t.value] = LogisticModel(names, fill, mean, std, coef, b)
     return CalibrationMap({}, dict(meta or {}), models)
 
