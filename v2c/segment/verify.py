@@ -300,13 +300,7 @@ def split_by_regions(
             ids.append(new)
         rest = inst == i
         if int((rest & valid).sum()) < need:  # a small rest joins the nearest piece
-            seeds = np.isin(inst, ids)
-            _, near = cv2.distanceTransformWithLabels(
-                (~seeds).astype(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL
-            )
-            lut = np.zeros(int(near.max()) + 1, np.int32)
-            lut[near[seeds]] = inst[seeds]
-            inst[rest] = lut[near[rest]]
+            _join_nearest(inst, np.isin(inst, ids), rest)
     return _compact(Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method))
 
 
@@ -494,6 +488,15 @@ def verify_instances(
     return seg
 
 
+def _join_nearest(inst: np.ndarray, seeds: np.ndarray, rest: np.ndarray) -> None:
+    """The pixels of ``rest`` take the id (``inst``, (H, W), changed in place) of the nearest pixel of ``seeds``
+    ((H, W) bool, not empty)."""
+    _, near = cv2.distanceTransformWithLabels((~seeds).astype(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL)
+    lut = np.zeros(int(near.max()) + 1, np.int32)
+    lut[near[seeds]] = inst[seeds]
+    inst[rest] = lut[near[rest]]
+
+
 def split_unexplained(
     seg: Segmentation,
     depth: np.ndarray,
@@ -519,6 +522,8 @@ def split_unexplained(
     if not valid.any():
         return seg
     pts, size = scan_geometry(depth, K, inst, ransac)
+    if not size > 0:
+        return seg
     labels, scores = list(np.asarray(seg.labels)), list(np.asarray(seg.scores, np.float32))
     undecided = label_of("plane", "U")
     todo = [(int(i), 0) for i in seg.instance_ids()]
@@ -581,14 +586,7 @@ def split_unexplained(
         # the small pieces and the pixels without depth join the nearest of the instance's pieces
         left = whole & (inst == 0)
         if left.any():
-            seeds = np.where(whole & (inst > 0), inst, 0)
-            _, idx = cv2.distanceTransformWithLabels(
-                (seeds == 0).astype(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL
-            )
-            ys, xs = np.nonzero(seeds)
-            lut = np.zeros(int(idx.max()) + 1, np.int32)
-            lut[idx[ys, xs]] = seeds[ys, xs]
-            inst[left] = lut[idx[left]]
+            _join_nearest(inst, whole & (inst > 0), left)
     if not changed:
         return seg
     return Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method)
