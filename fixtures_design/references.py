@@ -321,6 +321,12 @@ def _dihedral(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> DihedralReference | 
     )
 
 
+def _arc_bins(points: np.ndarray, center: np.ndarray, axis: np.ndarray, nbins: int) -> np.ndarray:
+    """The sorted indices of the ``nbins`` equal sectors around ``axis`` (through ``center``) that hold points."""
+    xy = plane_coords(points, center, axis)
+    return np.unique(np.floor((np.arctan2(xy[:, 1], xy[:, 0]) + np.pi) / (2 * np.pi) * nbins).astype(int) % nbins)
+
+
 def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     faces = [vb.faces[int(i)] for i in e.faces]
     types = sorted(_ptype(f) for f in faces)
@@ -346,10 +352,8 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     pc = face_samples(cyl)
     if not len(pc) or not len(pln.mesh_triangles):
         return "a face has no mesh: hole or boss unknown"
-    xy = plane_coords(pc, center, axis)
-    ang_c = np.arctan2(xy[:, 1], xy[:, 0])
     nbins = 36
-    bins_c = np.unique(np.floor((ang_c + np.pi) / (2 * np.pi) * nbins).astype(int) % nbins)
+    bins_c = _arc_bins(pc, center, axis, nbins)
     span = 360.0 * len(bins_c) / nbins
     if span < cfg.min_arc_deg:
         return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a hole or boss"
@@ -436,9 +440,7 @@ def _shoulder_of(e: VEdge, cyl: VFace, other: VFace, cfg: SelectionConfig) -> Ci
     to_cam = -pc / np.maximum(np.linalg.norm(pc, axis=1, keepdims=True), 1e-12)
     if float(np.median(np.sum(radial * to_cam, axis=1))) <= 0:  # a hole's wall shows its far side
         return "the cylinder is concave (a hole's wall): a shoulder needs a boss"
-    xy = plane_coords(pc, center, axis)
-    bins = np.unique(np.floor((np.arctan2(xy[:, 1], xy[:, 0]) + np.pi) / (2 * np.pi) * 36).astype(int) % 36)
-    span = 10.0 * len(bins)
+    span = 10.0 * len(_arc_bins(pc, center, axis, 36))
     if span < cfg.min_arc_deg:
         return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a boss"
     h = (pc - center) @ axis
