@@ -321,6 +321,27 @@ def _dihedral(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> DihedralReference | 
     )
 
 
+#: Equal sectors around a cylinder's axis in which its face's angular span is counted (10 degrees each).
+ARC_SECTORS = 36
+
+
+def radial_directions(points: np.ndarray, origin: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(N, 3) unit vectors from the axis (through ``origin`` along unit ``axis``) out to each of ``points``, across
+    the axis (camera frame)."""
+    q = np.asarray(points, float) - np.asarray(origin, float)
+    radial = q - np.outer(q @ axis, axis)
+    return radial / np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
+
+
+def seen_from_outside(points: np.ndarray, radial: np.ndarray) -> bool:
+    """Whether a cylinder's seen points (N, 3, camera frame) face the camera at the origin with their outside: the
+    median of their radial directions (`radial_directions`) dotted with the direction to the camera is positive. A
+    boss (convex) shows the side facing the camera; a hole's wall (concave) its far side."""
+    p = np.asarray(points, float)
+    to_cam = -p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-12)
+    return float(np.median(np.sum(radial * to_cam, axis=1))) > 0
+
+
 def _arc_bins(points: np.ndarray, center: np.ndarray, axis: np.ndarray, nbins: int) -> np.ndarray:
     """The sorted indices of the ``nbins`` equal sectors around ``axis`` (through ``center``) that hold points."""
     xy = plane_coords(points, center, axis)
@@ -352,7 +373,7 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     pc = face_samples(cyl)
     if not len(pc) or not len(pln.mesh_triangles):
         return "a face has no mesh: hole or boss unknown"
-    nbins = 36
+    nbins = ARC_SECTORS
     bins_c = _arc_bins(pc, center, axis, nbins)
     span = 360.0 * len(bins_c) / nbins
     if span < cfg.min_arc_deg:
@@ -434,13 +455,9 @@ def _shoulder_of(e: VEdge, cyl: VFace, other: VFace, cfg: SelectionConfig) -> Ci
     pc = face_samples(cyl)
     if not len(pc) or not len(cyl.mesh_triangles):
         return "the cylinder face has no mesh"
-    q = pc - o
-    radial = q - np.outer(q @ axis, axis)
-    radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
-    to_cam = -pc / np.maximum(np.linalg.norm(pc, axis=1, keepdims=True), 1e-12)
-    if float(np.median(np.sum(radial * to_cam, axis=1))) <= 0:  # a hole's wall shows its far side
+    if not seen_from_outside(pc, radial_directions(pc, o, axis)):  # a hole's wall shows its far side
         return "the cylinder is concave (a hole's wall): a shoulder needs a boss"
-    span = 10.0 * len(_arc_bins(pc, center, axis, 36))
+    span = 360.0 * len(_arc_bins(pc, center, axis, ARC_SECTORS)) / ARC_SECTORS
     if span < cfg.min_arc_deg:
         return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a boss"
     h = (pc - center) @ axis

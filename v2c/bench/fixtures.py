@@ -220,6 +220,7 @@ def visible_cylinders(scan: Any, cfg: FixtureBenchConfig) -> dict[str, bool]:
 
     The true part is probed at ``max(probe_mm, probe_rel x radius)`` beyond or inside the radius (gt/part.step, the
     camera frame in mm)."""
+    from fixtures_design.references import radial_directions, seen_from_outside
     from v2c.camera import backproject
 
     gt = scan.gt
@@ -233,12 +234,10 @@ def visible_cylinders(scan: Any, cfg: FixtureBenchConfig) -> dict[str, bool]:
         if int(pix.sum()) < cfg.min_visible_px:
             continue
         q = pts[pix] - origin
-        radial = q - np.outer(q @ axis, axis)
-        radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
-        to_cam = -pts[pix] / np.maximum(np.linalg.norm(pts[pix], axis=1, keepdims=True), 1e-12)
+        radial = radial_directions(pts[pix], origin, axis)
         if _arc_deg(radial, axis) < cfg.min_arc_deg:  # a fillet (90 deg), not a hole or a boss
             continue
-        convex = float(np.median(np.sum(radial * to_cam, axis=1))) > 0  # a boss shows the side facing the camera
+        convex = seen_from_outside(pts[pix], radial)  # a boss shows the side facing the camera
         horizontal = abs(float(axis @ up)) <= np.sin(np.radians(cfg.max_tilt_deg))
         if convex and not horizontal:
             continue
