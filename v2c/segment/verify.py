@@ -539,7 +539,7 @@ def split_unexplained(
         x = ip.points
         tol = cfg.explain_sigma * cfg.noise_sigma_coeff * x[:, 2] ** 2 + cfg.explain_floor_m
         tight = replace(ransac, d_inlier=float(np.median(tol)) / size)
-        lab = int(labels[i]) if i < len(labels) else 0
+        lab = int(labels[i])  # every id here is one of labels' (the pieces' are appended as they are made)
         own = TYPE_NAMES[int(TYPE_OF_LABEL[lab])] if 1 <= lab <= 17 else None
         rng = np.random.default_rng([cfg.seed, i, level])
         best_type, best_in = None, np.zeros(len(x), bool)
