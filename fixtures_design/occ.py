@@ -93,13 +93,18 @@ def face_primitive(face: object, curved: bool = False) -> dict | None:
     return None
 
 
+def camera_facing(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(T,) bool: which triangles of the mesh (camera frame, any unit; outward winding) face the camera at the
+    origin."""
+    t = np.asarray(t, np.int64).reshape(-1, 3)
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    n = np.cross(b - a, c - a)
+    return (n * (a + b + c) / 3).sum(axis=1) < 0
+
+
 def faces_the_camera(v_mm: np.ndarray, t: np.ndarray) -> bool:
     """Whether any triangle of the mesh (camera frame, mm; outward winding) faces the camera at the origin."""
-    if not len(t):
-        return False
-    a, b, c = v_mm[t[:, 0]], v_mm[t[:, 1]], v_mm[t[:, 2]]
-    n = np.cross(b - a, c - a)
-    return bool(((n * (a + b + c) / 3).sum(axis=1) < 0).any())
+    return bool(len(t)) and bool(camera_facing(v_mm, t).any())
 
 
 def edge_curve(edge: object, n: int = 24) -> tuple[np.ndarray, dict | None]:

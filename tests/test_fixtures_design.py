@@ -223,11 +223,12 @@ def _seen_meshes(vb):
     reconstruction's meshes are: a ground-truth VB-Rep meshes whole faces, the far side of a rod too."""
     from dataclasses import replace
 
+    from fixtures_design.occ import camera_facing
+
     faces = []
     for f in vb.faces:
         v, t = np.asarray(f.mesh_vertices), np.asarray(f.mesh_triangles).reshape(-1, 3)
-        n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-        faces.append(replace(f, mesh_triangles=t[(n * v[t].mean(axis=1)).sum(axis=1) < 0]))
+        faces.append(replace(f, mesh_triangles=t[camera_facing(v, t)]))
     return replace(vb, faces=faces)
 
 
