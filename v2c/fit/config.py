@@ -104,6 +104,13 @@ class FitConfig(RansacConfig):
     # times the free fit's plus one depth-noise sigma (ratio)
     tangent_clip_sigma: float = 3.0  # residuals are clipped at this many depth-noise sigmas in that RMS (ratio)
     tangent_max_nfev: int = 50  # function evaluations of one constrained fit (count)
+    related_axes: bool = True  # an unaligned instance whose own points hardly fix its axis (fewer inliers than
+    # related_anchor_points) takes the direction of a well-fixed unaligned one (a plane's normal, a curved face's
+    # axis) or of the line where two such planes cross, when that keeps label_keep_ratio of its free fit's inliers:
+    # a CAD part's tilted features share their directions (parallel faces, holes square to their face, blends
+    # along the edge of two planes); held fixed in the joint fit (`stage._related_axes`)
+    related_anchor_points: int = 300  # count: inliers from which an unaligned instance's axis is its own
+    related_max_deg: float = 45.0  # degrees: only directions within this of the instance's free axis are tried
     crossing_planes: bool = True  # an unaligned plane (axis class U or none) is refitted parallel to the line
     # where two neighbouring planes meet (a chamfer between them) when that explains its inlier points nearly as
     # well as its free plane (`stage._planes_along_crossings`): the sensor's correlated depth error tilts a small

@@ -18,7 +18,7 @@ from v2c.fit.constrained import fit_with_axis, start_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
 from v2c.fit.result import ABLATIONS, FitResult
 from v2c.fit.tangency import adjacent_terms, constrain_blends, tangent_junctions
-from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points
+from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points, mad_sigma
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
 from v2c.geometry.selection import fit_instance, noise_sigma, select_type, supported
@@ -559,6 +559,97 @@ def _small_instances(
         axis_idx[i] = k
 
 
+def _adjacency(inst: np.ndarray) -> dict[int, set[int]]:
+    """Instance id -> the ids whose pixels touch its own (4-neighbourhood of the instance map; 0 is no instance)."""
+    out: dict[int, set[int]] = {}
+    for a, b in ((inst[:, :-1], inst[:, 1:]), (inst[:-1, :], inst[1:, :])):
+        m = (a != b) & (a > 0) & (b > 0)
+        for u, v in set(zip(a[m].tolist(), b[m].tolist(), strict=True)):
+            out.setdefault(u, set()).add(v)
+            out.setdefault(v, set()).add(u)
+    return out
+
+
+def _related_axes(
+    fits: _Fits,
+    ipts: dict[int, InstancePoints],
+    axis_idx: dict[int, int | None],
+    inst: np.ndarray,
+    scale: float,
+    config: FitConfig,
+) -> set[int]:
+    """Unaligned instances whose axis their own points hardly fix, held on a direction their neighbours give: the
+    ids so held.
+
+    An instance with at least ``related_anchor_points`` inliers is an anchor: its axis (a plane's normal, a curved
+    face's axis, or its frame axis) is its own. The directions an unaligned instance may take from the anchors whose
+    pixels touch its own are their unaligned axes (parallel faces, a hole square to its face, coaxial sections) and
+    the lines where two of those neighbours that are planes, aligned or not, cross at least ``crossing_min_deg``
+    apart (a blend along their edge). Every other unaligned instance is refitted with its axis on each such
+    direction within ``related_max_deg`` of its free axis and takes the one of lowest GRIC
+    (`geometry.selection.select_type`'s criterion: truncated squared residuals in units of the sensor's noise,
+    log(3 N) per degree of freedom) when that is no higher than its free fit's: two degrees of freedom fewer must
+    cost less than they explain."""
+    free = [i for i, p in fits.prims.items() if axis_idx.get(i) == -1 and p.axis_vector is not None]
+    anchor = {
+        i
+        for i, p in fits.prims.items()
+        if p.axis_vector is not None and np.count_nonzero(fits.inliers[i]) >= config.related_anchor_points
+    }
+    held: set[int] = set()
+    if not anchor or not free:
+        return held
+    near = _adjacency(inst)
+    sin_min = np.sin(np.deg2rad(config.crossing_min_deg))
+    cos_max = np.cos(np.deg2rad(config.related_max_deg))
+    for i in free:
+        if i in anchor:
+            continue
+        nb = sorted(j for j in near.get(i, ()) if j in anchor and j in fits.prims)
+        dirs = [unit(fits.prims[j].axis_vector) for j in nb if axis_idx.get(j) == -1]
+        planes = [unit(fits.prims[j].axis_vector) for j in nb if isinstance(fits.prims[j], Plane)]
+        for a_i, u in enumerate(planes):
+            for v in planes[a_i + 1 :]:
+                c = np.cross(u, v)
+                if np.linalg.norm(c) >= sin_min:
+                    dirs.append(unit(c))
+        if not dirs:
+            continue
+        cand = np.array(dirs)
+        p = fits.prims[i]
+        a = unit(p.axis_vector)
+        cos = np.abs(cand @ a)
+        if not np.any(cos >= cos_max):
+            continue
+        ip = ipts[i]
+        x, n = ip.points[fits.inliers[i]], ip.normals[fits.inliers[i]]
+        if len(x) > config.refine_points:
+            sel = np.random.default_rng([config.seed, i, 5]).choice(len(x), config.refine_points, replace=False)
+            x, n = x[sel], n[sel]
+        if len(x) < p.local_size + 2:
+            continue
+        d_free = np.abs(p.signed_distance(x))
+        sigma = np.maximum(max(mad_sigma(d_free), config.gric_min_sigma * scale), noise_sigma(x, config))
+        lam = np.log(3 * len(x))
+
+        def cost(d: np.ndarray, sigma: np.ndarray = sigma) -> float:
+            return float(np.sum(np.minimum((d / sigma) ** 2, config.gric_trunc)))
+
+        best, best_cost = None, cost(d_free) + 2 * lam  # the free axis: two more degrees of freedom
+        for k in np.flatnonzero(cos >= cos_max):
+            q = fit_with_axis(p, x, n, cand[k] * (np.sign(a @ cand[k]) or 1.0), scale, config)
+            if not q.is_finite():
+                continue
+            c = cost(np.abs(q.signed_distance(x)))
+            if c <= best_cost:
+                best, best_cost = q, c
+        if best is not None:
+            fits.prims[i] = _canonical(best, x)
+            fits.inliers[i] = _inliers(fits.prims[i], ip, scale, config)
+            held.add(i)
+    return held
+
+
 def _joint_terms(
     fits: _Fits,
     ipts: dict[int, InstancePoints],
@@ -566,8 +657,10 @@ def _joint_terms(
     frame: np.ndarray,
     use_frame: bool,
     config: FitConfig,
+    held: set[int] = frozenset(),
 ) -> tuple[list[int], list[Term]]:
-    """Step 2 set-up: one Term per fitted instance (subsampled inliers; frame axis or free axis)."""
+    """Step 2 set-up: one Term per fitted instance (subsampled inliers; frame axis, free axis, or the axis it is
+    held on, ``held``: `_related_axes`)."""
     order = []
     terms: list[Term] = []
     for i in sorted(fits.prims):
@@ -584,7 +677,7 @@ def _joint_terms(
             x = x[rng.choice(len(x), config.align_points, replace=False)]
         k = axis_idx[i]
         if k is not None and (k < 0 or not use_frame):
-            k = -1
+            k = -2 if i in held else -1
         p = fits.prims[i]
         sign = 1.0 if k is None or k < 0 else float(np.sign(p.axis_vector @ frame[k]) or 1.0)
         n_in = int(np.count_nonzero(fits.inliers[i]))
@@ -696,7 +789,10 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     if use_frame:  # the frame gives small instances the axis their points cannot
         _small_instances(fits, small_pts, seg, axis_idx, frame, scale, config)
         ipts.update({i: small_pts[i] for i in small_pts if i in fits.prims})
-    order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
+    held = set()
+    if use_frame and config.related_axes:  # unaligned instances on their neighbours' directions
+        held = _related_axes(fits, ipts, axis_idx, inst, scale, config)
+    order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config, held)
     prims = [tm.prim for tm in terms]
     if ablation != "fit-only":
         frame, prims = _joint_fit(terms, frame, scale, config)
@@ -705,7 +801,7 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
             and config.nested_from_axis
             and _nested_after_joint(fits, ipts, order, prims, scale, config)
         ):
-            order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config)
+            order, terms = _joint_terms(fits, ipts, axis_idx, frame, use_frame, config, held)
             frame, prims = _joint_fit(terms, frame, scale, config)
     timings["align"] = perf_counter() - t
     t = perf_counter()
