@@ -105,9 +105,9 @@ class FitConfig(RansacConfig):
     tangent_clip_sigma: float = 3.0  # residuals are clipped at this many depth-noise sigmas in that RMS (ratio)
     tangent_max_nfev: int = 50  # function evaluations of one constrained fit (count)
     related_axes: bool = True  # an unaligned instance whose own points hardly fix its axis (fewer inliers than
-    # related_anchor_points) takes the direction of a well-fixed unaligned one (a plane's normal, a curved face's
-    # axis) or of the line where two such planes cross, when that keeps label_keep_ratio of its free fit's inliers:
-    # a CAD part's tilted features share their directions (parallel faces, holes square to their face, blends
+    # related_anchor_points) takes a direction that a well-fixed instance touching it gives (its unaligned axis, or
+    # the line where two such planes cross) when GRIC with the sensor's noise prefers that held axis to its free
+    # one: a CAD part's tilted features share their directions (parallel faces, holes square to their face, blends
     # along the edge of two planes); held fixed in the joint fit (`stage._related_axes`)
     related_anchor_points: int = 300  # count: inliers from which an unaligned instance's axis is its own
     related_max_deg: float = 45.0  # degrees: only directions within this of the instance's free axis are tried

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, replace
 from time import perf_counter, process_time
 from typing import TYPE_CHECKING
@@ -605,7 +606,7 @@ def _related_axes(
     for i in free:
         if i in anchor:
             continue
-        nb = sorted(j for j in near.get(i, ()) if j in anchor and j in fits.prims)
+        nb = sorted(near.get(i, set()) & anchor)
         dirs = [unit(fits.prims[j].axis_vector) for j in nb if axis_idx.get(j) == -1]
         planes = [unit(fits.prims[j].axis_vector) for j in nb if isinstance(fits.prims[j], Plane)]
         for a_i, u in enumerate(planes):
@@ -657,7 +658,7 @@ def _joint_terms(
     frame: np.ndarray,
     use_frame: bool,
     config: FitConfig,
-    held: set[int] = frozenset(),
+    held: AbstractSet[int] = frozenset(),
 ) -> tuple[list[int], list[Term]]:
     """Step 2 set-up: one Term per fitted instance (subsampled inliers; frame axis, free axis, or the axis it is
     held on, ``held``: `_related_axes`)."""
