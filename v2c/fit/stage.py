@@ -571,6 +571,22 @@ def _adjacency(inst: np.ndarray) -> dict[int, set[int]]:
     return out
 
 
+def _neighbour_directions(
+    nb: list[int], fits: _Fits, axis_idx: dict[int, int | None], config: FitConfig
+) -> list[np.ndarray]:
+    """The directions the anchors ``nb`` (instance ids touching an instance) give it: their unaligned axes, then the
+    lines where two of them that are planes, aligned or not, cross at least ``crossing_min_deg`` apart."""
+    dirs = [unit(fits.prims[j].axis_vector) for j in nb if axis_idx.get(j) == -1]
+    planes = [unit(fits.prims[j].axis_vector) for j in nb if isinstance(fits.prims[j], Plane)]
+    sin_min = np.sin(np.deg2rad(config.crossing_min_deg))
+    for a_i, u in enumerate(planes):
+        for v in planes[a_i + 1 :]:
+            c = np.cross(u, v)
+            if np.linalg.norm(c) >= sin_min:
+                dirs.append(unit(c))
+    return dirs
+
+
 def _related_axes(
     fits: _Fits,
     ipts: dict[int, InstancePoints],
@@ -601,19 +617,11 @@ def _related_axes(
     if not anchor or not free:
         return held
     near = _adjacency(inst)
-    sin_min = np.sin(np.deg2rad(config.crossing_min_deg))
     cos_max = np.cos(np.deg2rad(config.related_max_deg))
     for i in free:
         if i in anchor:
             continue
-        nb = sorted(near.get(i, set()) & anchor)
-        dirs = [unit(fits.prims[j].axis_vector) for j in nb if axis_idx.get(j) == -1]
-        planes = [unit(fits.prims[j].axis_vector) for j in nb if isinstance(fits.prims[j], Plane)]
-        for a_i, u in enumerate(planes):
-            for v in planes[a_i + 1 :]:
-                c = np.cross(u, v)
-                if np.linalg.norm(c) >= sin_min:
-                    dirs.append(unit(c))
+        dirs = _neighbour_directions(sorted(near.get(i, set()) & anchor), fits, axis_idx, config)
         if not dirs:
             continue
         cand = np.array(dirs)
