@@ -407,6 +407,18 @@ def _holds_patch(prim: Primitive, x: np.ndarray, config: FitConfig) -> bool:
     return float(hi - lo) <= 2.0 * prim.radius + config.small_chord_sigma * sigma
 
 
+def _adjacency(inst: np.ndarray) -> dict[int, set[int]]:
+    """Instance id -> the ids whose pixels touch its own (`segment.refine.touching_pairs`: 4-neighbourhood of the
+    instance map; 0 is no instance)."""
+    from v2c.segment.refine import touching_pairs
+
+    out: dict[int, set[int]] = {}
+    for a, b in touching_pairs(inst).tolist():  # loop over touching instance pairs
+        out.setdefault(a, set()).add(b)
+        out.setdefault(b, set()).add(a)
+    return out
+
+
 def _planes_along_crossings(
     prims: list[Primitive],
     order: list[int],
@@ -431,18 +443,14 @@ def _planes_along_crossings(
     from itertools import combinations
 
     from v2c.primitives.directions import tangent_basis
-    from v2c.segment.refine import touching_pairs
 
     at = {i: k for k, i in enumerate(order)}
     planes = {i for i in order if isinstance(prims[at[i]], Plane)}
     free = [i for i in planes if axis_idx.get(i) is None or axis_idx[i] < 0]
     if not free:
         return prims
-    touching: dict[int, set[int]] = {i: set() for i in planes}
-    for a, b in touching_pairs(inst).tolist():  # loop over touching instance pairs
-        if a in planes and b in planes:
-            touching[a].add(b)
-            touching[b].add(a)
+    near = _adjacency(inst)
+    touching = {i: near.get(i, set()) & planes for i in planes}
     min_sin = float(np.sin(np.deg2rad(config.crossing_min_deg)))
     out = list(prims)
     for i in sorted(free):  # loop over unaligned planes
@@ -558,17 +566,6 @@ def _small_instances(
         fits.weights[i] = float(np.count_nonzero(fits.inliers[i]))
         fits.scores[i] = float(seg.scores[i]) if i < len(seg.scores) else 0.0
         axis_idx[i] = k
-
-
-def _adjacency(inst: np.ndarray) -> dict[int, set[int]]:
-    """Instance id -> the ids whose pixels touch its own (4-neighbourhood of the instance map; 0 is no instance)."""
-    out: dict[int, set[int]] = {}
-    for a, b in ((inst[:, :-1], inst[:, 1:]), (inst[:-1, :], inst[1:, :])):
-        m = (a != b) & (a > 0) & (b > 0)
-        for u, v in set(zip(a[m].tolist(), b[m].tolist(), strict=True)):
-            out.setdefault(u, set()).add(v)
-            out.setdefault(v, set()).add(u)
-    return out
 
 
 def _neighbour_directions(
