@@ -463,6 +463,38 @@ def test_small_curved_face_keeps_its_labelled_type() -> None:
     assert isinstance(old[2].prim, Plane)
 
 
+def test_small_fillet_beside_one_plane_takes_its_strip_direction() -> None:
+    # The same fillet with only one of its two planes fitted: the one neighbour suggests its normal, 90 degrees off
+    # the fillet's axis, and no line of intersection. The evidence's long direction (the strip along the axis) is
+    # a candidate too (VBRepConfig.fallback_strip_axis): the cylinder comes back on the x axis within 2 degrees,
+    # its radius within 1 mm; without it the one candidate there is lies 90 degrees off or fits nothing.
+    from types import SimpleNamespace
+
+    from v2c.labels import label_of
+    from v2c.primitives import Cylinder
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.faces import _add_fitted, _FaceSet, curved_fallback, fallback_sources
+
+    K, inst, depth, a, c, (yc, zc), r = _fillet_scene(2e-4, seed=4)
+    frame = np.array([[0.8, 0.6, 0.0], [-0.6, 0.8, 0.0], [0.0, 0.0, 1.0]])  # x is no frame axis
+    fit = SimpleNamespace(primitives={1: a}, residuals={1: 0.0}, axis_labels={1: None}, frame=frame)
+    labels = [0, label_of("plane", "U"), label_of("cylinder", "U"), label_of("plane", "U")]
+    seg = SimpleNamespace(instances=inst, labels=np.array(labels, np.uint8))
+    fs = _FaceSet(inst, depth, K, (0.05, 5.0), VBRepConfig())
+    _add_fitted(fs, fit, 0.1)
+    own, edges = fallback_sources(2, inst, depth, K, fs.faces, fs.window)
+    evidence = np.concatenate([own, *edges])
+    got = curved_fallback(2, seg, fit, fs.faces, [1, 3], evidence, 0.1, VBRepConfig())
+    assert got is not None and isinstance(got[0], Cylinder)
+    cyl = got[0]
+    assert np.degrees(np.arccos(min(1.0, abs(float(cyl.axis_vector[0]))))) < 2.0
+    assert abs(cyl.radius - r) < 1e-3
+    off = np.asarray(cyl.origin, float)[1:] - np.array([yc, zc])  # the axis line: within 1 mm
+    assert np.hypot(*off) < 1e-3
+    old = curved_fallback(2, seg, fit, fs.faces, [1, 3], evidence, 0.1, VBRepConfig(fallback_strip_axis=False))
+    assert old is None or abs(float(old[0].axis_vector[0])) < np.cos(np.deg2rad(10.0))
+
+
 def test_cone_and_torus_on_a_given_axis_line() -> None:
     # A 45-degree chamfer and a 2 mm rounded rim at the mouth of a 10 mm hole, 0.1 mm noise, on 60 degrees of arc:
     # fitted on the hole's axis line they come back within 1.5 degrees and 0.3 mm; too few points give None.

@@ -138,6 +138,15 @@ class VBRepConfig:
     #                               planes on fillets, rounded rims, chamfers and ball ends of 10-70 pixels)
     fallback_axis_cross_deg: float = 10.0  # degrees: two neighbouring planes this far apart or more suggest the
     #                                        axis along their line of intersection (a blend between them)
+    fallback_strip_axis: bool = True  # a cylinder's candidate axes include its evidence's long direction (the
+    #                                   principal axis of its points: a fillet or rounded edge is a strip along its
+    #                                   axis, and its neighbours may suggest no direction along it) ...
+    fallback_strip_elongation: float = 2.0  # ratio: ... when the evidence is at least this many times longer than
+    #                                         wide (RMS extents along its first two principal axes): a patch as wide
+    #                                         as long has no long direction (corpus training split, oracle: from 2.0
+    #                                         no such candidate made a fallback cylinder's axis worse; in-family seed
+    #                                         9000 scan 37, a knob's 34-point patch 1.6 times longer than wide, took
+    #                                         one 56 degrees off)
     fallback_curved_sigma: float = 2.0  # ratio: ... and its RMS within this many depth-noise sigmas
     #                                     (sigma_depth_coeff_per_m z^2 at the evidence's median depth). Chosen on
     #                                     the validation sets: without it a knob flute of seed 9000 took a wrong

@@ -128,7 +128,10 @@ def curved_fallback(
     """An unfitted instance labelled with a curved type (cylinder, cone, sphere, torus; any axis class), called
     where a free plane through its evidence would be drawn (``neighbours``: the ids of the instances touching it,
     ascending): that type through its evidence X (N, 3), the best
-    (least RMS) over the axes its fitted neighbours and its label's axis class suggest (`_axis_candidates`): a
+    (least RMS) over the axes its fitted neighbours and its label's axis class suggest (`_axis_candidates`) and,
+    for a cylinder, its evidence's long direction (``fallback_strip_axis``: the principal axis of X, where X is at
+    least ``fallback_strip_elongation`` times longer than wide; a fillet or rounded edge is a strip along its
+    axis): a
     cylinder on any candidate direction, a cone or torus on a curved neighbour's axis line, a free sphere; its
     size at most the part size and its RMS within fallback_rms and within fallback_curved_sigma depth-noise
     sigmas (sigma_depth_coeff_per_m z^2 at the evidence's median depth: a 2 mm knob flute fitted on a
@@ -153,6 +156,11 @@ def curved_fallback(
         if sp is not None:
             got.append((sp[0], sp[1], None))
     elif ptype.value == "cylinder":
+        if cfg.fallback_strip_axis and len(X) >= 3:  # the evidence's long direction: a strip along its axis
+            c = X - X.mean(axis=0)
+            w, v = np.linalg.eigh(c.T @ c)
+            if w[-1] >= cfg.fallback_strip_elongation**2 * max(float(w[-2]), 1e-30):
+                dirs.append((v[:, -1], None))
         for a, name in dirs:  # loop over candidate axis directions
             cy = fit_axis_cylinder_points(X, a, cfg.fallback_fit_iters)
             if cy is not None:
