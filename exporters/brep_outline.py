@@ -479,6 +479,35 @@ def _separate_rings(poly: shapely.Geometry, gap: float, min_area: float) -> list
     return out
 
 
+def _cut_pinches(poly: shapely.Geometry, gap: float, min_area: float, max_cuts: int = 32) -> list[shapely.Polygon] | None:
+    """`_separate_rings` by cuts instead of a shrink: where two rings of a piece come within ``gap`` of each other
+    (a hole touching the outer ring at a point), a disc of twice ``gap`` round the closest pair of points is cut
+    out, until every piece's rings lie ``gap`` apart; pieces under ``min_area`` are dropped. Only the pinches lose
+    area (about 4 pi gap^2 each), where the shrink takes the perimeter times ``gap`` off the whole piece. None when
+    ``max_cuts`` cuts do not part the rings (rings that run side by side for a stretch) or the cuts leave an
+    invalid piece."""
+    geom = shapely.make_valid(poly)
+    for _ in range(max_cuts):  # loop over cuts, one pinch at a time
+        parts = [p for p in getattr(geom, "geoms", [geom]) if isinstance(p, shapely.Polygon) and not p.is_empty]
+        pinch = None
+        for part in parts:  # loop over pieces: the first pair of rings closer than the gap
+            rings = [part.exterior, *part.interiors]
+            for k, a in enumerate(rings):
+                for b in rings[k + 1 :]:
+                    if a.distance(b) < gap:
+                        pinch = shapely.shortest_line(a, b).centroid
+                        break
+                if pinch is not None:
+                    break
+            if pinch is not None:
+                break
+        if pinch is None:
+            out = [p for p in parts if p.area >= min_area]
+            return out if all(p.is_valid for p in out) else None
+        geom = shapely.make_valid(shapely.difference(geom, pinch.buffer(2.0 * gap)))
+    return None
+
+
 def _rings_apart(poly: shapely.Polygon, gap: float) -> bool:
     """Whether ``poly`` is valid and its rings (outer and holes) lie at least ``gap`` from one another."""
     if not poly.is_valid:
@@ -541,9 +570,12 @@ class OutlineBuilder:
         self.hole_budget_rel = hole_budget_rel
         self.bb = BRep_Builder()
 
-    def build(self, f: VFace, s: AnalyticSurface, raw: bool = False) -> list[OutlinePiece]:
+    def build(self, f: VFace, s: AnalyticSurface, raw: bool = False, whole: bool = False) -> list[OutlinePiece]:
         """The outline faces of ``f`` on surface ``s`` (empty when none can be built); ``raw``: the outline as the
-        mesh gives it, not simplified (`exporters.step.write` asks for it for a face OCCT's mesher drew short)."""
+        mesh gives it, not simplified (`exporters.step.write` asks for it for a face OCCT's mesher drew short);
+        ``whole``: no piece dropped as a speck, and touching rings parted by cuts at their pinches
+        (`_cut_pinches`) rather than a shrink of the whole piece (`exporters.brep.build_brep` asks for it, with
+        ``raw``, for a face whose outline came out more than ``area_tol_rel`` off its mesh's area)."""
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         tris = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
         areas = _triangle_areas(pts, tris)
@@ -558,7 +590,8 @@ class OutlineBuilder:
             s, pts, tris, 0.0, min_area, self.max_stretch, self.hole_budget_rel * total, piece_budget=0.0
         )
         speck = max(self.min_piece_tris * float(np.median(areas)), min_area)
-        polys = _drop_specks(polys, speck, self.speck_budget_rel * total)
+        if not whole:
+            polys = _drop_specks(polys, speck, self.speck_budget_rel * total)
         cands = edge_candidates(self.vb, self.fmap, f.id)
         out = []
 
@@ -571,7 +604,8 @@ class OutlineBuilder:
             # millimetre wide (a cylinder's contour, where the mesh's vertices crowd one u) is valid to shapely
             # and a self-intersecting wire to OCCT at its precision; snapped, the spike collapses and goes
             simple = shapely.set_precision(simple, self.gap)
-            parts = _separate_rings(simple, self.gap, min(min_area, 0.5 * simple.area))
+            cut = _cut_pinches(simple, self.gap, min(min_area, 0.5 * simple.area)) if whole else None
+            parts = cut if cut is not None else _separate_rings(simple, self.gap, min(min_area, 0.5 * simple.area))
             target = on_surface(poly)
             if abs(sum(on_surface(q) for q in parts) - target) > 2 * self.tol_area_rel * target:
                 # the ring separation filled a hole that simplification brought within the gap of the outer ring

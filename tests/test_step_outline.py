@@ -136,6 +136,41 @@ def test_outline_drops_specks_of_a_few_pixels(tmp_path: Path) -> None:
     assert len([f for f in step.read_typed(path).faces if f.id == 0]) == 2
 
 
+def test_an_outline_past_the_area_tolerance_is_written_again_whole(tmp_path: Path) -> None:
+    """The outline's budgets (simplification, specks, holes, the shrink that parts touching rings) each stay within
+    their share, yet together may take a face past ``area_tol_rel``: then the outline is built again as the mesh
+    gives it, every piece kept, touching rings parted by cuts, when that is closer. Here the speck budget is raised to 5 % so that a one-cell speck beside a 30-cell body (3.2 % of the
+    face) is dropped: the face is written again with its speck, within 2 % of its mesh's area."""
+    vb = box_corner()
+    _grid_face(vb, 0, lambda i, j: (i <= 2 and j <= 9) or (i, j) == (18, 18))
+    vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]  # the loop does not close: outline
+    path = tmp_path / "budgets.step"
+    report = step.write(vb, path, frame="camera", config=BrepConfig(outline_speck_budget_rel=0.05))
+    assert report.fallback_faces == [0]
+    a0 = _written_area(check_written(vb, path, report.frame_map), 0)
+    assert a0.written == pytest.approx(a0.reconstructed, rel=0.02)
+    assert len([f for f in step.read_typed(path).faces if f.id == 0]) == 2
+
+
+def test_touching_rings_are_parted_by_a_cut_at_their_pinch() -> None:
+    """A 10 x 1 strip with a hole touching its outer ring at one point: `_cut_pinches` parts the rings with a
+    disc at the pinch (area lost about 4 pi gap^2, under 0.1 %), where `_separate_rings`' shrink takes the
+    perimeter times the gap off the whole strip (over 2 % here); both leave rings at least the gap apart."""
+    import shapely
+
+    from exporters.brep_outline import _cut_pinches, _rings_apart, _separate_rings
+
+    gap = 0.01
+    hole = shapely.Polygon([(4.0, 0.5), (5.0, 0.0), (6.0, 0.5), (5.0, 0.8)])  # touches y = 0 at (5, 0)
+    strip = shapely.Polygon([(0, 0), (10, 0), (10, 1), (0, 1)], [list(hole.exterior.coords)])
+    cut = _cut_pinches(strip, gap, 0.01)
+    shrunk = _separate_rings(strip, gap, 0.01)
+    assert cut is not None and all(_rings_apart(p, gap) for p in cut)
+    assert all(_rings_apart(p, gap) for p in shrunk)
+    assert abs(sum(p.area for p in cut) - strip.area) < 0.001 * strip.area
+    assert strip.area - sum(p.area for p in shrunk) > 0.02 * strip.area
+
+
 def test_nothing_written_outside_the_part_box(tmp_path: Path) -> None:
     """A free edge far from the part (a 629 mm circle beside a 100 mm box, as on a real frame) is not
     written: the file's bounding box stays the part's."""
