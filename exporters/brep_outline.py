@@ -479,7 +479,9 @@ def _separate_rings(poly: shapely.Geometry, gap: float, min_area: float) -> list
     return out
 
 
-def _cut_pinches(poly: shapely.Geometry, gap: float, min_area: float, max_cuts: int = 32) -> list[shapely.Polygon] | None:
+def _cut_pinches(
+    poly: shapely.Geometry, gap: float, min_area: float, max_cuts: int = 32
+) -> list[shapely.Polygon] | None:
     """`_separate_rings` by cuts instead of a shrink: where two rings of a piece come within ``gap`` of each other
     (a hole touching the outer ring at a point), a disc of twice ``gap`` round the closest pair of points is cut
     out, until every piece's rings lie ``gap`` apart; pieces under ``min_area`` are dropped. Only the pinches lose

@@ -139,8 +139,9 @@ def test_outline_drops_specks_of_a_few_pixels(tmp_path: Path) -> None:
 def test_an_outline_past_the_area_tolerance_is_written_again_whole(tmp_path: Path) -> None:
     """The outline's budgets (simplification, specks, holes, the shrink that parts touching rings) each stay within
     their share, yet together may take a face past ``area_tol_rel``: then the outline is built again as the mesh
-    gives it, every piece kept, touching rings parted by cuts, when that is closer. Here the speck budget is raised to 5 % so that a one-cell speck beside a 30-cell body (3.2 % of the
-    face) is dropped: the face is written again with its speck, within 2 % of its mesh's area."""
+    gives it, every piece kept, touching rings parted by cuts, when that is closer. Here the speck budget is raised
+    to 5 % so that a one-cell speck beside a 30-cell body (3.2 % of the face) is dropped: the face is written again
+    with its speck, within 2 % of its mesh's area."""
     vb = box_corner()
     _grid_face(vb, 0, lambda i, j: (i <= 2 and j <= 9) or (i, j) == (18, 18))
     vb.faces[0].loops = [[(0, False), (3, False), (1, True)]]  # the loop does not close: outline
