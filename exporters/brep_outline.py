@@ -491,18 +491,7 @@ def _cut_pinches(
     geom = shapely.make_valid(poly)
     for _ in range(max_cuts):  # loop over cuts, one pinch at a time
         parts = [p for p in getattr(geom, "geoms", [geom]) if isinstance(p, shapely.Polygon) and not p.is_empty]
-        pinch = None
-        for part in parts:  # loop over pieces: the first pair of rings closer than the gap
-            rings = [part.exterior, *part.interiors]
-            for k, a in enumerate(rings):
-                for b in rings[k + 1 :]:
-                    if a.distance(b) < gap:
-                        pinch = shapely.shortest_line(a, b).centroid
-                        break
-                if pinch is not None:
-                    break
-            if pinch is not None:
-                break
+        pinch = next((q for q in (_pinch(p, gap) for p in parts) if q is not None), None)
         if pinch is None:
             out = [p for p in parts if p.area >= min_area]
             return out if all(p.is_valid for p in out) else None
@@ -510,12 +499,20 @@ def _cut_pinches(
     return None
 
 
+def _pinch(poly: shapely.Polygon, gap: float) -> shapely.Point | None:
+    """The midpoint of the closest pair of points of the first two rings of ``poly`` (outer and holes) that lie
+    within ``gap`` of each other, or None when every pair of its rings is at least ``gap`` apart."""
+    rings = [poly.exterior, *poly.interiors]
+    for k, a in enumerate(rings):  # loop over ring pairs
+        for b in rings[k + 1 :]:
+            if a.distance(b) < gap:
+                return shapely.shortest_line(a, b).centroid
+    return None
+
+
 def _rings_apart(poly: shapely.Polygon, gap: float) -> bool:
     """Whether ``poly`` is valid and its rings (outer and holes) lie at least ``gap`` from one another."""
-    if not poly.is_valid:
-        return False
-    rings = [poly.exterior, *poly.interiors]
-    return all(a.distance(b) >= gap for k, a in enumerate(rings) for b in rings[k + 1 :])
+    return poly.is_valid and _pinch(poly, gap) is None
 
 
 def _distinct(ring: np.ndarray, tol: float) -> np.ndarray:
