@@ -90,3 +90,35 @@ def test_samples_export_with_few_fallback_faces(name, max_fallback, tmp_path):
     assert back.untyped_edges == 0 and back.box_inside(0.05)
     # every face is in the file (read back by name), at its mesh area within the read-back's 2 %
     assert all(0.98 <= f.ratio <= 1.02 for f in back.faces), [(f.id, f.ratio) for f in back.faces]
+
+
+def _on_plane(uv: list[tuple[float, float]], K: np.ndarray, z: float = 0.5) -> np.ndarray:
+    """(N, 3) camera-frame points at depth ``z`` seen at the pixels ``uv``."""
+    p = np.c_[np.asarray(uv, float), np.ones(len(uv))] @ np.linalg.inv(K).T
+    return p * z
+
+
+def test_drop_end_hooks_removes_a_hook_past_the_corner_and_nothing_else():
+    from v2c.vbrep.model import EdgeType
+    from v2c.vbrep.postprocess import ProtoEdge
+    from v2c.vbrep.topology import drop_end_hooks
+
+    K = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+    # the vertex at (100, 100); the first sample 6 px past it, then the edge runs down from (102, 102): the
+    # path turns back by 153 degrees at the first sample (a hook), by 45 at the second (a corner of the edge)
+    hooked_uv = [(100, 100), (106, 100), (102, 102), (102, 110), (102, 120), (102, 130)]
+    hooked = ProtoEdge(EdgeType.OCCLUDED, (1,), _on_plane(hooked_uv, K), v0=0, v1=1)
+    straight = ProtoEdge(EdgeType.OCCLUDED, (1,), _on_plane([(0, 0), (5, 1), (10, 0), (15, 1)], K), v0=2, v1=3)
+    # a closed edge round a thin sliver turns back by 169 degrees at its far sample: left as it is
+    closed_uv = [(200, 200), (220, 202), (200, 204), (200, 200)]
+    closed = ProtoEdge(EdgeType.SILHOUETTE, (2,), _on_plane(closed_uv, K), v0=4, v1=4)
+    before = [p.pts.copy() for p in (hooked, straight, closed)]
+    assert drop_end_hooks([hooked, straight, closed], K, 45.0) == 1
+    np.testing.assert_allclose(hooked.pts, np.delete(before[0], 1, axis=0))
+    np.testing.assert_allclose(straight.pts, before[1])
+    np.testing.assert_allclose(closed.pts, before[2])
+    # the end, too: the same polyline reversed loses the same sample; 0 degrees leaves it
+    rev = ProtoEdge(EdgeType.OCCLUDED, (1,), before[0][::-1].copy(), v0=1, v1=0)
+    assert drop_end_hooks([rev], K, 0.0) == 0 and len(rev.pts) == 6
+    assert drop_end_hooks([rev], K, 45.0) == 1
+    np.testing.assert_allclose(rev.pts, np.delete(before[0], 1, axis=0)[::-1])

@@ -34,7 +34,7 @@ from v2c.vbrep.edges import edge_protos
 from v2c.vbrep.faces import absorb_islands, absorb_specks, face_geoms
 from v2c.vbrep.model import VBRep
 from v2c.vbrep.postprocess import ProtoEdge, postprocess
-from v2c.vbrep.topology import drop_degenerate, snap_to_surfaces
+from v2c.vbrep.topology import drop_degenerate, drop_end_hooks, snap_to_surfaces
 from v2c.vbrep.vertices import make_vertices
 
 if TYPE_CHECKING:
@@ -76,6 +76,7 @@ def extract_vbrep(scan: Scan, seg: Segmentation, fit: FitResult, config: VBRepCo
         protos, vertices, K, cfg, same_m=cfg.vertex_merge_gap_share * gap_thr, prims=prims, stats=stats
     )
     stats.update(snap_to_surfaces(protos, vertices, prims, cfg.d_int * scale, K, cfg))
+    stats["hook_samples_dropped"] = drop_end_hooks(protos, K, cfg.end_hook_deg)
     protos = drop_degenerate(protos, K, cfg.min_edge_px)
     # 5. the VB-Rep
     return assemble(ctx, protos, vertices, fit, seg)
