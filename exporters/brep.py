@@ -321,6 +321,8 @@ def build_brep(
     out = BuiltBRep(shape=TopoDS_Compound(), fmap=fmap, box=part_box(vbrep, fmap, cfg.box_margin_rel))
     faces: dict[int, TopoDS_Face] = {}
     face_edges: dict[int, set[int]] = {}
+    # VFace id -> (piece, the VEdge ids its loops hold) for a face built from its loops in several pieces
+    loop_parts: dict[int, list[tuple[TopoDS_Face, set[int]]]] = {}
     mesh_deflection = max(cfg.mesh_check_deflection_abs, cfg.mesh_check_deflection_rel * fmap.length(vbrep.scale))
     for f in vbrep.faces:
         if f.id not in eb.surfaces:
@@ -343,22 +345,32 @@ def build_brep(
         else:
             made, why = fb.build_face(f, eb.edges), "boundary wire invalid"
         if made is not None:
-            area = face_area(made[0])
-            shift = 0.0 if centre is None else float(np.linalg.norm(face_centroid(made[0]) - centre))
+            built = [face for face, _ in made]
+            areas = [face_area(face) for face in built]
+            area = sum(areas)
+            shift = 0.0
+            if centre is not None and area > 0:
+                middle = sum(a * face_centroid(face) for a, face in zip(areas, built)) / area
+                shift = float(np.linalg.norm(middle - centre))
             if target > 0 and abs(area - target) > cfg.area_tol_rel * target:
                 why = f"its loops bound {area:.4g} mm² of a {target:.4g} mm² reconstruction"
             elif target > 0 and shift > cfg.placement_tol_rel * np.sqrt(target):
                 why = f"its loops bound its area {shift:.3g} mm away from its reconstruction"
-            elif not _inside(made[0], out.box):
+            elif not all(_inside(face, out.box) for face in built):
                 why = "its loops reach outside the part's box"
             elif not all(
-                meshes(made[0], k * mesh_deflection, cfg.mesh_check_angle_rad, 1.0 - cfg.area_tol_rel)
+                meshes(face, k * mesh_deflection, cfg.mesh_check_angle_rad, 1.0 - cfg.area_tol_rel)
+                for face in built
                 for k in cfg.mesh_check_scales
             ):
                 why = "OCCT's mesher does not draw it whole (its boundary wire crosses itself once discretised)"
             else:
-                faces[f.id] = fb.done[f.id] = made[0]
-                face_edges[f.id] = {eid for lp in made[1] for eid, _ in lp}
+                for k, face in enumerate(built):
+                    fb.done[(f.id, k)] = face
+                faces[f.id] = built[0]
+                if len(built) > 1:  # seen in pieces: each its own OCCT face, all named after it
+                    loop_parts[f.id] = [(face, {eid for lp in loops for eid, _ in lp}) for face, loops in made]
+                face_edges[f.id] = {eid for _, loops in made for lp in loops for eid, _ in lp}
                 out.built_area[f.id] = area
                 continue
         pieces = [p for p in ob.build(f, eb.surfaces[f.id], f.id in raw_outline) if _inside(p.face, out.box)]
@@ -393,24 +405,36 @@ def build_brep(
     copied = sorted((fid, eid) for (fid, eid) in eb.copies if eid in face_edges.get(fid, ()))
     for fid, eid in copied:
         out.copied_edges.setdefault(eid, []).append(fid)
-    # shells join faces through the edges they share, not through copies
+    # shells join faces through the edges they share, not through copies; a face in pieces joins through each
+    # piece's own edges, and an outline face's pieces share no edge (a shell must be connected)
     shared = {fid: {eid for eid in es if (fid, eid) not in eb.copies} for fid, es in face_edges.items()}
+    nodes: list[tuple[int, TopoDS_Face, bool]] = []  # (VFace id, face, built from loops)
+    node_edges: dict[int, set[int]] = {}
+    for fid in shared:
+        if fid in out.face_parts:
+            pieces = [(part, set()) for part in out.face_parts[fid]]
+        else:
+            pieces = loop_parts.get(fid, [(faces[fid], shared[fid])])
+        for face, es in pieces:
+            node_edges[len(nodes)] = {eid for eid in es if (fid, eid) not in eb.copies}
+            nodes.append((fid, face, fid not in out.face_parts))
     eb.bb.MakeCompound(out.shape)
-    for shell_faces in connected_groups(shared):
-        if len(shell_faces) == 1 and shell_faces[0] in out.face_parts:
-            # an outline face's pieces share no edge: one shell each (a shell must be connected)
-            fid = shell_faces[0]
-            for part in out.face_parts[fid]:
-                _add_shell(eb.bb, out.shape, [part])
-            out.faces[fid] = out.face_parts[fid][0]
-            continue
+    placed: dict[int, list[TopoDS_Face]] = {}
+    for group in connected_groups(node_edges):
         shell = []
-        for fid in shell_faces:
-            out.faces[fid] = TopoDS.Face_s(fb.ctx.Apply(faces[fid]))
-            shell.append(out.faces[fid])
+        for k in group:
+            fid, face, from_loops = nodes[k]
+            if from_loops:
+                face = TopoDS.Face_s(fb.ctx.Apply(face))
+            placed.setdefault(fid, []).append(face)
+            shell.append(face)
         _add_shell(eb.bb, out.shape, shell)
+    for fid, pieces in placed.items():
+        out.faces[fid] = pieces[0]
+        if fid in loop_parts:
+            out.face_parts[fid] = pieces
     used = set().union(*shared.values()) if shared else set()
-    outlined = set(out.face_parts)
+    outlined = set(out.fallback_faces)
     faces_by_edge = {e.id: set(e.faces) for e in vbrep.edges}
     # the VEdge names the outline faces' edges carry (`brep_outline`: each after the face's nearest VB-Rep edge)
     carried = {name for fid in outlined for _, name in out.outline_edges.get(fid, [])}

@@ -7,6 +7,7 @@ from collections import defaultdict
 from typing import TYPE_CHECKING
 
 import numpy as np
+import shapely
 from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve2d
 from OCP.BRepCheck import BRepCheck_Analyzer, BRepCheck_NoError, BRepCheck_Wire
@@ -67,7 +68,7 @@ class FaceBuilder:
         self.warnings = eb.warnings
         self.bb = eb.bb
         self.ctx = ShapeBuild_ReShape()
-        self.done: dict[int, TopoDS_Face] = {}
+        self.done: dict[tuple[int, int], TopoDS_Face] = {}  # (VFace id, piece) -> the face built so far
 
     def _wire(self, loop: Loop, edges: dict[int, TopoDS_Edge]) -> TopoDS_Wire | None:
         w = TopoDS_Wire()
@@ -337,15 +338,91 @@ class FaceBuilder:
             out.append(loop)
         return out
 
+    def _outer_groups(self, f: VFace, loops: list[Loop]) -> list[list[Loop]] | None:
+        """The loops grouped as the boundaries of separate pieces, when the face is seen in several (an occluder or
+        a gap in the segmentation cuts it in two): each loop that lies inside no other (in the face's (u, v)) is a
+        piece's outer loop, largest first, followed by the loops inside it (in the smallest outer loop holding
+        them). None when a loop cannot be sampled, its polygon is degenerate, or only one loop is outermost (one
+        piece: the loops as given)."""
+        s = self.surfaces[f.id]
+        sampled = [self._loop_uv_polygon(s, lp, fid=f.id) for lp in loops]
+        if any(p is None or len(p[0]) < 3 for p in sampled):
+            return None
+        centre = np.array([s.u_center, s.v_center])
+        polys = []
+        for p, _ in sampled:
+            q = p.copy()
+            for k, periodic in ((0, s.u_periodic), (1, s.v_periodic)):
+                if periodic:  # each loop within half a period of the face's centre
+                    q[:, k] -= 2 * np.pi * np.round((q[:, k].mean() - centre[k]) / (2 * np.pi))
+            poly = shapely.Polygon(q)
+            if not poly.is_valid or poly.area <= 0:
+                return None
+            polys.append(poly)
+        inside = [
+            [j for j in range(len(polys)) if j != i and polys[j].area > polys[i].area and polys[j].contains(polys[i])]
+            for i in range(len(polys))
+        ]
+        outers = sorted((i for i in range(len(polys)) if not inside[i]), key=lambda i: -polys[i].area)
+        if len(outers) < 2:
+            return None
+        groups = {i: [i] for i in outers}
+        for i in range(len(polys)):
+            if inside[i]:
+                holder = min((j for j in inside[i] if j in groups), key=lambda j: polys[j].area, default=None)
+                if holder is None:  # inside a hole only: an island, which these pieces do not hold
+                    return None
+                groups[holder].append(i)
+        # a piece that holds none of the face's mesh is not in the reconstruction (its pixels' mesh was dropped as
+        # a stray island, or lay where the sensor read nothing): not written
+        support = self._mesh_support(
+            f,
+            s,
+            centre,
+            [shapely.Polygon(polys[g[0]].exterior, [polys[h].exterior for h in g[1:]]) for g in groups.values()],
+        )
+        kept = []
+        for members, share in zip(groups.values(), support):
+            if share > self.cfg.area_tol_rel:
+                kept.append([loops[k] for k in members])
+            else:
+                self.warnings.append(
+                    f"face {f.id}: a piece of it bounded by {len(members)} loop(s) holds {100 * share:.2g} % of its "
+                    "mesh; not written"
+                )
+        return kept or None
+
+    def _mesh_support(
+        self, f: VFace, s: AnalyticSurface, centre: np.ndarray, pieces: list[shapely.Polygon]
+    ) -> list[float]:
+        """The share of face ``f``'s mesh area (its triangles' 3D areas) whose triangles' centroids lie in each
+        piece (polygons in the surface's (u, v), periodic parameters within half a period of ``centre``)."""
+        pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
+        tri = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
+        if not len(tri):
+            return [0.0] * len(pieces)
+        a, b, c = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
+        areas = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        uv = s.uv((a + b + c) / 3.0)
+        for k, periodic in ((0, s.u_periodic), (1, s.v_periodic)):
+            if periodic:
+                uv[:, k] -= 2 * np.pi * np.round((uv[:, k] - centre[k]) / (2 * np.pi))
+        total = float(areas.sum())
+        if total <= 0:
+            return [0.0] * len(pieces)
+        return [float(areas[shapely.contains_xy(p, uv[:, 0], uv[:, 1])].sum()) / total for p in pieces]
+
     def build_face(
         self,
         f: VFace,
         edges: dict[int, TopoDS_Edge],
-    ) -> tuple[TopoDS_Face, list[Loop]] | None:
-        """The face trimmed by its loops and the loops it kept, trying in turn: the VB-Rep's loops; their
-        edges chained again through shared vertices (when the given loops do not close); only the loops that
-        close; the largest closed loop with each other closed loop that leaves it a valid face (largest first);
-        only the largest closed loop. Anything but the first is reported as a warning. None if all fail."""
+    ) -> list[tuple[TopoDS_Face, list[Loop]]] | None:
+        """The face trimmed by its loops, as one or more pieces (each an OCCT face and the loops it kept), trying in
+        turn: the VB-Rep's loops as separate pieces where they are (`_outer_groups`: the face seen in several
+        pieces, which one face with holes cannot hold); the VB-Rep's loops; their edges chained again through
+        shared vertices (when the given loops do not close); only the loops that close; the largest closed loop
+        with each other closed loop that leaves it a valid face (largest first); only the largest closed loop.
+        Anything after the VB-Rep's loops is reported as a warning. None if all fail."""
         # degenerate edges (dropped by the EdgeBuilder, their vertices merged) leave their loops
         given = [[(eid, rev) for eid, rev in lp if eid not in self.degenerate] for lp in f.loops]
         given = [lp for lp in given if lp]
@@ -358,6 +435,17 @@ class FaceBuilder:
         def by_area(loops: list[Loop]) -> list[Loop]:
             return sorted(loops, key=lambda lp: -abs(self.loop_area_uv(s, lp)))
 
+        if len(given) > 1 and all(self._loop_closed(lp) for lp in given):
+            groups = self._outer_groups(f, given)
+            if groups is not None:
+                parts = []
+                for group in groups:
+                    face = self._try_face(f, group, edges)
+                    if face is None:
+                        break
+                    parts.append((face, group))
+                else:
+                    return parts
         attempts: list[tuple[str, list[Loop]]] = [("", given)]
         if not all(self._loop_closed(lp) for lp in given):
             chained = self._rechain(given)
@@ -373,7 +461,7 @@ class FaceBuilder:
             tried.append(loops)
             face = self._try_face(f, loops, edges)
             if face is not None:
-                return self._report(f, why, face, loops)
+                return [self._report(f, why, face, loops)]
         if len(closed) > 1:
             # the largest loop with each hole that leaves it a valid face, largest first (one hole whose wire
             # crosses the outer one in (u, v) no longer costs the face its other holes); tried only now, as every
@@ -386,10 +474,10 @@ class FaceBuilder:
                 if got is not None:
                     kept, face = [*kept, hole], got
             if face is not None:
-                return self._report(f, "its largest loop and the holes it can take", face, kept)
+                return [self._report(f, "its largest loop and the holes it can take", face, kept)]
             face = self._try_face(f, closed[:1], edges)
             if face is not None:
-                return self._report(f, "only its largest loop", face, closed[:1])
+                return [self._report(f, "only its largest loop", face, closed[:1])]
         return None
 
     def _report(self, f: VFace, why: str, face: TopoDS_Face, loops: list[Loop]) -> tuple[TopoDS_Face, list[Loop]]:

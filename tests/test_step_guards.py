@@ -324,3 +324,70 @@ def test_a_vertex_is_not_drawn_along_near_parallel_curves() -> None:
 
     assert placed(BrepConfig(vertex_iterations=5000)) <= 3.0  # 3 % of the part
     assert placed(BrepConfig(vertex_iterations=5000, vertex_move_rel=10.0)) > 50.0  # unguarded it runs off
+
+
+def _two_piece_face(second_meshed: bool = True):
+    """A plane (z = 0.5 m, facing the camera) seen in two pieces, 20 x 20 mm squares 20 mm apart (an occluder
+    between them): one VB-Rep face whose two loops are both outer loops, each of four silhouette edges, and the
+    mesh of both squares (of the first only, without ``second_meshed``)."""
+    from v2c.vbrep.model import VBRep, VFace
+
+    from scenes.vbrep import K_DEFAULT, _quad_mesh, _segment, project
+
+    z = 0.5
+    squares = [(-0.03, -0.01), (0.01, 0.03)]
+    verts, edges, loops, mv, mt = [], [], [], [], []
+    for x0, x1 in squares:
+        corners = np.array([[x0, -0.01, z], [x1, -0.01, z], [x1, 0.01, z], [x0, 0.01, z]])
+        ids = []
+        for c in corners:
+            ids.append(len(verts))
+            verts.append(VVertex(len(verts), VertexKind.OTHER, c, project(c, K_DEFAULT)[0]))
+        loop = []
+        for k in range(4):
+            a, b = ids[k], ids[(k + 1) % 4]
+            edges.append(
+                VEdge(len(edges), EdgeType.SILHOUETTE, 0.9, (0,), _segment(corners[k], corners[(k + 1) % 4]), a, b, None)
+            )
+            loop.append((len(edges) - 1, False))
+        loops.append(loop)
+        if second_meshed or not mt:
+            v, t = _quad_mesh(corners)
+            mt.append(t + sum(len(x) for x in mv))
+            mv.append(v)
+    plane = {"type": "plane", "params": {"origin": [0.0, 0.0, z], "normal": [0.0, 0.0, -1.0]}}
+    face = VFace(0, 1, plane, "Z", loops, np.concatenate(mv), np.concatenate(mt), 0.9)
+    return VBRep([face], edges, verts, frame=np.eye(3), K=K_DEFAULT, image_size=(640, 480), scale=0.06, meta={})
+
+
+def test_a_face_seen_in_two_pieces_is_written_from_its_loops_in_two_pieces(tmp_path: Path) -> None:
+    """One face with two outer loops (no loop inside the other) cannot be one OCCT face with a hole: it is written
+    as two faces, each bounded by its own loop, both named after the VB-Rep face, not from its mesh outline."""
+    from exporters.readback import check_written
+
+    vb = _two_piece_face()
+    rep = step.write(vb, tmp_path / "two.step", frame="camera")
+    assert rep.fallback_faces == [] and rep.skipped_faces == [] and rep.free_edges == []
+    built = build_brep(vb, CAMERA)
+    pieces = built.face_parts[0]
+    assert len(pieces) == 2 and all(BRepCheck_Analyzer(p).IsValid() for p in pieces)
+    assert built.face_edges[0] == set(range(8))
+    rb = check_written(vb, tmp_path / "two.step", rep.frame_map)
+    assert not rb.off_faces()
+    (face,) = rb.faces
+    assert abs(face.written - 800.0) < 1.0 and abs(face.reconstructed - 800.0) < 1.0  # two 400 mm² squares
+
+
+def test_a_piece_of_a_face_that_holds_none_of_its_mesh_is_not_written(tmp_path: Path) -> None:
+    """The second square's mesh is gone (its pixels' mesh dropped as a stray island): the file writes the first
+    square from its loop, leaves the second out with a warning, and the face reads back at its mesh's area."""
+    from exporters.readback import check_written
+
+    vb = _two_piece_face(second_meshed=False)
+    rep = step.write(vb, tmp_path / "one.step", frame="camera")
+    assert rep.fallback_faces == [] and rep.skipped_faces == []
+    assert any(w.startswith("face 0: a piece of it bounded by 1 loop(s) holds 0 % of its mesh") for w in rep.warnings)
+    built = build_brep(vb, CAMERA)
+    assert 0 not in built.face_parts and built.face_edges[0] == {0, 1, 2, 3}
+    (face,) = check_written(vb, tmp_path / "one.step", rep.frame_map).faces
+    assert abs(face.written - 400.0) < 1.0 and abs(face.reconstructed - 400.0) < 1.0
