@@ -77,6 +77,9 @@ class BrepConfig:
     # Two edges of a boundary wire that BRepCheck finds crossing near their shared vertex (an edge trimmed a
     # little past the corner) have the vertex's tolerance raised to cover the crossing, when it lies within the
     # vertex's reach; at most this many such repairs per face
+    # A face's own copies of two loop edges that cross near their shared vertex are cut where they cross
+    # (`FaceBuilder._corner_cuts`), sampled this many times over each edge's half at that vertex; 0: off
+    corner_cut_samples: int = 40
     max_vertex_repairs: int = 12
     analytic_tol: float = 1e-4  # a VB-Rep line/circle counts as the exact intersection within this
     # The written face must be the reconstruction: a face bounded by its loops is kept only when its area is

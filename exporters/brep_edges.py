@@ -561,29 +561,10 @@ class EdgeBuilder:
             # across gaps its tolerances state within join_tol (a 27 mm vertex tolerance joined nothing real)
             va = own.get((e.id, 0, fid), va)
             vb = own.get((e.id, 1, fid), vb)
-            forward = g.t1 > g.t0
-            lo, hi = (g.t0, g.t1) if forward else (g.t1, g.t0)
-            v_lo, v_hi = (va, vb) if forward else (vb, va)
-            try:
-                if g.curve is None:
-                    mk = BRepBuilderAPI_MakeEdge(g.pcurve, self.surfaces[g.face].geom, v_lo, v_hi, lo, hi)
-                else:
-                    mk = BRepBuilderAPI_MakeEdge(g.curve, v_lo, v_hi, lo, hi)
-                ok = mk.IsDone()
-            except Exception as exc:  # noqa: BLE001 - OCCT construction errors: report, skip the edge
-                ok, mk = False, exc
-            if not ok:
-                why = mk.Error() if hasattr(mk, "Error") else mk
-                self.warnings.append(f"edge {e.id}: BRepBuilderAPI_MakeEdge failed ({why})")
+            made = self.make_edge(e, g, va, vb)
+            if made is None:
                 continue
-            edge = mk.Edge()
-            if g.curve is None:
-                BRepLib.BuildCurves3d_s(edge)
-            elif g.pcurve is not None:  # exact iso curve: attach its pcurve (same parametrisation)
-                self.bb.UpdateEdge(
-                    edge, g.pcurve, self.surfaces[g.face].geom, TopLoc_Location(), BRep_Tool.Tolerance_s(edge)
-                )
-            oriented = edge if forward else TopoDS.Edge_s(edge.Reversed())
+            edge, oriented = made
             if fid >= 0:
                 self.copies[(fid, e.id)] = oriented
                 continue
@@ -592,6 +573,35 @@ class EdgeBuilder:
             # Stored oriented from v0 to v1, so a loop entry (id, reversed) is this edge, reversed or not.
             edges[e.id] = oriented
         return edges
+
+    def make_edge(
+        self, e: VEdge, g: EdgeGeom, va: TopoDS_Vertex, vb: TopoDS_Vertex
+    ) -> tuple[TopoDS_Edge, TopoDS_Edge] | None:
+        """The TopoDS_Edge of geometry ``g`` between the vertices ``va`` (at e.v0) and ``vb`` (at e.v1): as built
+        (along its curve's parameter) and oriented from v0 to v1; None (a warning) when OCCT cannot make it."""
+        forward = g.t1 > g.t0
+        lo, hi = (g.t0, g.t1) if forward else (g.t1, g.t0)
+        v_lo, v_hi = (va, vb) if forward else (vb, va)
+        try:
+            if g.curve is None:
+                mk = BRepBuilderAPI_MakeEdge(g.pcurve, self.surfaces[g.face].geom, v_lo, v_hi, lo, hi)
+            else:
+                mk = BRepBuilderAPI_MakeEdge(g.curve, v_lo, v_hi, lo, hi)
+            ok = mk.IsDone()
+        except Exception as exc:  # noqa: BLE001 - OCCT construction errors: report, skip the edge
+            ok, mk = False, exc
+        if not ok:
+            why = mk.Error() if hasattr(mk, "Error") else mk
+            self.warnings.append(f"edge {e.id}: BRepBuilderAPI_MakeEdge failed ({why})")
+            return None
+        edge = mk.Edge()
+        if g.curve is None:
+            BRepLib.BuildCurves3d_s(edge)
+        elif g.pcurve is not None:  # exact iso curve: attach its pcurve (same parametrisation)
+            self.bb.UpdateEdge(
+                edge, g.pcurve, self.surfaces[g.face].geom, TopLoc_Location(), BRep_Tool.Tolerance_s(edge)
+            )
+        return edge, (edge if forward else TopoDS.Edge_s(edge.Reversed()))
 
     def _own_vertices(
         self, placed: list[tuple[VEdge, EdgeGeom | None, int]], apart: dict[tuple[int, int, int], float]

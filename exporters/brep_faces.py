@@ -4,6 +4,7 @@ edges of `exporters.brep_edges` (its loops, or a repaired version of them), else
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,7 +26,7 @@ from exporters.occ_surfaces import AnalyticSurface, distance_to_surface
 from exporters.polygons import polygon_crossings
 
 if TYPE_CHECKING:
-    from exporters.brep_edges import EdgeBuilder
+    from exporters.brep_edges import EdgeBuilder, EdgeGeom
     from v2c.vbrep.model import VFace
 
 Loop = list[tuple[int, bool]]
@@ -41,6 +42,25 @@ def edges_of(shape: TopoDS_Shape) -> list[TopoDS_Edge]:
         out.append(TopoDS.Edge_s(exp.Current()))
         exp.Next()
     return out
+
+
+def _first_crossing(a: np.ndarray, b: np.ndarray) -> tuple[tuple[int, float], tuple[int, float]] | None:
+    """Where polyline ``b`` (M, 2) first properly crosses polyline ``a`` (N, 2), both starting at one point: the
+    segment index and fraction along it on each (the crossing with the smallest index sum); None without one."""
+    p, r = a[:-1], np.diff(a, axis=0)
+    q, s_ = b[:-1], np.diff(b, axis=0)
+    den = r[:, None, 0] * s_[None, :, 1] - r[:, None, 1] * s_[None, :, 0]
+    qp = q[None, :, :] - p[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (qp[..., 0] * s_[None, :, 1] - qp[..., 1] * s_[None, :, 0]) / den
+        u = (qp[..., 0] * r[:, None, 1] - qp[..., 1] * r[:, None, 0]) / den
+    ok = (np.abs(den) > 1e-15) & (t > 1e-9) & (t < 1 - 1e-9) & (u > 1e-9) & (u < 1 - 1e-9)
+    ok[0, 0] = False  # the two first segments meet at the shared start
+    if not ok.any():
+        return None
+    i, j = np.nonzero(ok)
+    k = int(np.argmin(i + j))
+    return (int(i[k]), float(t[i[k], j[k]])), (int(j[k]), float(u[i[k], j[k]]))
 
 
 class FaceBuilder:
@@ -63,6 +83,7 @@ class FaceBuilder:
         self.vpos = eb.vpos
         self.edges = eb.edges
         self.vid = eb.vid
+        self.eb = eb
         self.loop_area_uv = eb.loop_area_uv
         self.degenerate = eb.degenerate
         self.warnings = eb.warnings
@@ -294,6 +315,32 @@ class FaceBuilder:
             self.ctx.Replace(old, new)
         return self.orient_to_camera(face, f)
 
+    def _try_cut(
+        self,
+        f: VFace,
+        loops: list[Loop],
+        edges: dict[int, TopoDS_Edge],
+        cut_edges: dict[int, TopoDS_Edge],
+        cut_geoms: dict[int, EdgeGeom],
+    ) -> TopoDS_Face | None:
+        """`_try_face` with the face's own cut copies of some loop edges (`_corner_cuts`); kept as this face's
+        copies (``copies``, ``copy_geoms``) when the face is valid, else forgotten."""
+        saved = {eid: self.copy_geoms.get((f.id, eid)) for eid in cut_geoms}
+        for eid, g in cut_geoms.items():
+            self.copy_geoms[(f.id, eid)] = g
+        face = self._try_face(f, loops, {**edges, **cut_edges})
+        if face is None:
+            for eid, g in saved.items():
+                if g is None:
+                    self.copy_geoms.pop((f.id, eid), None)
+                else:
+                    self.copy_geoms[(f.id, eid)] = g
+            return None
+        for eid, ed in cut_edges.items():
+            self.copies[(f.id, eid)] = ed
+        self.warnings.append(f"face {f.id}: its edges {sorted(cut_edges)} cut at the corners where they cross")
+        return face
+
     def _replacements_keep_faces_valid(self, replaced: list[tuple[TopoDS_Shape, TopoDS_Shape]]) -> bool:
         """Whether the faces built so far stay valid when ShapeFix's replacements of shared edges (made while
         fixing another face) are applied to them."""
@@ -337,6 +384,86 @@ class FaceBuilder:
             used |= used_here
             out.append(loop)
         return out
+
+    def _geom_uv(self, s: AnalyticSurface, g: EdgeGeom, ts: np.ndarray) -> np.ndarray:
+        """(N, 2) (u, v) on ``s`` of an edge geometry at its parameters ``ts`` (periodic parameters continuous)."""
+        if g.curve is None and self.surfaces[g.face] is s:
+            return s.unwrap(pcurve_points(g.pcurve, ts))
+        xyz = (
+            curve_points(g.curve, ts)
+            if g.curve is not None
+            else self.surfaces[g.face].evaluate(pcurve_points(g.pcurve, ts))
+        )
+        return s.unwrap(s.uv(xyz))
+
+    def _geom_point(self, g: EdgeGeom, t: float) -> np.ndarray:
+        """(3,) mm: an edge geometry's point at parameter ``t``."""
+        if g.curve is not None:
+            return curve_points(g.curve, np.array([t]))[0]
+        return self.surfaces[g.face].evaluate(pcurve_points(g.pcurve, np.array([t])))[0]
+
+    def _corner_cuts(
+        self, f: VFace, loops: list[Loop], edges: dict[int, TopoDS_Edge]
+    ) -> tuple[dict[int, TopoDS_Edge], dict[int, EdgeGeom]] | None:
+        """Face ``f``'s own copies of the loop edges that cross the next edge of their loop near the vertex they
+        share, each cut where they cross (``cfg.corner_cut_samples`` samples per edge, the crossing in the half of
+        both edges nearest the vertex, beyond the vertex's reach (`_vertex_reach`: nearer, the vertex's tolerance
+        covers the crossing), the two curves there within ``join_tol``): the corner the two edges make
+        on this face. A vertex placed off that corner (solved on three surfaces, or an occlusion vertex of the
+        image) leaves the two edges running past each other to it, and the face's boundary crosses itself.
+        Returns the copies (oriented v0 -> v1) and their geometries, or None when no corner is cut."""
+        s = self.surfaces[f.id]
+        n = self.cfg.corner_cut_samples
+        if n < 4:
+            return None
+        geom = {eid: self.copy_geoms.get((f.id, eid), self.geoms.get(eid)) for lp in loops for eid, _ in lp}
+        reach = self._vertex_reach([])
+        cuts: dict[int, dict[int, tuple[float, int]]] = defaultdict(dict)  # eid -> {end: (parameter, corner)}
+        corners: list[tuple[np.ndarray, float]] = []
+        for lp in loops:
+            for k in range(len(lp)):
+                (ea, ra), (eb, rb) = lp[k], lp[(k + 1) % len(lp)]
+                ga, gb = geom.get(ea), geom.get(eb)
+                if ea == eb or ga is None or gb is None:
+                    continue
+                end_a, end_b = (0 if ra else 1), (1 if rb else 0)  # each edge's end at the shared vertex
+                va = self.vb.edges[ea].v1 if end_a else self.vb.edges[ea].v0
+                vb_ = self.vb.edges[eb].v1 if end_b else self.vb.edges[eb].v0
+                if self.vid(va) != self.vid(vb_) or end_a in cuts[ea] or end_b in cuts[eb]:
+                    continue
+                # both parametrised from the shared vertex outwards, to their middle
+                ta = np.linspace(ga.t1 if end_a else ga.t0, 0.5 * (ga.t0 + ga.t1), n)
+                tb = np.linspace(gb.t1 if end_b else gb.t0, 0.5 * (gb.t0 + gb.t1), n)
+                hit = _first_crossing(self._geom_uv(s, ga, ta), self._geom_uv(s, gb, tb))
+                if hit is None:
+                    continue
+                (ia, fa), (ib, fb) = hit
+                txa = ta[ia] + fa * (ta[ia + 1] - ta[ia])
+                tyb = tb[ib] + fb * (tb[ib + 1] - tb[ib])
+                pa, pb = self._geom_point(ga, txa), self._geom_point(gb, tyb)
+                gap = float(np.linalg.norm(pa - pb))
+                if gap > self.eb.join_tol or np.linalg.norm(0.5 * (pa + pb) - self.vpos[self.vid(va)]) <= reach:
+                    continue  # the curves do not meet there, or meet within the vertex's reach (its tolerance)
+                cuts[ea][end_a] = (txa, len(corners))
+                cuts[eb][end_b] = (tyb, len(corners))
+                corners.append((0.5 * (pa + pb), 0.5 * gap))
+        if not corners:
+            return None
+        vertices = [self.eb._vertex(x, 1.05 * half + self.cfg.min_tolerance) for x, half in corners]
+        out_edges: dict[int, TopoDS_Edge] = {}
+        out_geoms: dict[int, EdgeGeom] = {}
+        for eid, ends in ((eid, ends) for eid, ends in cuts.items() if ends):
+            g = geom[eid]
+            t0, t1 = ends[0][0] if 0 in ends else g.t0, ends[1][0] if 1 in ends else g.t1
+            cut = replace(g, t0=t0, t1=t1, end0=self._geom_point(g, t0), end1=self._geom_point(g, t1))
+            old = TopoDS.Edge_s(self.ctx.Apply(edges[eid]))
+            va = vertices[ends[0][1]] if 0 in ends else TopExp.FirstVertex_s(old, True)
+            vb_ = vertices[ends[1][1]] if 1 in ends else TopExp.LastVertex_s(old, True)
+            made = self.eb.make_edge(self.vb.edges[eid], cut, va, vb_)
+            if made is None:
+                return None
+            out_edges[eid], out_geoms[eid] = made[1], cut
+        return out_edges, out_geoms
 
     def _outer_groups(self, f: VFace, loops: list[Loop]) -> list[list[Loop]] | None:
         """The loops grouped as the boundaries of separate pieces, when the face is seen in several (an occluder or
@@ -462,6 +589,12 @@ class FaceBuilder:
             face = self._try_face(f, loops, edges)
             if face is not None:
                 return [self._report(f, why, face, loops)]
+            if why == "" and all(self._loop_closed(lp) for lp in loops):
+                cut = self._corner_cuts(f, loops, edges)
+                if cut is not None:
+                    face = self._try_cut(f, loops, edges, *cut)
+                    if face is not None:
+                        return [self._report(f, why, face, loops)]
         if len(closed) > 1:
             # the largest loop with each hole that leaves it a valid face, largest first (one hole whose wire
             # crosses the outer one in (u, v) no longer costs the face its other holes); tried only now, as every

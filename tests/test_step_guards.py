@@ -391,3 +391,50 @@ def test_a_piece_of_a_face_that_holds_none_of_its_mesh_is_not_written(tmp_path: 
     assert 0 not in built.face_parts and built.face_edges[0] == {0, 1, 2, 3}
     (face,) = check_written(vb, tmp_path / "one.step", rep.frame_map).faces
     assert abs(face.written - 400.0) < 1.0 and abs(face.reconstructed - 400.0) < 1.0
+
+
+def _overshooting_corner():
+    """A 20 x 20 mm square of the plane z = 0.5 m whose corner vertex (20, 0) mm was placed 4 mm out, at (24, 3):
+    the bottom edge runs to it along y = 0 and then up, the right edge comes back from it below the square to
+    (20, -1) and then up x = 20, so the two cross at (20, 1), 4.5 mm from their vertex."""
+    from v2c.vbrep.model import VBRep, VFace
+
+    from scenes.vbrep import K_DEFAULT, _quad_mesh, project
+
+    z = 0.5
+
+    def p(x_mm: float, y_mm: float) -> np.ndarray:
+        return np.array([x_mm / 1000.0, y_mm / 1000.0, z])
+
+    corners = [p(0, 0), p(24, 3), p(20, 20), p(0, 20)]
+    verts = [VVertex(k, VertexKind.CORNER, c, project(c, K_DEFAULT)[0]) for k, c in enumerate(corners)]
+    runs = [
+        [p(0, 0), p(6, 0), p(12, 0), p(18, 0), p(24, 3)],
+        [p(24, 3), p(20, -1), p(20, 6), p(20, 13), p(20, 20)],
+        [p(20, 20), p(10, 20), p(0, 20)],
+        [p(0, 20), p(0, 10), p(0, 0)],
+    ]
+    edges = [VEdge(k, EdgeType.SILHOUETTE, 0.9, (0,), np.stack(r), k, (k + 1) % 4, None) for k, r in enumerate(runs)]
+    mv, mt = _quad_mesh(np.array([p(0, 0), p(20, 0), p(20, 20), p(0, 20)]))
+    plane = {"type": "plane", "params": {"origin": [0.0, 0.0, z], "normal": [0.0, 0.0, -1.0]}}
+    face = VFace(0, 1, plane, "Z", [[(k, False) for k in range(4)]], mv, mt, 0.9)
+    return VBRep([face], edges, verts, frame=np.eye(3), K=K_DEFAULT, image_size=(640, 480), scale=0.03, meta={})
+
+
+def test_two_edges_crossing_near_their_corner_are_cut_there(tmp_path: Path) -> None:
+    """The face's boundary crosses itself 4.5 mm from the overshooting vertex (its tolerance would have to cover
+    that): the face gets its own copies of the two edges, cut where they cross, and is written from its loop
+    within 2 % of its mesh (the ear past the corner, 1 mm², left out). With the cut off it goes to its outline."""
+    from exporters.readback import check_written
+
+    vb = _overshooting_corner()
+    rep = step.write(vb, tmp_path / "cut.step", frame="camera")
+    assert rep.fallback_faces == [] and rep.skipped_faces == []
+    assert any(w == "face 0: its edges [0, 1] cut at the corners where they cross" for w in rep.warnings)
+    built = build_brep(vb, CAMERA)
+    assert sorted(built.copied_edges) == [0, 1] and built.copied_edges[0] == [0]
+    (face,) = check_written(vb, tmp_path / "cut.step", rep.frame_map).faces
+    assert abs(face.written - face.reconstructed) <= 0.02 * face.reconstructed
+    assert abs(face.written - 399.0) < 1.0  # the square less the 1 mm² triangle under the bottom edge's rise
+    off = step.write(vb, tmp_path / "off.step", frame="camera", config=BrepConfig(corner_cut_samples=0))
+    assert off.fallback_faces == [0]
