@@ -347,7 +347,9 @@ def _two_piece_face(second_meshed: bool = True):
         for k in range(4):
             a, b = ids[k], ids[(k + 1) % 4]
             edges.append(
-                VEdge(len(edges), EdgeType.SILHOUETTE, 0.9, (0,), _segment(corners[k], corners[(k + 1) % 4]), a, b, None)
+                VEdge(
+                    len(edges), EdgeType.SILHOUETTE, 0.9, (0,), _segment(corners[k], corners[(k + 1) % 4]), a, b, None
+                )
             )
             loop.append((len(edges) - 1, False))
         loops.append(loop)
