@@ -424,8 +424,8 @@ class FaceBuilder:
             for k in range(len(lp)):
                 (ea, ra), (eb, rb) = lp[k], lp[(k + 1) % len(lp)]
                 ga, gb = geom.get(ea), geom.get(eb)
-                if ea == eb or ga is None or gb is None:
-                    continue
+                if ea == eb or ga is None or gb is None or ea not in edges or eb not in edges:
+                    continue  # an edge OCCT could not make leaves the loop unbuildable anyway
                 end_a, end_b = (0 if ra else 1), (1 if rb else 0)  # each edge's end at the shared vertex
                 va = self.vb.edges[ea].v1 if end_a else self.vb.edges[ea].v0
                 vb_ = self.vb.edges[eb].v1 if end_b else self.vb.edges[eb].v0
@@ -590,7 +590,11 @@ class FaceBuilder:
             if face is not None:
                 return [self._report(f, why, face, loops)]
             if why == "" and all(self._loop_closed(lp) for lp in loops):
-                cut = self._corner_cuts(f, loops, edges)
+                try:
+                    cut = self._corner_cuts(f, loops, edges)
+                except Exception as exc:  # noqa: BLE001 - OCCT evaluation or projection failures: no cut
+                    self.warnings.append(f"face {f.id}: its corners could not be cut ({type(exc).__name__}: {exc})")
+                    cut = None
                 if cut is not None:
                     face = self._try_cut(f, loops, edges, *cut)
                     if face is not None:

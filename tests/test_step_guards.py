@@ -440,3 +440,16 @@ def test_two_edges_crossing_near_their_corner_are_cut_there(tmp_path: Path) -> N
     assert abs(face.written - 399.0) < 1.0  # the square less the 1 mm² triangle under the bottom edge's rise
     off = step.write(vb, tmp_path / "off.step", frame="camera", config=BrepConfig(corner_cut_samples=0))
     assert off.fallback_faces == [0]
+
+
+def test_a_corner_cut_skips_an_edge_occt_could_not_make() -> None:
+    """An edge of the loop that OCCT could not make (BRepBuilderAPI_MakeEdge failed: no TopoDS edge) leaves the
+    face unbuildable from its loops; the corner cut must not fail on it (it raised a KeyError on a corpus part,
+    whose whole scan then failed): the face is refused and goes to its outline."""
+    from exporters.brep_edges import EdgeBuilder
+    from exporters.brep_faces import FaceBuilder
+
+    vb = _overshooting_corner()
+    eb = EdgeBuilder(vb, CAMERA, BrepConfig()).run()
+    del eb.edges[1]
+    assert FaceBuilder(eb).build_face(vb.faces[0], eb.edges) is None
