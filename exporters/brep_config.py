@@ -80,6 +80,7 @@ class BrepConfig:
     # A face's own copies of two loop edges that cross near their shared vertex are cut where they cross
     # (`FaceBuilder._corner_cuts`), sampled this many times over each edge's half at that vertex; 0: off
     corner_cut_samples: int = 40
+    corner_cut_span: float = 0.5  # ratio: ... over this share of each edge's parameter range, from the shared vertex
     max_vertex_repairs: int = 12
     analytic_tol: float = 1e-4  # a VB-Rep line/circle counts as the exact intersection within this
     # The written face must be the reconstruction: a face bounded by its loops is kept only when its area is

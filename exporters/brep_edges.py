@@ -544,7 +544,7 @@ class EdgeBuilder:
         for vid, x in self.vpos.items():
             if vid in self.vertex_alias:
                 continue
-            verts[vid] = self._vertex(x, max(self.cfg.min_tolerance, 1.05 * gap[vid] + self.cfg.min_tolerance))
+            verts[vid] = self.vertex(x, max(self.cfg.min_tolerance, 1.05 * gap[vid] + self.cfg.min_tolerance))
         for (eid, end, fid), d in sorted(apart.items()):
             e = self.vb.edges[eid]
             self.warnings.append(
@@ -621,7 +621,7 @@ class EdgeBuilder:
                 if key not in apart:
                     continue
                 if g.face is None or (g.curve is not None and g.pcurve is None):
-                    out[key] = self._vertex(x, self.cfg.min_tolerance)
+                    out[key] = self.vertex(x, self.cfg.min_tolerance)
                 else:
                     groups[(self.vid(v), g.face)].append((key, x))
         for members in groups.values():
@@ -629,13 +629,13 @@ class EdgeBuilder:
             mid = pts.mean(axis=0)
             spread = float(np.linalg.norm(pts - mid, axis=1).max())
             if len(members) > 1 and spread <= self.join_tol:
-                vx = self._vertex(mid, max(self.cfg.min_tolerance, 1.05 * spread + self.cfg.min_tolerance))
+                vx = self.vertex(mid, max(self.cfg.min_tolerance, 1.05 * spread + self.cfg.min_tolerance))
                 out.update({key: vx for key, _ in members})
             else:
-                out.update({key: self._vertex(x, self.cfg.min_tolerance) for key, x in members})
+                out.update({key: self.vertex(x, self.cfg.min_tolerance) for key, x in members})
         return out
 
-    def _vertex(self, x: np.ndarray, tol: float) -> TopoDS_Vertex:
+    def vertex(self, x: np.ndarray, tol: float) -> TopoDS_Vertex:
         """A new vertex at ``x`` (mm) of tolerance ``tol`` (mm)."""
         vx = TopoDS_Vertex()
         self.bb.MakeVertex(vx, gp_Pnt(*map(float, x)), tol)

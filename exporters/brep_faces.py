@@ -406,12 +406,13 @@ class FaceBuilder:
         self, f: VFace, loops: list[Loop], edges: dict[int, TopoDS_Edge]
     ) -> tuple[dict[int, TopoDS_Edge], dict[int, EdgeGeom]] | None:
         """Face ``f``'s own copies of the loop edges that cross the next edge of their loop near the vertex they
-        share, each cut where they cross (``cfg.corner_cut_samples`` samples per edge, the crossing in the half of
-        both edges nearest the vertex, beyond the vertex's reach (`_vertex_reach`: nearer, the vertex's tolerance
-        covers the crossing), the two curves there within ``join_tol``): the corner the two edges make
-        on this face. A vertex placed off that corner (solved on three surfaces, or an occlusion vertex of the
-        image) leaves the two edges running past each other to it, and the face's boundary crosses itself.
-        Returns the copies (oriented v0 -> v1) and their geometries, or None when no corner is cut."""
+        share, each cut where they cross: each edge sampled ``cfg.corner_cut_samples`` times over the
+        ``cfg.corner_cut_span`` of it nearest the vertex, where the crossing must lie on both, beyond the vertex's
+        reach (`_vertex_reach`: nearer, the vertex's tolerance covers the crossing), the two curves there within
+        ``join_tol``: the corner the two edges make on this face. A vertex placed off that corner (solved on three
+        surfaces, or an occlusion vertex of the image) leaves the two edges running past each other to it, and the
+        face's boundary crosses itself. Returns the copies (oriented v0 -> v1) and their geometries, or None when
+        no corner is cut."""
         s = self.surfaces[f.id]
         n = self.cfg.corner_cut_samples
         if n < 4:
@@ -431,9 +432,10 @@ class FaceBuilder:
                 vb_ = self.vb.edges[eb].v1 if end_b else self.vb.edges[eb].v0
                 if self.vid(va) != self.vid(vb_) or end_a in cuts[ea] or end_b in cuts[eb]:
                     continue
-                # both parametrised from the shared vertex outwards, to their middle
-                ta = np.linspace(ga.t1 if end_a else ga.t0, 0.5 * (ga.t0 + ga.t1), n)
-                tb = np.linspace(gb.t1 if end_b else gb.t0, 0.5 * (gb.t0 + gb.t1), n)
+                # both parametrised from the shared vertex outwards, over corner_cut_span of their range
+                span = self.cfg.corner_cut_span
+                ta = np.linspace(ga.t1 if end_a else ga.t0, ga.t0 + (1 - span if end_a else span) * (ga.t1 - ga.t0), n)
+                tb = np.linspace(gb.t1 if end_b else gb.t0, gb.t0 + (1 - span if end_b else span) * (gb.t1 - gb.t0), n)
                 hit = _first_crossing(self._geom_uv(s, ga, ta), self._geom_uv(s, gb, tb))
                 if hit is None:
                     continue
@@ -449,7 +451,7 @@ class FaceBuilder:
                 corners.append((0.5 * (pa + pb), 0.5 * gap))
         if not corners:
             return None
-        vertices = [self.eb._vertex(x, 1.05 * half + self.cfg.min_tolerance) for x, half in corners]
+        vertices = [self.eb.vertex(x, 1.05 * half + self.cfg.min_tolerance) for x, half in corners]
         out_edges: dict[int, TopoDS_Edge] = {}
         out_geoms: dict[int, EdgeGeom] = {}
         for eid, ends in ((eid, ends) for eid, ends in cuts.items() if ends):
