@@ -454,7 +454,10 @@ class EdgeBuilder:
 
     def _geom_points(self, g: EdgeGeom, n: int = 33) -> np.ndarray:
         """(n, 3) mm points along an edge geometry, before it is an edge."""
-        ts = np.linspace(g.t0, g.t1, n)
+        return self.geom_at(g, np.linspace(g.t0, g.t1, n))
+
+    def geom_at(self, g: EdgeGeom, ts: np.ndarray) -> np.ndarray:
+        """(N, 3) mm: an edge geometry's points at its parameters ``ts`` (N,)."""
         if g.curve is not None:
             return curve_points(g.curve, ts)
         return self.surfaces[g.face].evaluate(pcurve_points(g.pcurve, ts))

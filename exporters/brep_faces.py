@@ -21,7 +21,8 @@ from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Vertex, TopoDS_Wire
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
-from exporters.occ_curves import curve_points, pcurve_points
+from exporters.brep_outline import _triangle_areas
+from exporters.occ_curves import pcurve_points
 from exporters.occ_surfaces import AnalyticSurface, distance_to_surface
 from exporters.polygons import polygon_crossings
 
@@ -117,16 +118,8 @@ class FaceBuilder:
             g = self.copy_geoms.get((fid, eid), self.geoms.get(eid))  # face ``fid``'s own copy, if it has one
             if g is None:
                 return None
-            ts = np.linspace(g.t0, g.t1, n)
-            if g.curve is None and self.surfaces[g.face] is s:
-                uv = pcurve_points(g.pcurve, ts)
-            else:
-                if g.curve is None:  # a pcurve on the edge's other face: through 3D
-                    uv2 = pcurve_points(g.pcurve, ts)
-                    xyz = self.surfaces[g.face].evaluate(uv2)
-                else:
-                    xyz = curve_points(g.curve, ts)
-                uv = s.uv(xyz)
+            uv, xyz = self._geom_samples(s, g, np.linspace(g.t0, g.t1, n))
+            if xyz is not None:
                 dev = max(dev, float(distance_to_surface(s, xyz).max()))
             pts.append((uv[::-1] if rev else uv)[:-1])
         poly = np.concatenate(pts)
@@ -385,22 +378,18 @@ class FaceBuilder:
             out.append(loop)
         return out
 
-    def _geom_uv(self, s: AnalyticSurface, g: EdgeGeom, ts: np.ndarray) -> np.ndarray:
-        """(N, 2) (u, v) on ``s`` of an edge geometry at its parameters ``ts`` (periodic parameters continuous)."""
+    def _geom_samples(self, s: AnalyticSurface, g: EdgeGeom, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """An edge geometry at its parameters ``ts`` (N,) in the (u, v) of surface ``s`` ((N, 2)), and its 3D points
+        (mm) when they were needed to get there (an exact curve, or a pcurve on another face's surface; None for a
+        pcurve on ``s``)."""
         if g.curve is None and self.surfaces[g.face] is s:
-            return s.unwrap(pcurve_points(g.pcurve, ts))
-        xyz = (
-            curve_points(g.curve, ts)
-            if g.curve is not None
-            else self.surfaces[g.face].evaluate(pcurve_points(g.pcurve, ts))
-        )
-        return s.unwrap(s.uv(xyz))
+            return pcurve_points(g.pcurve, ts), None
+        xyz = self.eb.geom_at(g, ts)
+        return s.uv(xyz), xyz
 
     def _geom_point(self, g: EdgeGeom, t: float) -> np.ndarray:
         """(3,) mm: an edge geometry's point at parameter ``t``."""
-        if g.curve is not None:
-            return curve_points(g.curve, np.array([t]))[0]
-        return self.surfaces[g.face].evaluate(pcurve_points(g.pcurve, np.array([t])))[0]
+        return self.eb.geom_at(g, np.array([t]))[0]
 
     def _corner_cuts(
         self, f: VFace, loops: list[Loop], edges: dict[int, TopoDS_Edge]
@@ -436,7 +425,9 @@ class FaceBuilder:
                 span = self.cfg.corner_cut_span
                 ta = np.linspace(ga.t1 if end_a else ga.t0, ga.t0 + (1 - span if end_a else span) * (ga.t1 - ga.t0), n)
                 tb = np.linspace(gb.t1 if end_b else gb.t0, gb.t0 + (1 - span if end_b else span) * (gb.t1 - gb.t0), n)
-                hit = _first_crossing(self._geom_uv(s, ga, ta), self._geom_uv(s, gb, tb))
+                hit = _first_crossing(
+                    s.unwrap(self._geom_samples(s, ga, ta)[0]), s.unwrap(self._geom_samples(s, gb, tb)[0])
+                )
                 if hit is None:
                     continue
                 (ia, fa), (ib, fb) = hit
@@ -505,10 +496,7 @@ class FaceBuilder:
         # a piece that holds none of the face's mesh is not in the reconstruction (its pixels' mesh was dropped as
         # a stray island, or lay where the sensor read nothing): not written
         support = self._mesh_support(
-            f,
-            s,
-            centre,
-            [shapely.Polygon(polys[g[0]].exterior, [polys[h].exterior for h in g[1:]]) for g in groups.values()],
+            f, s, [shapely.Polygon(polys[g[0]].exterior, [polys[h].exterior for h in g[1:]]) for g in groups.values()]
         )
         kept = []
         for members, share in zip(groups.values(), support):
@@ -521,24 +509,17 @@ class FaceBuilder:
                 )
         return kept or None
 
-    def _mesh_support(
-        self, f: VFace, s: AnalyticSurface, centre: np.ndarray, pieces: list[shapely.Polygon]
-    ) -> list[float]:
+    def _mesh_support(self, f: VFace, s: AnalyticSurface, pieces: list[shapely.Polygon]) -> list[float]:
         """The share of face ``f``'s mesh area (its triangles' 3D areas) whose triangles' centroids lie in each
-        piece (polygons in the surface's (u, v), periodic parameters within half a period of ``centre``)."""
+        piece (polygons in the surface's (u, v); `AnalyticSurface.uv` puts periodic parameters within half a period
+        of the face's centre, as `_outer_groups` puts the pieces)."""
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         tri = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
-        if not len(tri):
-            return [0.0] * len(pieces)
-        a, b, c = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
-        areas = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-        uv = s.uv((a + b + c) / 3.0)
-        for k, periodic in ((0, s.u_periodic), (1, s.v_periodic)):
-            if periodic:
-                uv[:, k] -= 2 * np.pi * np.round((uv[:, k] - centre[k]) / (2 * np.pi))
+        areas = _triangle_areas(pts, tri)
         total = float(areas.sum())
         if total <= 0:
             return [0.0] * len(pieces)
+        uv = s.uv(pts[tri].mean(axis=1))
         return [float(areas[shapely.contains_xy(p, uv[:, 0], uv[:, 1])].sum()) / total for p in pieces]
 
     def build_face(
@@ -564,7 +545,8 @@ class FaceBuilder:
         def by_area(loops: list[Loop]) -> list[Loop]:
             return sorted(loops, key=lambda lp: -abs(self.loop_area_uv(s, lp)))
 
-        if len(given) > 1 and all(self._loop_closed(lp) for lp in given):
+        given_closed = all(self._loop_closed(lp) for lp in given)
+        if len(given) > 1 and given_closed:
             groups = self._outer_groups(f, given)
             if groups is not None:
                 parts = []
@@ -576,7 +558,7 @@ class FaceBuilder:
                 else:
                     return parts
         attempts: list[tuple[str, list[Loop]]] = [("", given)]
-        if not all(self._loop_closed(lp) for lp in given):
+        if not given_closed:
             chained = self._rechain(given)
             if chained:
                 attempts.append(("its edges chained again through shared vertices", by_area(chained)))
@@ -591,7 +573,7 @@ class FaceBuilder:
             face = self._try_face(f, loops, edges)
             if face is not None:
                 return [self._report(f, why, face, loops)]
-            if why == "" and all(self._loop_closed(lp) for lp in loops):
+            if why == "" and given_closed:  # the VB-Rep's own loops
                 try:
                     cut = self._corner_cuts(f, loops, edges)
                 except Exception as exc:  # noqa: BLE001 - OCCT evaluation or projection failures: no cut
