@@ -248,3 +248,52 @@ def test_roi_without_mask_keeps_the_one_object_it_frames(table_scene: tuple[Path
     holed = replace(scan, depth=np.where(hole, 0.0, scan.depth))
     part, _ = part_region(holed, GeometricConfig())
     assert part[hole].all() and not (part & (truth["side_box"] | truth["cylinder"])).any()
+
+
+#: Intrinsics of `_ramp_depth` (pixels): the real YCB-Video frames' focal length.
+RAMP_K = np.array([[1066.0, 0.0, 30.0], [0.0, 1066.0, 20.0], [0.0, 0.0, 1.0]])
+
+
+def _ramp_depth() -> np.ndarray:
+    """(40, 60) metres, seen with `RAMP_K`: a far surface (0.85 m, rows 0-16) behind a near one (0.80 m, rows
+    20-39), and between them the ramp of flying pixels a real sensor draws across such a step: rows 17-19 at
+    0.8375, 0.825 and 0.8125 m, each 12.5 mm from the next, under the pick's join step (8 mm + 1 % of the depth =
+    16 mm), and steeper than a surface seen at 80 degrees from the ray (9 mm over 2 px)."""
+    depth = np.full((40, 60), 0.85)
+    depth[20:] = 0.80
+    depth[17:20] = np.array([[0.8375], [0.825], [0.8125]])
+    return depth
+
+
+def test_flying_pixels_never_join_two_pieces() -> None:
+    """Without the flying-pixel rule the ramp makes one piece of the two surfaces (the real lying sugar box and the
+    drill behind it, ycb_video_000005, were one object); with it they are two, each ramp pixel in one of them."""
+    from v2c.pick import depth_pieces, flying_mask
+
+    depth = _ramp_depth()
+    keep = np.ones(depth.shape, bool)
+    n_off, lab_off = depth_pieces(keep, depth, RAMP_K, PickConfig(flying_window_px=0))
+    assert n_off == 1 and (lab_off == lab_off[0, 0]).all()
+    fly = flying_mask(depth, RAMP_K, PickConfig())
+    assert fly[17:20].all() and not fly[:17].any() and not fly[20:].any()
+    n, lab = depth_pieces(keep, depth, RAMP_K)
+    far, near = lab[0, 0], lab[-1, -1]
+    assert n == 2 and far != near
+    assert (lab[:17] == far).all() and (lab[20:] == near).all()
+    assert set(np.unique(lab[17:20]).tolist()) <= {int(far), int(near)}
+
+
+def test_roi_object_does_not_reach_the_surface_behind_it_through_flying_pixels() -> None:
+    """`segment.geometric._one_object` (the ROI's one object) keeps the near surface and leaves the far one out:
+    the flying pixels neither join the two pieces nor bring the far one within the join step in space. Without the
+    rule (flying_window_px 0) the far surface is taken too."""
+    from types import SimpleNamespace
+
+    from v2c.segment.geometric import _one_object
+
+    depth = _ramp_depth()
+    scan = SimpleNamespace(depth=depth, K=RAMP_K)
+    part = np.ones(depth.shape, bool)
+    obj = _one_object(part, scan)  # type: ignore[arg-type]
+    assert obj[20:].all() and not obj[:17].any()
+    assert _one_object(part, scan, PickConfig(flying_window_px=0)).all()  # type: ignore[arg-type]

@@ -24,7 +24,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import sparse
@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import connected_components
 
 from v2c.camera import backproject
 from v2c.contexts import scoped
+from v2c.depth_clean import DepthCleanConfig, flying_pixels
 
 __all__ = [
     "PICK_MODES",
@@ -41,6 +42,7 @@ __all__ = [
     "PickResult",
     "current_pick",
     "depth_pieces",
+    "flying_mask",
     "fit_support_plane",
     "large_frame_warning",
     "parse_point",
@@ -75,6 +77,11 @@ class PickConfig:
     extra_plane_height_mm: float = 250.0  # ... and this high above it: a table top over a floor, not a box top
     connect_step_mm: float = 8.0  # 4-neighbours join one object when their depths differ by less than this (mm) ...
     connect_step_rel: float = 0.01  # ... plus this fraction of their depth (a step grows with distance)
+    flying_window_px: int = 5  # a reading with a nearer and a farther layer inside this window (pixels, odd; 0 =
+    # off) lies between two surfaces (`depth_clean.flying_pixels`): it joins a piece but never joins two
+    flying_grazing_deg: float = 80.0  # a layer is a reading farther / nearer than a surface seen at this incidence
+    # would be across half the window (degrees from the viewing ray; a jump of (window // 2) px x z / fx x tan of
+    # it: 9.8 mm at 0.92 m on the real frames' fx 1066 px): readings on a face seen less obliquely never count
     min_object_px: int = 150  # smaller pieces are not objects (speckle, edges of the plane)
     search_radius_px: float = 60.0  # no object under the point: the nearest one within this distance (pixels)
     seed: int = 0  # RANSAC's random draws
@@ -183,28 +190,91 @@ def fit_support_plane(
     return n, dd, np.abs(points @ n + dd) < tol
 
 
-def depth_pieces(keep: np.ndarray, depth: np.ndarray, cfg: PickConfig | None = None) -> tuple[int, np.ndarray]:
+def depth_pieces(
+    keep: np.ndarray, depth: np.ndarray, K: np.ndarray, cfg: PickConfig | None = None
+) -> tuple[int, np.ndarray]:
     """Depth-connected pieces of the pixels ``keep``: 4-neighbours join when their depths differ by less than
-    connect_step_mm + connect_step_rel x depth. Returns (count, (H, W) int labels, -1 outside ``keep``)."""
+    connect_step_mm + connect_step_rel x depth. A flying pixel (a reading between two layers of a depth edge,
+    `flying_mask`, with intrinsics ``K``) never joins two pieces: a sensor's ramp of such
+    readings across a depth step (a box in front of the object behind it) would otherwise make one piece of both.
+    It takes the piece of the joined neighbour nearest in depth (repeated along a ramp), or one of its own.
+    Returns (count, (H, W) int labels, -1 outside ``keep``)."""
     cfg = cfg or PickConfig()
     h, w = keep.shape
+    fly = keep & flying_mask(depth, K, cfg)
+    core = keep & ~fly
     ids = np.arange(h * w).reshape(h, w)
     rows, cols = [], []
-    for sl_a, sl_b in (
-        ((slice(None), slice(0, -1)), (slice(None), slice(1, None))),
-        ((slice(0, -1),), (slice(1, None),)),
-    ):
-        ka, kb = keep[sl_a], keep[sl_b]
-        za, zb = depth[sl_a], depth[sl_b]
-        step = cfg.connect_step_mm / 1000.0 + cfg.connect_step_rel * np.minimum(za, zb)
-        join = ka & kb & (np.abs(za - zb) < step)
+    for sl_a, sl_b in _NEIGHBOUR_SLICES:
+        join = core[sl_a] & core[sl_b] & _joins(depth[sl_a], depth[sl_b], cfg)
         rows.append(ids[sl_a][join])
         cols.append(ids[sl_b][join])
     r, c = np.concatenate(rows), np.concatenate(cols)
     graph = sparse.coo_matrix((np.ones(len(r), np.int8), (r, c)), shape=(h * w, h * w))
     count, labels = connected_components(graph, directed=False)
-    labels = labels.reshape(h, w)
-    return count, np.where(keep, labels, -1)
+    labels = np.where(core, labels.reshape(h, w), -1)
+    labels = _attach(labels, fly, depth, cfg)
+    left = fly & (labels < 0)
+    if left.any():  # flying pixels no piece reaches: pieces of their own
+        sub = depth_pieces(left, depth, K, replace(cfg, flying_window_px=0))[1]
+        labels = np.where(left, sub + count, labels)
+    used, labels_c = np.unique(labels[keep], return_inverse=True)
+    out = np.full((h, w), -1, np.int64)
+    out[keep] = labels_c
+    return len(used), out
+
+
+#: (a, b) slices of the horizontal and the vertical 4-neighbour pairs of an image.
+_NEIGHBOUR_SLICES = (
+    ((slice(None), slice(0, -1)), (slice(None), slice(1, None))),
+    ((slice(0, -1),), (slice(1, None),)),
+)
+
+
+def _joins(za: np.ndarray, zb: np.ndarray, cfg: PickConfig) -> np.ndarray:
+    """Whether neighbours of depths ``za``, ``zb`` (metres) are one surface: their step under the join step."""
+    return np.abs(za - zb) < cfg.connect_step_mm / 1000.0 + cfg.connect_step_rel * np.minimum(za, zb)
+
+
+def flying_mask(depth: np.ndarray, K: np.ndarray, cfg: PickConfig) -> np.ndarray:
+    """(H, W) bool: the flying pixels of ``depth`` (metres; intrinsics ``K``, pixels) by the pick's flying_*
+    settings."""
+    if cfg.flying_window_px <= 0:
+        return np.zeros(depth.shape, bool)
+    rel = (cfg.flying_window_px // 2) * math.tan(math.radians(cfg.flying_grazing_deg)) / float(K[0, 0])
+    fc = DepthCleanConfig(flying_window_px=cfg.flying_window_px, flying_jump_m=0.0, flying_jump_rel=rel)
+    return flying_pixels(np.asarray(depth, np.float32), fc)
+
+
+def _attach(labels: np.ndarray, fly: np.ndarray, depth: np.ndarray, cfg: PickConfig) -> np.ndarray:
+    """``labels`` with each flying pixel given the piece of its joined 4-neighbour nearest in depth, ring by ring
+    (a pixel attached in one ring passes its piece on in the next) until no more attach: pieces only grow, none
+    joins another, so a steep face of one object that reads as flying pixels throughout stays whole."""
+    labels = labels.copy()
+    h, w = labels.shape
+    while True:
+        todo = fly & (labels < 0)
+        if not todo.any():
+            break
+        best = np.full((h, w), np.inf)
+        new = labels.copy()
+        for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+            lab_n = np.full((h, w), -1, labels.dtype)
+            z_n = np.zeros((h, w))
+            ys = slice(max(dy, 0), h + min(dy, 0))
+            yd = slice(max(-dy, 0), h + min(-dy, 0))
+            xs = slice(max(dx, 0), w + min(dx, 0))
+            xd = slice(max(-dx, 0), w + min(-dx, 0))
+            lab_n[yd, xd] = labels[ys, xs]  # the neighbour at (y + dy, x + dx)
+            z_n[yd, xd] = depth[ys, xs]
+            step = np.abs(z_n - depth)
+            ok = todo & (lab_n >= 0) & _joins(depth, z_n, cfg) & (step < best)
+            new[ok] = lab_n[ok]
+            best[ok] = step[ok]
+        if (new == labels).all():
+            break
+        labels = new
+    return labels
 
 
 def pick_object(
@@ -241,7 +311,7 @@ def pick_object(
         if np.median(pts[keep][on2] @ n + d) < cfg.extra_plane_height_mm / 1000.0:
             break  # a large flat face of an object on the support, not a further support
         keep &= np.abs(pts @ n2 + d2) > drop_m
-    _, labels = depth_pieces(keep, depth.astype(np.float64), cfg)
+    _, labels = depth_pieces(keep, depth.astype(np.float64), K, cfg)
     sizes = np.bincount(labels[keep], minlength=1)
     big = keep & (sizes[np.maximum(labels, 0)] >= cfg.min_object_px)
     if big[v, u]:

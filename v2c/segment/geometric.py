@@ -36,7 +36,7 @@ from v2c.geometry.config import RansacConfig
 from v2c.geometry.points import mad_sigma, median_depth_sigma
 from v2c.geometry.selection import supported
 from v2c.labels import AxisClass, PrimitiveType, axis_class, label_of
-from v2c.pick import PickConfig, depth_pieces
+from v2c.pick import PickConfig, depth_pieces, flying_mask
 from v2c.primitives import Cone, Cylinder, Plane, Primitive, Sphere
 from v2c.scan import Scan
 from v2c.segment.data import FeatureConfig, Ground, estimate_ground, estimate_normals, gravity_frame
@@ -839,23 +839,28 @@ def _one_object(part: np.ndarray, scan: Scan, pick: PickConfig | None = None) ->
     """The object among ``part``'s pixels (H, W) bool: its largest depth-connected piece (`v2c.pick.depth_pieces`)
     and every piece whose points come within the pick's join step (connect_step_mm + connect_step_rel x depth) of
     it in space, repeated while one joins: pieces of one object that holes without depth part (a shiny lid), not
-    the neighbours that stand apart from it (a bottle in front of a box)."""
+    the neighbours that stand apart from it (a bottle in front of a box). Flying pixels (`v2c.pick.flying_mask`)
+    are left out of that nearness: a ramp of them across a depth step would bring the object behind within reach."""
     from scipy.spatial import cKDTree
 
     pick = pick or PickConfig()
     depth = np.asarray(scan.depth, np.float64)
-    _, pieces = depth_pieces(part, depth, pick)
+    _, pieces = depth_pieces(part, depth, scan.K, pick)
     flat = np.flatnonzero(part)
     piece = pieces.ravel()[flat]  # each part pixel's piece
     x = backproject(depth, scan.K).reshape(-1, 3)[flat]
     step = pick.connect_step_mm / 1000.0 + pick.connect_step_rel * x[:, 2]
+    solid = ~flying_mask(depth, scan.K, pick).ravel()[flat]  # the pixels whose nearness counts
     ids, sizes = np.unique(piece, return_counts=True)
     inside = np.isin(piece, ids[np.argmax(sizes)])  # the largest piece (the first of equal ones)
     while not inside.all():  # loop while some piece joins: every piece with a point near the object joins at once
-        near = cKDTree(x[inside]).query(x[~inside], k=1)[0] < step[~inside]
+        ask, have = ~inside & solid, inside & solid
+        if not ask.any() or not have.any():
+            break
+        near = cKDTree(x[have]).query(x[ask], k=1)[0] < step[ask]
         if not near.any():
             break
-        inside |= np.isin(piece, piece[~inside][near])
+        inside |= np.isin(piece, piece[ask][near])
     keep = np.zeros(part.shape, bool)
     keep.flat[flat[inside]] = True
     return keep
