@@ -557,6 +557,35 @@ def test_crease_strip_is_cut_between_its_planes_and_a_resolved_fillet_stays() ->
             assert out.num_instances == 3, seed
 
 
+def test_a_plane_labelled_crease_strip_is_cut_and_a_resolved_chamfer_stays() -> None:
+    """The network also labels the rounded band of a real box's crease a plane of no axis class, which leans halfway
+    between the sides (the real lying sugar box, ycb_video_000005 with its ROI). With crease_planes such a strip is
+    judged as a curved-labelled one: the rounded band (13 px, 5 noise seeds) is cut between its planes; off, it
+    stays. A true chamfer 30 mm deep (23 px wide at 0.5 m), labelled a plane, departs from the planes' envelope
+    beyond the sensor's band and stays a face of its own."""
+    from v2c.segment.refine import split_crease_strips
+
+    plane_u = label_of("plane", "U")
+    labels = np.array([0, PLANE_Z, plane_u, PLANE_Z], np.uint8)
+    scores = np.array([0, 0.9, 0.7, 0.9], np.float32)
+    u = np.arange(W)[None, :].repeat(H, 0)
+    for seed in range(5):
+        depth, strip = _ridge_scene(seed)
+        inst = np.where(strip, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
+        seg = Segmentation(inst, labels, scores, "learned")
+        out = split_crease_strips(seg, depth, K, RefineConfig())
+        assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, PLANE_Z], seed
+        assert split_crease_strips(seg, depth, K, RefineConfig(crease_planes=False)).num_instances == 3, seed
+        ridge, _ = _ridge_scene(seed)
+        chamfered = np.maximum(
+            ridge, 0.53 + np.random.default_rng(50 + seed).normal(0.0, 0.0015 * 0.53**2, ridge.shape)
+        )
+        bevel = np.abs(u - K[0, 2]) <= 12
+        inst = np.where(bevel, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
+        out = split_crease_strips(Segmentation(inst, labels, scores, "learned"), chamfered, K, RefineConfig())
+        assert out.num_instances == 3 and (out.instances == inst).all(), seed
+
+
 def test_remerge_joins_pieces_of_one_plane_and_not_a_step_of_a_few_sigma() -> None:
     """`remerge` (the merge once more after the steps that change which instances touch) joins two pieces of one
     plane under the sensor's noise (0.0015 z^2) and keeps a parallel piece 3 mm off it apart: about 8 sensor

@@ -154,6 +154,9 @@ class RefineConfig:
     # cannot tell a narrow fillet from the rounding (true fillets of the validation sets), and the label stands
     crease_sigma: float = 1.0  # ... the instance's points outside the band within this many sensor sigmas of the
     # planes' envelope (median of |distance along the ray| / sigma(z); ratio; absorb_sigma's)
+    crease_planes: bool = True  # a plane-labelled strip is judged as a curved-labelled one: a plane through the
+    # rounded band of a real crease leans halfway between its hosts (the lying sugar box's long edge, labelled an
+    # unaligned plane), and a chamfer the sensor resolves departs from the hosts' envelope as a fillet does
     crease_host_ratio: float = 1.0  # a host plane instance has at least this many times the strip's valid pixels
     # (ratio; 2 kept the real standing sugar box's strip of 1,800 px beside its end face of 3,000 on one seed of four
     # and changed nothing on the validation sets)
@@ -1077,8 +1080,8 @@ def split_crease_strips(
     tol = 0.5 * cfg.tol_part * size  # the hosts' RANSAC inlier band (metres)
     planes: dict[int, tuple[np.ndarray, float]] = {}
     groups = []
-    for i in range(1, len(labels)):  # loop over the curved-labelled instances
-        if plane[i] or n_px[i] < 3:
+    for i in range(1, len(labels)):  # loop over the curved-labelled instances (and with crease_planes the planes)
+        if (plane[i] and not cfg.crease_planes) or n_px[i] < 3:
             continue
         hosts = [
             int(g)
@@ -1097,6 +1100,9 @@ def split_crease_strips(
             continue
         inst[sel] = cut
         groups.append([i, int(np.bincount(cut).argmax())])  # the emptied id goes
+        n_px = np.bincount(inst[valid].ravel(), minlength=len(labels))  # an emptied strip hosts nothing after
+        for g in hosts:  # a host that grew is fitted anew when it hosts again
+            planes.pop(g, None)
     if not groups:
         return seg
     return _relabel(seg, inst, groups, np.ones(len(labels), bool))
