@@ -368,3 +368,44 @@ def test_type_searched_curve_the_pixels_rays_miss_is_a_plane() -> None:
         assert isinstance(p, Plane), (seed, p)
         x = backproject(scan.depth, K)[(inst == 1) & scan.valid]
         assert np.median(np.abs(p.signed_distance(x))) < 0.006, seed
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_searched_cone_is_tested_against_a_free_cylinder_too(seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A type-searched instance (no label said cone) that came out a cone is also tested against a free RANSAC
+    cylinder (`FitConfig.nested_free_searched`), not only against the cylinder nested on the cone's axis: on the
+    real tuna can's side with its ROI the cone's axis was tilted and the cylinder held on it lost. Here the nested
+    cylinder is taken away (as if it had lost) and the cone is a can's side (33 mm at 0.8 m) taken for a
+    4-degree cone on an axis tilted by as much, matching the side along its nearest line: the free cylinder wins
+    with the can's radius. Without the flag, or for a labelled cone (no type search), the cone stays."""
+    from v2c.fit import stage
+    from v2c.primitives import Cone
+
+    monkeypatch.setattr(stage, "_nested_cylinder", lambda *args, **kwargs: None)
+    can = cone_depth(0.033, 0.0, 0.8, (270, 370))
+    alpha = np.deg2rad(4.0)
+    reach = 0.033 * np.cos(alpha) ** 2 / np.sin(alpha)  # apex to where its curvature across is the can's
+    cone = Cone(np.array([-reach, 0.0, 0.8 - 0.033]), np.array([np.cos(alpha), 0.0, np.sin(alpha)]), float(alpha))
+    rng = np.random.default_rng(seed)
+    valid = can > 0
+    noisy = np.where(valid, can + SIGMA_COEFF * can**2 * rng.standard_normal(can.shape), 0.0)
+    ip = instance_points(backproject(noisy, K), valid, valid.astype(np.int32), np.array([1]), FitConfig())[1]
+    size = estimate_part_size(ip.points, FitConfig().scale_trim)
+
+    def run(cfg: FitConfig, searched: bool) -> Primitive:
+        fits = stage._Fits(
+            prims={1: cone},
+            want={1: "?"},
+            weights={1: float(len(ip.points))},
+            inliers={1: np.ones(len(ip.points), bool)},
+            searched=[1] if searched else [],
+            scores={1: 0.3 if searched else LEARNED_SCORE},
+        )
+        stage._simpler_where_nested(fits, {1: ip}, {1: -1}, np.eye(3), size, cfg)
+        return fits.prims[1]
+
+    cfg = replace(FitConfig(), seed=seed)
+    p = run(cfg, searched=True)
+    assert isinstance(p, Cylinder) and abs(p.radius - 0.033) <= 0.05 * 0.033, (seed, p)
+    assert run(replace(cfg, nested_free_searched=False), searched=True).type == "cone"
+    assert run(cfg, searched=False).type == "cone"

@@ -372,16 +372,19 @@ def _simpler_where_nested(
             continue
         cands = {p.type: RansacFit(p, fits.inliers[i], 0.0)}
         for k, t in enumerate(NESTED[p.type]):  # loop over the simpler types
+            tries = []
             if config.nested_from_axis and p.type == "cone":
-                f = _nested_cylinder(p, ip, fits.inliers[i], scale, config)
-            else:
-                f = ransac_fit(t, ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 5, k]))
-            if f is None:
-                continue
-            q = f.primitive
-            if supported(q, ip.points, config):
-                cands[t] = RansacFit(q, f.inliers, f.score)
-        best = select_type(cands, ip.points, scale, config)
+                tries.append(_nested_cylinder(p, ip, fits.inliers[i], scale, config))
+            free_searched = config.nested_free_searched and i in fits.searched and p.type == "cone"
+            if not (config.nested_from_axis and p.type == "cone") or free_searched:
+                rng = np.random.default_rng([config.seed, i, 5, k])
+                tries.append(ransac_fit(t, ip.points, ip.normals, scale, config, rng))
+            for f in tries:
+                if f is None or not supported(f.primitive, ip.points, config):
+                    continue
+                key = t if t not in cands else f"{t}_free"
+                cands[key] = RansacFit(f.primitive, f.inliers, f.score)
+        best = _select_among(cands, ip.points, scale, config)
         if best == p.type:
             continue
         q = _canonical(cands[best].primitive, ip.points)
@@ -390,6 +393,25 @@ def _simpler_where_nested(
         cos = np.abs(frame @ q.axis_vector)
         k = int(np.argmax(cos))
         axis_idx[i] = k if cos[k] > np.cos(np.deg2rad(config.snap_deg)) else -1
+
+
+def _select_among(cands: dict[str, RansacFit], x: np.ndarray, scale: float, config: FitConfig) -> str:
+    """`select_type` over candidates that may hold two fits of one type (keys "cylinder" and "cylinder_free"):
+    the key of the winner."""
+    types = {k: k.split("_")[0] for k in cands}
+    best: str | None = None
+    for k in cands:  # each candidate against the best so far, as its own type
+        if best is None:
+            best = k
+            continue
+        pair = {types[best]: cands[best], types[k]: cands[k]} if types[best] != types[k] else None
+        if pair is None:  # two fits of one type: the one with the smaller truncated residual
+            a, b = (np.abs(cands[q].primitive.signed_distance(x)) for q in (best, k))
+            best = k if float(np.median(b)) < float(np.median(a)) else best
+        elif select_type(pair, x, scale, config) == types[k]:
+            best = k
+    assert best is not None
+    return best
 
 
 def _holds_patch(prim: Primitive, x: np.ndarray, config: FitConfig) -> bool:
