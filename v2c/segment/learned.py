@@ -27,7 +27,7 @@ from v2c.scan import Scan
 from v2c.segment.data import MIRROR_SIGN_CHANNEL, FeatureConfig, scan_features
 from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
 from v2c.segment.net import UNet, bf16_supported, load_weights
-from v2c.segment.refine import RefineConfig, absorb_fragments, refine_instances, remerge
+from v2c.segment.refine import RefineConfig, absorb_fragments, refine_instances, remerge, split_crease_strips
 from v2c.segment.types import Segmentation
 from v2c.segment.verify import VerifyConfig, needs_regions, split_unexplained, verify_instances
 
@@ -179,6 +179,11 @@ def segment_learned(
             seg = remerge(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
         else:
             seg = absorb_fragments(seg, scan.depth, scan.K, cfg.refine, ransac=ransac)
+        if cfg.refine.crease_after_verify:  # the merged faces host strips along their creases
+            cut = split_crease_strips(seg, scan.depth, scan.K, cfg.refine, ransac=ransac or RansacConfig())
+            if cut is not seg and cfg.refine.remerge:
+                cut = remerge(cut, scan.depth, scan.K, cfg.refine, ransac=ransac)
+            seg = cut
     # last: an instance that no one primitive explains holds two surfaces (docs/segmentation.md)
     return split_unexplained(seg, scan.depth, scan.K, cfg.verify, ransac)
 

@@ -157,6 +157,10 @@ class RefineConfig:
     crease_planes: bool = True  # a plane-labelled strip is judged as a curved-labelled one: a plane through the
     # rounded band of a real crease leans halfway between its hosts (the lying sugar box's long edge, labelled an
     # unaligned plane), and a chamfer the sensor resolves departs from the hosts' envelope as a fillet does
+    crease_flat_hosts: bool = True  # a curved-labelled instance that `_flat` finds flat hosts a strip too (the real
+    # cracker box's printed front, labelled a cylinder, beside the strips along its creases)
+    crease_after_verify: bool = True  # in segment_learned, the crease cut once more after the depth-region
+    # verification, whose merges make the faces that host the strips
     crease_host_ratio: float = 1.0  # a host plane instance has at least this many times the strip's valid pixels
     # (ratio; 2 kept the real standing sugar box's strip of 1,800 px beside its end face of 3,000 on one seed of four
     # and changed nothing on the validation sets)
@@ -241,7 +245,7 @@ def refine_instances(
     seg = split_coaxial_steps(seg, depth, K, cfg, geometry, ransac)
     seg = merge_coplanar(seg, depth, K, cfg, geometry, ransac)
     seg = absorb_fragments(seg, depth, K, cfg, geometry, ransac)
-    seg = split_crease_strips(seg, depth, K, cfg, geometry)
+    seg = split_crease_strips(seg, depth, K, cfg, geometry, ransac)
     return remerge(seg, depth, K, cfg, geometry, ransac)
 
 
@@ -1054,12 +1058,37 @@ def _absorb_round(
     return _relabel(seg, inst, groups, np.ones(len(labels), bool))
 
 
+def _flat_instances(
+    inst: np.ndarray,
+    valid: np.ndarray,
+    pts: np.ndarray,
+    size: float,
+    labels: np.ndarray,
+    n_px: np.ndarray,
+    cfg: RefineConfig,
+    ransac: RansacConfig,
+) -> np.ndarray:
+    """(N,) bool: the curved-labelled instances of at least flat_min_px valid pixels that `_flat` finds flat."""
+    out = np.zeros(len(labels), bool)
+    plane = _is_plane(labels)
+    for i in range(1, len(labels)):  # loop over instances
+        if plane[i] or n_px[i] < max(cfg.flat_min_px, 3):
+            continue
+        x = pts[valid & (inst == i)]
+        rng = np.random.default_rng([cfg.seed, i, 7])
+        nrm, off = _plane_ransac(x, 0.5 * cfg.tol_part * size, cfg, rng)
+        ip = instance_points(pts, valid, inst, np.array([i]), ransac)[int(i)]
+        out[i] = _flat(i, ip.points, nrm, off, labels, size, cfg, rng, ip.normals, ransac, (ip.pixels, inst.shape))
+    return out
+
+
 def split_crease_strips(
     seg: Segmentation,
     depth: np.ndarray,
     K: np.ndarray,
     cfg: RefineConfig = RefineConfig(),
     geometry: tuple[np.ndarray, float] | None = None,
+    ransac: RansacConfig | None = None,
 ) -> Segmentation:
     """``seg`` with each crease strip cut between its host planes: a curved-labelled instance touching two or more
     plane-labelled instances (each with at least crease_host_ratio times its valid pixels, their planes meeting at
@@ -1077,6 +1106,8 @@ def split_crease_strips(
     if not len(pairs):
         return seg
     plane = _is_plane(labels)
+    if cfg.crease_flat_hosts and ransac is not None:
+        plane = plane | _flat_instances(inst, valid, pts, size, labels, n_px, cfg, ransac)
     tol = 0.5 * cfg.tol_part * size  # the hosts' RANSAC inlier band (metres)
     planes: dict[int, tuple[np.ndarray, float]] = {}
     groups = []
