@@ -358,8 +358,10 @@ def _simpler_where_nested(
     parameters must buy more than their log(3N) each; a cone of half angle within noise of 0 buys nothing) take
     that type, in place. A cone's cylinder is the nested one with ``nested_from_axis`` (`_nested_cylinder`: on
     the cone's axis direction; tested again after the joint fit, `_nested_after_joint`); a torus's, and with it
-    off a cone's, a free RANSAC fit. Either way the simpler fit's axis ends free (the frame's axis came in part
-    from this instance's own poor fit); it joins the frame axis within snap_deg of it, else it stays unaligned.
+    off a cone's, a free RANSAC fit; a type-searched cone meets a free RANSAC cylinder too with
+    ``nested_free_searched`` (`_select_among`). Either way the simpler fit's axis ends free (the frame's axis
+    came in part from this instance's own poor fit); it joins the frame axis within snap_deg of it, else it
+    stays unaligned.
     A cone or torus whose label is at least ``nested_label_certain`` probable keeps its type: on a narrow
     chamfer strip the cylinder wins GRIC for want of points, not because the surface is one."""
     if not config.nested_selection:
@@ -396,16 +398,17 @@ def _simpler_where_nested(
 
 
 def _select_among(cands: dict[str, RansacFit], x: np.ndarray, scale: float, config: FitConfig) -> str:
-    """`select_type` over candidates that may hold two fits of one type (keys "cylinder" and "cylinder_free"):
+    """`select_type` over candidates that may hold two fits of one type (keys "cylinder" and "cylinder_free"),
+    each against the best so far: two of one type by their median absolute residual, two types by GRIC. Returns
     the key of the winner."""
     types = {k: k.split("_")[0] for k in cands}
     best: str | None = None
-    for k in cands:  # each candidate against the best so far, as its own type
+    for k in cands:  # loop over the candidates
         if best is None:
             best = k
             continue
         pair = {types[best]: cands[best], types[k]: cands[k]} if types[best] != types[k] else None
-        if pair is None:  # two fits of one type: the one with the smaller truncated residual
+        if pair is None:  # two fits of one type: the one nearer its points
             a, b = (np.abs(cands[q].primitive.signed_distance(x)) for q in (best, k))
             best = k if float(np.median(b)) < float(np.median(a)) else best
         elif select_type(pair, x, scale, config) == types[k]:

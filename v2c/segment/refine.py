@@ -1090,8 +1090,10 @@ def split_crease_strips(
     geometry: tuple[np.ndarray, float] | None = None,
     ransac: RansacConfig | None = None,
 ) -> Segmentation:
-    """``seg`` with each crease strip cut between its host planes: a curved-labelled instance touching two or more
-    plane-labelled instances (each with at least crease_host_ratio times its valid pixels, their planes meeting at
+    """``seg`` with each crease strip cut between its host planes: a curved-labelled instance (with crease_planes a
+    plane-labelled one too) touching two or more plane-labelled instances (with crease_flat_hosts and ``ransac``,
+    the fit settings `_flat` needs, also curved-labelled ones `_flat` finds flat; each with at least
+    crease_host_ratio times its valid pixels, their planes meeting at
     crease_min_angle_deg or more) whose depth the hosts' envelope explains (`_crease_hosts`). Each of its pixels
     joins the host whose plane the envelope shows there (with depth or without), so the cut follows the crease.
     Each host's plane is fitted once to all its valid pixels (RANSAC seeded by the seed and the host's id, then
