@@ -526,6 +526,15 @@ def _ridge_scene(seed: int, fillet_m: float = 0.0) -> tuple[np.ndarray, np.ndarr
     return z + rng.normal(0.0, 1.0, z.shape) * 0.0015 * z**2, on
 
 
+def _ridge_strip_seg(seed: int, labels: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, Segmentation]:
+    """(depth, segmentation) of `_ridge_scene` (sharp crease, seed ``seed``): instance 1 left of the crease, 2 the
+    rounded band the network labels apart, 3 right of it, with ``labels`` and ``scores``."""
+    depth, strip = _ridge_scene(seed)
+    u = np.arange(W)[None, :].repeat(H, 0)
+    inst = np.where(strip, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
+    return depth, Segmentation(inst, labels, scores, "learned")
+
+
 def test_crease_strip_is_cut_between_its_planes_and_a_resolved_fillet_stays() -> None:
     """A real sensor's matching window rounds a box's crease over about 9 px, and the network labels the band a
     fillet (the real frames' boxes). The band, 13 px wide and labelled cylinder between two plane instances, is
@@ -570,15 +579,12 @@ def test_a_plane_labelled_crease_strip_is_cut_and_a_resolved_chamfer_stays() -> 
     scores = np.array([0, 0.9, 0.7, 0.9], np.float32)
     u = np.arange(W)[None, :].repeat(H, 0)
     for seed in range(5):
-        depth, strip = _ridge_scene(seed)
-        inst = np.where(strip, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
-        seg = Segmentation(inst, labels, scores, "learned")
+        depth, seg = _ridge_strip_seg(seed, labels, scores)
         out = split_crease_strips(seg, depth, K, RefineConfig())
         assert out.num_instances == 2 and list(out.labels) == [0, PLANE_Z, PLANE_Z], seed
         assert split_crease_strips(seg, depth, K, RefineConfig(crease_planes=False)).num_instances == 3, seed
-        ridge, _ = _ridge_scene(seed)
         chamfered = np.maximum(
-            ridge, 0.53 + np.random.default_rng(50 + seed).normal(0.0, 0.0015 * 0.53**2, ridge.shape)
+            depth, 0.53 + np.random.default_rng(50 + seed).normal(0.0, 0.0015 * 0.53**2, depth.shape)
         )
         bevel = np.abs(u - K[0, 2]) <= 12
         inst = np.where(bevel, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
@@ -597,11 +603,8 @@ def test_a_flat_face_labelled_curved_hosts_a_crease_strip() -> None:
 
     labels = np.array([0, PLANE_Z, CYL_Z, CYL_Z], np.uint8)
     scores = np.array([0, 0.9, 0.7, 0.7], np.float32)
-    u = np.arange(W)[None, :].repeat(H, 0)
     for seed in range(5):
-        depth, strip = _ridge_scene(seed)
-        inst = np.where(strip, 2, np.where(u < K[0, 2], 1, 3)).astype(np.int32)
-        seg = Segmentation(inst, labels, scores, "learned")
+        depth, seg = _ridge_strip_seg(seed, labels, scores)
         out = split_crease_strips(seg, depth, K, RefineConfig(), ransac=RansacConfig())
         assert out.num_instances == 2, seed
         left, right = out.instances[:, : int(K[0, 2]) - 1], out.instances[:, int(K[0, 2]) + 1 :]
