@@ -21,10 +21,10 @@ from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Vertex, TopoDS_Wire
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
-from exporters.brep_outline import _triangle_areas
 from exporters.occ_curves import pcurve_points
 from exporters.occ_surfaces import AnalyticSurface, distance_to_surface
 from exporters.polygons import polygon_crossings
+from v2c.vbrep.mesh import triangle_areas
 
 if TYPE_CHECKING:
     from exporters.brep_edges import EdgeBuilder, EdgeGeom
@@ -62,6 +62,12 @@ def _first_crossing(a: np.ndarray, b: np.ndarray) -> tuple[tuple[int, float], tu
     i, j = np.nonzero(ok)
     k = int(np.argmin(i + j))
     return (int(i[k]), float(t[i[k], j[k]])), (int(j[k]), float(u[i[k], j[k]]))
+
+
+def _from_end(g: EdgeGeom, end: int, span: float, n: int) -> np.ndarray:
+    """(n,) parameters of edge geometry ``g`` from its end ``end`` (0: t0, 1: t1) over ``span`` of its range."""
+    start = g.t1 if end else g.t0
+    return np.linspace(start, g.t0 + (1 - span if end else span) * (g.t1 - g.t0), n)
 
 
 class FaceBuilder:
@@ -423,8 +429,7 @@ class FaceBuilder:
                     continue
                 # both parametrised from the shared vertex outwards, over corner_cut_span of their range
                 span = self.cfg.corner_cut_span
-                ta = np.linspace(ga.t1 if end_a else ga.t0, ga.t0 + (1 - span if end_a else span) * (ga.t1 - ga.t0), n)
-                tb = np.linspace(gb.t1 if end_b else gb.t0, gb.t0 + (1 - span if end_b else span) * (gb.t1 - gb.t0), n)
+                ta, tb = _from_end(ga, end_a, span, n), _from_end(gb, end_b, span, n)
                 hit = _first_crossing(
                     s.unwrap(self._geom_samples(s, ga, ta)[0]), s.unwrap(self._geom_samples(s, gb, tb)[0])
                 )
@@ -515,7 +520,7 @@ class FaceBuilder:
         of the face's centre, as `_outer_groups` puts the pieces)."""
         pts = self.fmap.points(np.asarray(f.mesh_vertices, float).reshape(-1, 3))
         tri = np.asarray(f.mesh_triangles, int).reshape(-1, 3)
-        areas = _triangle_areas(pts, tri)
+        areas = triangle_areas(pts, tri)
         total = float(areas.sum())
         if total <= 0:
             return [0.0] * len(pieces)

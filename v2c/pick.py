@@ -191,17 +191,18 @@ def fit_support_plane(
 
 
 def depth_pieces(
-    keep: np.ndarray, depth: np.ndarray, K: np.ndarray, cfg: PickConfig | None = None
+    keep: np.ndarray, depth: np.ndarray, K: np.ndarray, cfg: PickConfig | None = None, fly: np.ndarray | None = None
 ) -> tuple[int, np.ndarray]:
     """Depth-connected pieces of the pixels ``keep``: 4-neighbours join when their depths differ by less than
     connect_step_mm + connect_step_rel x depth. A flying pixel (a reading between two layers of a depth edge,
     `flying_mask`, with intrinsics ``K``) never joins two pieces: a sensor's ramp of such
     readings across a depth step (a box in front of the object behind it) would otherwise make one piece of both.
     It takes the piece of the joined neighbour nearest in depth (repeated along a ramp), or one of its own.
-    Returns (count, (H, W) int labels, -1 outside ``keep``)."""
+    ``fly``: the flying pixels when the caller has them (`flying_mask`). Returns (count, (H, W) int labels, -1
+    outside ``keep``)."""
     cfg = cfg or PickConfig()
     h, w = keep.shape
-    fly = keep & flying_mask(depth, K, cfg)
+    fly = keep & (flying_mask(depth, K, cfg) if fly is None else fly)
     core = keep & ~fly
     ids = np.arange(h * w).reshape(h, w)
     rows, cols = [], []

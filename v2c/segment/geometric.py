@@ -845,12 +845,13 @@ def _one_object(part: np.ndarray, scan: Scan, pick: PickConfig | None = None) ->
 
     pick = pick or PickConfig()
     depth = np.asarray(scan.depth, np.float64)
-    _, pieces = depth_pieces(part, depth, scan.K, pick)
+    fly = flying_mask(depth, scan.K, pick)
+    _, pieces = depth_pieces(part, depth, scan.K, pick, fly)
     flat = np.flatnonzero(part)
     piece = pieces.ravel()[flat]  # each part pixel's piece
     x = backproject(depth, scan.K).reshape(-1, 3)[flat]
     step = pick.connect_step_mm / 1000.0 + pick.connect_step_rel * x[:, 2]
-    solid = ~flying_mask(depth, scan.K, pick).ravel()[flat]  # the pixels whose nearness counts
+    solid = ~fly.ravel()[flat]  # the pixels whose nearness counts
     ids, sizes = np.unique(piece, return_counts=True)
     inside = np.isin(piece, ids[np.argmax(sizes)])  # the largest piece (the first of equal ones)
     while not inside.all():  # loop while some piece joins: every piece with a point near the object joins at once
