@@ -22,7 +22,7 @@ from v2c.fit.tangency import adjacent_terms, constrain_blends, tangent_junctions
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points, mad_sigma
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
-from v2c.geometry.selection import fit_instance, noise_sigma, select_type, supported
+from v2c.geometry.selection import fit_instance, noise_sigma, select_type, support_measures, supported
 from v2c.labels import AxisClass, PrimitiveType, type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive, Torus
 from v2c.primitives.directions import unit
@@ -96,6 +96,7 @@ def _assign_axes(
     view_dir: np.ndarray,
     scale: float,
     config: FitConfig,
+    consensus: bool = False,
 ) -> tuple[np.ndarray, dict[int, int | None], dict[int, Primitive]]:
     """Initial frame from the labelled axes, then each instance's final axis index (0/1/2, -1 free, None none).
 
@@ -104,7 +105,12 @@ def _assign_axes(
     (a small patch's free RANSAC axis can be far off while the labelled axis fits it just as well). Otherwise the
     other frame axes are tried the same way, else the axis stays free. Type-searched (weak label) instances try
     the frame axis nearest their own when it is within snap_deg. Returns (frame, axis indices, primitives, with
-    the constrained refits in place)."""
+    the constrained refits in place).
+
+    consensus: the frame may instead be the consensus of every instance's axis, labelled or not (`frame_from_axes`
+    within frame_outlier_deg, its axes named by the labels, `_named_by_labels`): it is taken where it holds more
+    of the instances than the labels' frame does (`_frame_support`: the total weight of the instances whose axis
+    lies within frame_outlier_deg of one of its axes; the labels' frame on a tie)."""
     lab_ids = [i for i in fits if isinstance(want[i], int) and want[i] >= 0]
     frame = init_frame(
         [fits[i].axis_vector for i in lab_ids],
@@ -113,11 +119,18 @@ def _assign_axes(
         view_dir,
         config.frame_outlier_deg,
     )
-    if not lab_ids:  # no confident axis label: a frame from the type-searched axes themselves
-        weak = [i for i in fits if want[i] == "?" and fits[i].axis_vector is not None]
+    if consensus or not lab_ids:  # (no confident axis label: a frame from the type-searched axes themselves)
+        ids = [i for i in fits if (consensus or want[i] == "?") and fits[i].axis_vector is not None]
         found = frame_from_axes(
-            [fits[i].axis_vector for i in weak], [weights[i] for i in weak], view_dir, config.snap_deg
+            [fits[i].axis_vector for i in ids],
+            [weights[i] for i in ids],
+            view_dir,
+            config.frame_outlier_deg if consensus else config.snap_deg,
         )
+        if found is not None and consensus and lab_ids:  # the labels name the consensus axes
+            found = _named_by_labels(found, [(fits[i].axis_vector, want[i], weights[i]) for i in lab_ids], view_dir)
+            if _frame_support(found, fits, weights, config) <= _frame_support(frame, fits, weights, config):
+                found = frame
         frame = frame if found is None else found
     eps = config.d_inlier * scale
     out: dict[int, int | None] = {}
@@ -151,6 +164,38 @@ def _assign_axes(
                 out[i], prims[i] = int(k), _canonical(q, x)
                 break
     return frame, out, prims
+
+
+def _frame_support(
+    frame: np.ndarray, fits: dict[int, Primitive], weights: dict[int, float], config: FitConfig
+) -> float:
+    """The total weight of the instances whose axis lies within frame_outlier_deg of one of ``frame``'s axes."""
+    cos = np.cos(np.deg2rad(config.frame_outlier_deg))
+    return float(
+        sum(
+            weights[i]
+            for i, p in fits.items()
+            if p.axis_vector is not None and np.max(np.abs(frame @ unit(p.axis_vector))) >= cos
+        )
+    )
+
+
+def _named_by_labels(frame: np.ndarray, labelled: list, view_dir: np.ndarray) -> np.ndarray:
+    """``frame``'s rows reordered so that each labelled axis class (X, Y, Z) names the row its instances' axes
+    lie along, by the largest total weight over the six orderings (``labelled``: (axis, class 0/1/2, weight)),
+    then oriented as SCAN_FORMAT.md says (`orient_frame`)."""
+    from itertools import permutations
+
+    from v2c.fit.align import orient_frame
+
+    def support(order: tuple[int, ...]) -> float:
+        return sum(w * abs(float(frame[order[k]] @ a)) for a, k, w in labelled)
+
+    best = max(permutations(range(3)), key=support)
+    r = frame[list(best)].copy()
+    if np.linalg.det(r) < 0:
+        r[0] *= -1
+    return orient_frame(r, view_dir)
 
 
 @dataclass
@@ -239,27 +284,40 @@ def _planes_where_unsupported(
     use_frame: bool,
     scale: float,
     config: FitConfig,
-) -> None:
+) -> list[int]:
     """Curved labels their patch does not support (`geometry.selection.supported`: a radius beyond
     support_extent_ratio patch extents, or a sagitta under the sensor noise), or whose fit does not beat a plane's
     by GRIC with the sensor's noise model (`geometry.selection.select_type`: a loose RANSAC inlier band lets a bent
     fit through), become planes, in place. Checked after the axis test, so a true cylinder whose free RANSAC axis
     was off is judged with the part frame's axis. The plane joins the frame only when its normal lies within
     snap_deg of a frame axis (the label's axis class named the cylinder's axis, not a plane normal). Certain
-    labels (score >= support_label_certain: the oracle's) stay."""
+    labels (score >= support_label_certain: the oracle's) stay, unless (unsupported_labels, scores under
+    unsupported_label_certain) their radius is beyond what the patch's extent supports (the first of
+    `support_measures`) and the plane wins GRIC. Returns the
+    instances that became planes whose label had named a frame axis (the frame drawn with their curved axes is
+    then drawn again, `_fit_scan`)."""
+    reframe = []
     for i in sorted(fits.prims):  # loop over instances
         p, ip = fits.prims[i], ipts[i]
-        if isinstance(p, Plane) or i in fits.searched or fits.scores.get(i, 0.0) >= config.support_label_certain:
+        if isinstance(p, Plane) or i in fits.searched:
             continue
+        x = ip.points[fits.inliers[i]]
+        certain = fits.scores.get(i, 0.0) >= config.support_label_certain
+        if certain and not (
+            config.unsupported_labels
+            and fits.scores.get(i, 0.0) < config.unsupported_label_certain
+            and not support_measures(p, x, config)[0]
+        ):
+            continue  # a certain label, unless its radius is more than its patch's extent supports
         f = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 3]))
         if f is None:
             continue
-        if (
-            supported(p, ip.points[fits.inliers[i]], config)
-            and select_type({"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config)
-            != "plane"
-        ):
+        if (certain or supported(p, x, config)) and select_type(
+            {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config
+        ) != "plane":
             continue
+        if isinstance(fits.want[i], int) and fits.want[i] >= 0:
+            reframe.append(i)
         q = _canonical(f.primitive, ip.points[f.inliers] if f.inliers.any() else ip.points)
         axis_idx[i] = -1
         cos = np.abs(frame @ q.axis_vector)
@@ -277,6 +335,7 @@ def _planes_where_unsupported(
         fits.inliers[i] = _inliers(q, ip, scale, config)
         fits.want[i] = "?"
         fits.searched.append(i)
+    return reframe
 
 
 #: The simpler types nested in a curved type (a cone of half angle 0 is a cylinder; a torus of infinite major
@@ -784,6 +843,24 @@ def fit_scan(scan: Scan, seg: Segmentation, config: FitConfig | None = None, abl
         return _fit_scan(scan, seg, config or FitConfig(), ablation)
 
 
+def _take_fixed(
+    fits: _Fits,
+    fixed: dict[int, Primitive],
+    ipts: dict[int, InstancePoints],
+    use_frame: bool,
+    scale: float,
+    config: FitConfig,
+) -> None:
+    """With the shared frame (use_frame), aligned instances start from their axis-constrained refit ``fixed``
+    (`_assign_axes`), in place."""
+    if not use_frame:
+        return
+    for i, p in fixed.items():
+        if p is not fits.prims[i]:
+            fits.prims[i] = p
+            fits.inliers[i] = _inliers(p, ipts[i], scale, config)
+
+
 def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -> FitResult:
     t_start, cpu_start = perf_counter(), process_time()
     timings: dict[str, float] = {}
@@ -809,13 +886,19 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     # 2. shared frame, label test and the aligned joint fit
     use_frame = ablation in ("full", "no-int")
     view_dir = unit(pts[valid].mean(axis=0)) if valid.any() else np.array([0.0, 0.0, 1.0])
+    free = (dict(fits.prims), dict(fits.inliers))  # RANSAC's, before any axis is held on the frame
     frame, axis_idx, fixed = _assign_axes(fits.prims, fits.want, fits.weights, ipts, view_dir, scale, config)
-    if use_frame:  # aligned instances start from their axis-constrained refit
-        for i, p in fixed.items():
-            if p is not fits.prims[i]:
-                fits.prims[i] = p
-                fits.inliers[i] = _inliers(p, ipts[i], scale, config)
-    _planes_where_unsupported(fits, ipts, axis_idx, frame, use_frame, scale, config)
+    _take_fixed(fits, fixed, ipts, use_frame, scale, config)
+    reframe = _planes_where_unsupported(fits, ipts, axis_idx, frame, use_frame, scale, config)
+    if reframe:  # a label that named a frame axis was wrong: the frame again, by the consensus of every
+        # instance's axis (the demoted ones' plane normals among them), every other instance from RANSAC's fit
+        for i in fits.prims:
+            if i not in reframe:
+                fits.prims[i], fits.inliers[i] = free[0][i], free[1][i]
+        frame, axis_idx, fixed = _assign_axes(
+            fits.prims, fits.want, fits.weights, ipts, view_dir, scale, config, consensus=True
+        )
+        _take_fixed(fits, fixed, ipts, use_frame, scale, config)
     _simpler_where_nested(fits, ipts, axis_idx, frame, scale, config)
     if use_frame:  # the frame gives small instances the axis their points cannot
         _small_instances(fits, small_pts, seg, axis_idx, frame, scale, config)
