@@ -7,13 +7,14 @@ import contextlib
 import logging
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, replace
+from itertools import permutations
 from time import perf_counter, process_time
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from v2c.camera import backproject, pixel_rays_closed_form
-from v2c.fit.align import AXIS_NAMES, align_fit, frame_from_axes, init_frame
+from v2c.fit.align import AXIS_NAMES, align_fit, frame_from_axes, init_frame, orient_frame
 from v2c.fit.config import FitConfig
 from v2c.fit.constrained import fit_with_axis, start_with_axis
 from v2c.fit.intersect import boundary_points, init_depths, refine_intersections
@@ -184,9 +185,6 @@ def _named_by_labels(frame: np.ndarray, labelled: list, view_dir: np.ndarray) ->
     """``frame``'s rows reordered so that each labelled axis class (X, Y, Z) names the row its instances' axes
     lie along, by the largest total weight over the six orderings (``labelled``: (axis, class 0/1/2, weight)),
     then oriented as SCAN_FORMAT.md says (`orient_frame`)."""
-    from itertools import permutations
-
-    from v2c.fit.align import orient_frame
 
     def support(order: tuple[int, ...]) -> float:
         return sum(w * abs(float(frame[order[k]] @ a)) for a, k, w in labelled)
