@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from v2c.geometry.config import RansacConfig
+from v2c.pick import PickConfig, flying_mask
 from v2c.scan import Scan
 from v2c.segment.data import MIRROR_SIGN_CHANNEL, FeatureConfig, scan_features
 from v2c.segment.instances import InstanceConfig, extract_instances, feature_evidence
@@ -56,6 +57,10 @@ class LearnedConfig:
     mirror_tta: bool = True  # average the prediction with that of the mirrored input (2x network time)
     ground_region: bool = True  # without mask.png: the part is what stands above the RANSAC ground inside the ROI
     # (`geometric.part_region`, as the geometric segmenter does), not the network's background class
+    flying_max_share: float = 0.5  # an instance more than this share of whose readings are flying pixels
+    # (`v2c.pick.flying_mask`: the ramp a sensor draws across a depth step) is no surface: its
+    # pixels become background, last (fraction; 1 keeps every instance). The real lying sugar
+    # box's ROI: a 39-pixel plane, 31 of them flying, along its end (docs/segmentation.md)
 
 
 def network_precision(cfg: LearnedConfig | None = None) -> str:
@@ -185,7 +190,33 @@ def segment_learned(
                 cut = remerge(cut, scan.depth, scan.K, cfg.refine, ransac=ransac)
             seg = cut
     # last: an instance that no one primitive explains holds two surfaces (docs/segmentation.md)
-    return split_unexplained(seg, scan.depth, scan.K, cfg.verify, ransac)
+    seg = split_unexplained(seg, scan.depth, scan.K, cfg.verify, ransac)
+    return without_flying(seg, scan.depth, scan.K, cfg.flying_max_share)
+
+
+def without_flying(
+    seg: Segmentation, depth: np.ndarray, K: np.ndarray, max_share: float, pick: PickConfig | None = None
+) -> Segmentation:
+    """``seg`` without the instances more than ``max_share`` of whose valid pixels (depth > 0) are flying pixels
+    (`v2c.pick.flying_mask` with ``pick``, default `PickConfig()`): their pixels become background and the other
+    instances are numbered 1..N again in order, each keeping its label and score. ``seg`` itself when none is."""
+    if max_share >= 1.0:
+        return seg
+    inst = np.asarray(seg.instances)
+    d = np.asarray(depth, np.float64)
+    valid = d > 0
+    fly = flying_mask(d, K, pick or PickConfig())
+    n_ids = len(seg.labels)
+    n = np.bincount(inst[valid].ravel(), minlength=n_ids)
+    f = np.bincount(inst[valid & fly].ravel(), minlength=n_ids)
+    drop = (n > 0) & (f > max_share * n)
+    drop[0] = False
+    if not drop.any():
+        return seg
+    keep = np.flatnonzero(~drop)  # 0 (background) first
+    lut = np.zeros(n_ids, np.int32)
+    lut[keep] = np.arange(len(keep), dtype=np.int32)
+    return Segmentation(lut[inst], np.asarray(seg.labels)[keep], np.asarray(seg.scores)[keep], seg.method)
 
 
 def instances_from_prediction(
