@@ -40,7 +40,7 @@ class FitConfig(RansacConfig):
     # tuna can's radius right (43.1 mm for 42.8; 36.5 mm at 0)
     unsupported_labels: bool = True  # ... except a curved label of any score whose radius exceeds
     # support_extent_ratio times its patch's extent (what the patch can
-    # support, `geometry.selection.support_measures`) and whose points a plane
+    # support, `geometry.selection.radius_supported`) and whose points a plane
     # explains as well by GRIC with the sensor's noise model: it becomes a
     # plane, and where its label had named a frame axis the part frame is
     # drawn again by the consensus of every instance's axis (issue 17: the real

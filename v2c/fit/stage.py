@@ -23,7 +23,7 @@ from v2c.fit.tangency import adjacent_terms, constrain_blends, tangent_junctions
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points, mad_sigma
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
-from v2c.geometry.selection import fit_instance, noise_sigma, select_type, support_measures, supported
+from v2c.geometry.selection import fit_instance, noise_sigma, radius_supported, select_type, supported
 from v2c.labels import AxisClass, PrimitiveType, type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive, Torus
 from v2c.primitives.directions import unit
@@ -290,21 +290,21 @@ def _planes_where_unsupported(
     was off is judged with the part frame's axis. The plane joins the frame only when its normal lies within
     snap_deg of a frame axis (the label's axis class named the cylinder's axis, not a plane normal). Certain
     labels (score >= support_label_certain: the oracle's) stay, unless (unsupported_labels, scores under
-    unsupported_label_certain) their radius is beyond what the patch's extent supports (the first of
-    `support_measures`) and the plane wins GRIC. Returns the
-    instances that became planes whose label had named a frame axis (the frame drawn with their curved axes is
-    then drawn again, `_fit_scan`)."""
+    unsupported_label_certain) their radius is beyond what the patch's extent supports (`radius_supported`) and
+    the plane wins GRIC. Returns the instances that became planes whose label had named a frame axis (the frame
+    drawn with their curved axes is then drawn again, `_fit_scan`)."""
     reframe = []
     for i in sorted(fits.prims):  # loop over instances
         p, ip = fits.prims[i], ipts[i]
         if isinstance(p, Plane) or i in fits.searched:
             continue
         x = ip.points[fits.inliers[i]]
-        certain = fits.scores.get(i, 0.0) >= config.support_label_certain
+        score = fits.scores.get(i, 0.0)
+        certain = score >= config.support_label_certain
         if certain and not (
             config.unsupported_labels
-            and fits.scores.get(i, 0.0) < config.unsupported_label_certain
-            and not support_measures(p, x, config)[0]
+            and score < config.unsupported_label_certain
+            and not radius_supported(p, x, config)
         ):
             continue  # a certain label, unless its radius is more than its patch's extent supports
         f = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 3]))

@@ -76,27 +76,29 @@ def patch_radii(prim: Primitive, x: np.ndarray) -> list[float]:
     return [0.0]
 
 
-def support_measures(prim: Primitive, x: np.ndarray, config: RansacConfig) -> tuple[bool, bool, bool]:
-    """The three measures by which the patch ``x`` can show ``prim``'s curvature, each True where it does:
-    (radius: no radius (`patch_radii`) beyond support_extent_ratio times the patch's extent (`patch_extent`);
-    turn: the normals turn by at least 2 asin(1 / (2 support_extent_ratio)) over the patch (a radius within that
-    many times the patch's extent across the curvature); sagitta: the surface departs from its own least-squares
-    plane by at least support_sagitta_sigma depth-noise sigmas (`noise_sigma` at the patch's median point), or
-    its normals turn by support_sagitta_turn_deg or more). All True for planes and patches under 3 points."""
+def radius_supported(prim: Primitive, x: np.ndarray, config: RansacConfig) -> bool:
+    """True unless a radius of ``prim`` (`patch_radii`) exceeds support_extent_ratio times the extent of its patch
+    ``x`` (`patch_extent`): what the patch can support (planes and patches under 3 points always)."""
     if isinstance(prim, Plane) or len(x) < 3:
-        return True, True, True
-    radius = max(patch_radii(prim, x)) <= config.support_extent_ratio * patch_extent(x, config)
-    turn, sag = curvature_support(prim, x, config)
-    turned = turn >= 2.0 * np.arcsin(min(1.0, 0.5 / config.support_extent_ratio))
-    sigma = float(np.median(noise_sigma(x, config)))
-    bent = sag >= config.support_sagitta_sigma * sigma or turn >= np.deg2rad(config.support_sagitta_turn_deg)
-    return bool(radius), bool(turned), bool(bent)
+        return True
+    return max(patch_radii(prim, x)) <= config.support_extent_ratio * patch_extent(x, config)
 
 
 def supported(prim: Primitive, x: np.ndarray, config: RansacConfig) -> bool:
-    """True when the patch ``x`` supports ``prim``'s curvature (planes always) by all three of
-    `support_measures`."""
-    return all(support_measures(prim, x, config))
+    """True when the patch ``x`` supports ``prim``'s curvature (planes always): no radius beyond what its extent
+    supports (`radius_supported`), its normals turn by at least 2 asin(1 / (2 support_extent_ratio)) over the
+    patch (a radius within that many times the patch's extent across the curvature), and its sagitta is at least
+    support_sagitta_sigma depth-noise sigmas (`noise_sigma` at the patch's median point) unless the normals turn
+    by support_sagitta_turn_deg or more."""
+    if isinstance(prim, Plane) or len(x) < 3:
+        return True
+    if not radius_supported(prim, x, config):
+        return False
+    turn, sag = curvature_support(prim, x, config)
+    if turn < 2.0 * np.arcsin(min(1.0, 0.5 / config.support_extent_ratio)):
+        return False
+    sigma = float(np.median(noise_sigma(x, config)))
+    return sag >= config.support_sagitta_sigma * sigma or turn >= np.deg2rad(config.support_sagitta_turn_deg)
 
 
 def fit_instance(
