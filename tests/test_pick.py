@@ -301,8 +301,8 @@ def test_roi_object_does_not_reach_the_surface_behind_it_through_flying_pixels()
 
 def test_an_instance_of_flying_pixels_is_dropped() -> None:
     """`segment.learned.without_flying`: on the ramp scene, an instance of the ramp's rows alone (every reading a
-    flying pixel) becomes background and the others are numbered again with their labels and scores; the near
-    surface with the ramp's rows in it (180 flying of 1,380 readings) stays; a share of 1 keeps everything."""
+    flying pixel) becomes background and the others keep their ids, labels and scores; the near surface with the
+    ramp's rows in it (180 flying of 1,380 readings) stays; a share of 1 keeps everything."""
     from v2c.segment.learned import without_flying
     from v2c.segment.types import Segmentation
 
@@ -312,8 +312,8 @@ def test_an_instance_of_flying_pixels_is_dropped() -> None:
     seg = Segmentation(inst, np.array([0, 3, 4, 1], np.uint8), np.array([0.0, 0.9, 0.4, 0.8], np.float32), "learned")
     out = without_flying(seg, depth, RAMP_K, 0.5)
     assert (out.instances[17:20] == 0).all()
-    assert (out.instances[:17] == 1).all() and (out.instances[20:] == 2).all()
-    assert out.labels.tolist() == [0, 3, 1] and np.allclose(out.scores, [0.0, 0.9, 0.8])
+    assert (out.instances[:17] == 1).all() and (out.instances[20:] == 3).all()
+    assert out.labels.tolist() == [0, 3, 4, 1] and np.allclose(out.scores, [0.0, 0.9, 0.4, 0.8])
     whole = Segmentation(np.where(inst == 2, 3, inst), seg.labels, seg.scores, "learned")
     assert without_flying(whole, depth, RAMP_K, 0.5) is whole
     assert without_flying(seg, depth, RAMP_K, 1.0) is seg

@@ -30,7 +30,7 @@ from v2c.segment.instances import InstanceConfig, extract_instances, feature_evi
 from v2c.segment.net import UNet, bf16_supported, load_weights
 from v2c.segment.refine import RefineConfig, absorb_fragments, refine_instances, remerge, split_crease_strips
 from v2c.segment.types import Segmentation
-from v2c.segment.verify import VerifyConfig, compact, needs_regions, split_unexplained, verify_instances
+from v2c.segment.verify import VerifyConfig, needs_regions, split_unexplained, verify_instances
 
 #: Environment variable choosing the network's arithmetic where ``LearnedConfig.bf16`` is None: "auto" (bf16
 #: where the CPU has it natively, else fp32), "fp32" or "bf16".
@@ -198,9 +198,9 @@ def without_flying(
     seg: Segmentation, depth: np.ndarray, K: np.ndarray, max_share: float, pick: PickConfig | None = None
 ) -> Segmentation:
     """``seg`` without the instances more than ``max_share`` of whose valid pixels (depth > 0) are flying pixels
-    (`v2c.pick.flying_mask` with ``pick``, default `PickConfig()`): their pixels become background and the other
-    instances are numbered 1..N again in order (`segment.verify.compact`), each keeping its label and score.
-    ``seg`` itself when none is."""
+    (`v2c.pick.flying_mask` with ``pick``, default `PickConfig()`): their pixels become background; every instance
+    keeps its id (and with it its seeded random draws downstream), its label and its score. ``seg`` itself when
+    none is."""
     if max_share >= 1.0:
         return seg
     inst = np.asarray(seg.instances)
@@ -214,7 +214,7 @@ def without_flying(
     drop[0] = False
     if not drop.any():
         return seg
-    return compact(replace(seg, instances=np.where(drop[inst], 0, inst)))
+    return replace(seg, instances=np.where(drop[inst], 0, inst))
 
 
 def instances_from_prediction(

@@ -301,10 +301,10 @@ def split_by_regions(
         rest = inst == i
         if int((rest & valid).sum()) < need:  # a small rest joins the nearest piece
             _join_nearest(inst, np.isin(inst, ids), rest)
-    return compact(Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method))
+    return _compact(Segmentation(inst, np.asarray(labels, np.uint8), np.asarray(scores, np.float32), seg.method))
 
 
-def compact(seg: Segmentation) -> Segmentation:
+def _compact(seg: Segmentation) -> Segmentation:
     """``seg`` with the ids that cover no pixel dropped and the rest renumbered 1..N in order."""
     keep = np.union1d([0], seg.instance_ids())
     if len(keep) == len(seg.labels):
