@@ -291,9 +291,8 @@ def _planes_where_unsupported(
     snap_deg of a frame axis (the label's axis class named the cylinder's axis, not a plane normal). Certain
     labels (score >= support_label_certain: the oracle's) stay, unless (unsupported_labels, scores under
     unsupported_label_certain) their radius is beyond what the patch's extent supports (`radius_supported`) and
-    the plane wins GRIC. Returns the instances that became planes whose label had named a frame axis (the frame
-    drawn with their curved axes is then drawn again, `_fit_scan`)."""
-    reframe = []
+    the plane wins GRIC. Returns the instances that became planes."""
+    demoted = []
     for i in sorted(fits.prims):  # loop over instances
         p, ip = fits.prims[i], ipts[i]
         if isinstance(p, Plane) or i in fits.searched:
@@ -314,8 +313,7 @@ def _planes_where_unsupported(
             {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config
         ) != "plane":
             continue
-        if isinstance(fits.want[i], int) and fits.want[i] >= 0:
-            reframe.append(i)
+        demoted.append(i)
         q = _canonical(f.primitive, ip.points[f.inliers] if f.inliers.any() else ip.points)
         axis_idx[i] = -1
         cos = np.abs(frame @ q.axis_vector)
@@ -333,7 +331,7 @@ def _planes_where_unsupported(
         fits.inliers[i] = _inliers(q, ip, scale, config)
         fits.want[i] = "?"
         fits.searched.append(i)
-    return reframe
+    return demoted
 
 
 #: The simpler types nested in a curved type (a cone of half angle 0 is a cylinder; a torus of infinite major
@@ -887,11 +885,13 @@ def _fit_scan(scan: Scan, seg: Segmentation, config: FitConfig, ablation: str) -
     free = (dict(fits.prims), dict(fits.inliers))  # RANSAC's, before any axis is held on the frame
     frame, axis_idx, fixed = _assign_axes(fits.prims, fits.want, fits.weights, ipts, view_dir, scale, config)
     _take_fixed(fits, fixed, ipts, use_frame, scale, config)
-    reframe = _planes_where_unsupported(fits, ipts, axis_idx, frame, use_frame, scale, config)
-    if reframe:  # a label that named a frame axis was wrong: the frame again, by the consensus of every
-        # instance's axis (the demoted ones' plane normals among them), every other instance from RANSAC's fit
+    named = {i for i, w in fits.want.items() if isinstance(w, int) and w >= 0}  # labels that named a frame axis
+    demoted = _planes_where_unsupported(fits, ipts, axis_idx, frame, use_frame, scale, config)
+    if named.intersection(demoted):  # a label that named a frame axis was wrong: the frame again, by the
+        # consensus of every instance's axis (the demoted ones' plane normals among them), every instance but the
+        # demoted ones from RANSAC's fit
         for i in fits.prims:
-            if i not in reframe:
+            if i not in demoted:
                 fits.prims[i], fits.inliers[i] = free[0][i], free[1][i]
         frame, axis_idx, fixed = _assign_axes(
             fits.prims, fits.want, fits.weights, ipts, view_dir, scale, config, consensus=True
