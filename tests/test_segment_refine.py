@@ -421,6 +421,28 @@ def test_curved_island_joins_its_only_neighbour_and_a_curved_strip_between_two_f
         assert out.num_instances == 3 and (out.instances[50:66, 70:86] == 2).all(), seed
 
 
+def test_an_uncertain_curved_label_on_the_silhouette_is_judged_by_its_depth(monkeypatch) -> None:
+    """The curvature guard spares a curved-labelled fragment on the silhouette only where the network is at least
+    absorb_earned_min_score sure of its label: the same fragment, on its neighbour's plane, joins it at a score of
+    0.4 and stays at 0.7 (the default 0.5), for 10 noise seeds; 5 mm off the plane it stays at 0.4 too (its depth
+    says another surface). The guard is forced to 'earned' so that the score, not the fit, decides."""
+    from v2c.segment import refine
+    from v2c.segment.refine import absorb_fragments
+
+    monkeypatch.setattr(refine, "_curvature_earned", lambda *a, **k: True)
+    assert RefineConfig().absorb_earned_min_score == 0.5
+    for seed in range(10):
+        for offset, score, joins in ((0.0, 0.4, True), (0.0, 0.7, False), (0.005, 0.4, False)):
+            depth, seg = _island_scene(offset, seed)
+            rim = seg.instances.copy()
+            rim[50:66, 86:90] = 0  # the fragment on the silhouette
+            edge = Segmentation(rim, seg.labels, np.array([0, 0.9, score], np.float32), "learned")
+            out = absorb_fragments(edge, depth, K, RefineConfig())
+            assert out.num_instances == (1 if joins else 2), (seed, offset, score)
+            if joins:
+                assert list(out.labels) == [0, PLANE_Z], seed
+
+
 def _correlated_field(seed: int, std_m: float) -> np.ndarray:
     """(H, W) depth error (metres): white noise blurred with a 3-px Gaussian (the `structured_light` profile's
     correlation length), rescaled to std ``std_m``."""

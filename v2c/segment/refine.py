@@ -142,6 +142,9 @@ class RefineConfig:
     # not the background: an island inside one face) joins it where its depth fits, though it earns its curvature:
     # a blend runs between two faces (a printed spot on a box's top). One on the silhouette may be a blend whose
     # other face is unseen (a can's rim beyond its lid) and stays
+    absorb_earned_min_score: float = 0.5  # a curved-labelled fragment keeps its curvature (the earned exemption
+    # above) only where the network's score for it is at least this (probability); below, it is judged as any
+    # fragment, by its depth against its neighbours' surfaces. 0: every earned fragment stays
     crease: bool = True  # a curved-labelled instance lying along the crease where two or more plane instances meet,
     # whose depth their planes explain outside the sensor's rounding band, is cut between them
     # (`split_crease_strips`): a real sensor's matching window rounds every crease, and the network labels the band
@@ -1008,6 +1011,7 @@ def _absorb_round(
         return seg
     inst, valid, pts, size = prepared
     labels = np.asarray(seg.labels)
+    scores = np.asarray(seg.scores)
     n_px = np.bincount(inst[valid].ravel(), minlength=len(labels))
     area = np.bincount(inst.ravel(), minlength=len(labels))
     contacts = _contacts(inst)
@@ -1028,6 +1032,7 @@ def _absorb_round(
         i
         for i in frags
         if types[i] != "plane"
+        and float(scores[i]) >= cfg.absorb_earned_min_score
         and not (cfg.absorb_island_curved and n_touch[i] <= 1 and not on_background[i])
         and (ip := instance_points(pts, valid, inst, np.array([i]), ransac).get(i)) is not None
         and _curvature_earned(
