@@ -225,6 +225,27 @@ def test_support_of_exact_surfaces() -> None:
         assert supported(sph, sph.origin + radius * d, cfg) is ok, radius
 
 
+def test_a_cones_radius_to_support_is_its_radius_of_curvature() -> None:
+    """The radius a cone's patch must support is its radius of curvature across the generators, distance from the
+    axis over cos(half angle): 20 mm for points 10 mm off the axis of a 60-degree cone, 115 mm for points 10 mm
+    off the axis of an 85-degree one (nearly a plane), which a patch about 10 mm across therefore does not
+    support (3 extents: about 30 mm), though its points lie 10 mm from the axis."""
+    from v2c.geometry.selection import patch_radii, radius_supported
+    from v2c.primitives import Cone
+
+    cfg = FitConfig()
+    for half_deg, expect_mm, ok in ((60.0, 20.0, True), (85.0, 114.7, False)):
+        a = np.deg2rad(half_deg)
+        cone = Cone([0.0, 0.0, 0.6], [1.0, 0.0, 0.0], a)
+        phi = np.linspace(-0.5, 0.5, 40)  # 1 radian around the axis, facing the camera
+        radial = np.stack([np.zeros_like(phi), np.sin(phi), -np.cos(phi)], axis=1)
+        slant = 0.01 / np.sin(a) + np.linspace(-0.005, 0.005, 40)  # 10 mm along the generators about radius 10 mm
+        gen = np.array([np.cos(a), 0.0, 0.0])[None, None, :] + np.sin(a) * radial[:, None, :]
+        pts = (cone.origin + slant[None, :, None] * gen).reshape(-1, 3)
+        assert abs(1000.0 * patch_radii(cone, pts)[0] - expect_mm) < 0.02 * expect_mm, half_deg
+        assert radius_supported(cone, pts, cfg) is ok, half_deg
+
+
 def cone_depth(radius: float, half_angle_deg: float, z0: float, cols: tuple[int, int]) -> np.ndarray:
     """Depth (m) of the camera-facing side of a cone whose axis runs along the camera x axis through (0, 0, z0):
     radius ``radius`` at x = 0, growing by tan(half_angle) per metre of x (a cylinder at 0), within the pixel

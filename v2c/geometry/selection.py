@@ -66,13 +66,16 @@ def patch_extent(x: np.ndarray, config: RansacConfig) -> float:
 
 def patch_radii(prim: Primitive, x: np.ndarray) -> list[float]:
     """The radii (metres) of ``prim`` that its patch ``x`` has to support: a cylinder's or sphere's radius, both
-    radii of a torus, a cone's median radius at the points."""
+    radii of a torus, a cone's median radius of curvature at the points: its distance from the axis over the cosine
+    of the half angle (the circumferential curvature of a cone is cos(half angle) / distance; a cone of half
+    angle near 90 degrees is nearly a plane, however near its axis the points lie)."""
     if isinstance(prim, (Cylinder, Sphere)):
         return [float(prim.radius)]
     if isinstance(prim, Torus):
         return [float(prim.radius), float(prim.minor_radius)]
     if isinstance(prim, Cone):
-        return [float(np.median(np.abs((x - prim.origin) @ prim.axis)) * np.tan(prim.half_angle))]
+        rho = float(np.median(np.abs((x - prim.origin) @ prim.axis)) * np.tan(prim.half_angle))
+        return [rho / max(float(np.cos(prim.half_angle)), 1e-9)]
     return [0.0]
 
 
