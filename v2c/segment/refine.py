@@ -984,10 +984,10 @@ def absorb_fragments(
     of noise that the network gave a label of their own. A fragment off every neighbour's surface (a hole's wall,
     a chamfer, a step: another surface) stays, and so does one whose curved label, at least absorb_earned_min_score
     probable, earns its curvature (`_curvature_earned`: a fillet strip leaves its plane tangentially, within the
-    noise at first) unless one instance encloses it (absorb_island_curved: a blend runs between faces, an island inside one is not one). Smallest
-    fragments first; the merged instance keeps the largest member's label and score; repeated on the result while
-    something joins, at most absorb_rounds times. ransac: the settings of the curved
-    neighbours' fits (default `RansacConfig()`)."""
+    noise at first) unless one instance encloses it (absorb_island_curved: a blend runs between faces, an island
+    inside one is not one). Smallest fragments first; the merged instance keeps the largest member's label and
+    score; repeated on the result while something joins, at most absorb_rounds times. ransac: the settings of the
+    curved neighbours' fits (default `RansacConfig()`)."""
     ransac = ransac or RansacConfig()
     for _ in range(max(cfg.absorb_rounds, 1)):  # loop over rounds, until nothing joins
         out = _absorb_round(seg, depth, K, cfg, geometry, ransac)
