@@ -485,37 +485,6 @@ def test_box_face_labelled_cylinder_leaves_the_frame_square() -> None:
         assert err < 1.0, (k, err)
 
 
-def test_a_nearly_flat_cylinder_has_little_say_in_the_frame() -> None:
-    """An instance's weight in the part frame (`stage._frame_weight`): a plane and a half cylinder weigh their
-    inliers; a 710 mm cylinder over a 200 mm patch (a bulged carton side, its normals turning by about 16 degrees)
-    weighs turn / frame_weight_turn_deg (90) of them, its axis direction being pinned that little by its points."""
-    from v2c.fit.stage import _frame_weight
-    from v2c.geometry.points import InstancePoints
-
-    cfg = FitConfig()
-    assert cfg.frame_weight_turn_deg == 90.0
-    rng = np.random.default_rng(0)
-    axis = np.array([1.0, 0.0, 0.0])
-
-    def cylinder_patch(radius: float, half_arc: float, n: int) -> tuple[Cylinder, np.ndarray]:
-        centre = np.array([0.0, 0.0, 0.8 + radius])  # the axis behind the patch, the patch facing the camera
-        phi = rng.uniform(-half_arc, half_arc, n)
-        along = rng.uniform(-0.1, 0.1, n)
-        x = centre + np.stack([along, radius * np.sin(phi), -radius * np.cos(phi)], axis=1)
-        return Cylinder(centre, axis, radius), x
-
-    def weight(p: Primitive, x: np.ndarray) -> float:
-        return _frame_weight(p, InstancePoints(np.arange(len(x)), x, np.zeros_like(x)), np.ones(len(x), bool), cfg)
-
-    flat = np.column_stack([rng.uniform(-0.1, 0.1, (500, 2)), np.full(500, 0.8)])
-    assert weight(Plane([0.0, 0.0, 0.8], [0.0, 0.0, -1.0]), flat) == 500.0
-    half = cylinder_patch(0.03, np.pi / 2, 800)
-    assert weight(*half) == 800.0
-    bulge, x = cylinder_patch(0.71, 0.14, 1000)  # 200 mm across: 16 degrees of turn
-    turn = np.degrees(2 * 0.14)
-    assert abs(weight(bulge, x) - 1000 * turn / 90.0) < 0.1 * 1000 * turn / 90.0
-
-
 def test_consensus_frame_ignores_a_lone_wrong_label() -> None:
     """The frame `_assign_axes` draws when a demoted label had named a frame axis (consensus=True): a box's three
     faces as planes (6820, 5801 and 4622 points, normals 1 degree off the true axes, the top labelled Z, the other

@@ -91,11 +91,6 @@ class FitConfig(RansacConfig):
     align_points: int = 400  # points per primitive in the joint least squares (count)
     frame_outlier_deg: float = 8.0  # frame init: labelled axes further than this from their class consensus
     # are ignored (degrees)
-    frame_weight_turn_deg: float = 90.0  # a curved instance's say in the frame (its inlier count) is scaled by
-    # min(1, turn / this), turn the angle its fitted surface's normals turn over its points
-    # (`geometry.selection.curvature_support`): a patch that turns little pins its axis direction little (a 710 mm
-    # cylinder over a 200 mm carton side has a free axis within the side), where a plane's normal is pinned by all
-    # its points (degrees; 0: off, every instance weighs its inliers)
     label_keep_ratio: float = 0.9  # an axis label stands if the axis-constrained fit keeps this share of the
     # free fit's inliers (fraction)
     snap_deg: float = 3.0  # type-searched (weak label) axes within this of a frame axis join the frame

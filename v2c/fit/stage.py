@@ -23,14 +23,7 @@ from v2c.fit.tangency import adjacent_terms, constrain_blends, tangent_junctions
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points, mad_sigma
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
-from v2c.geometry.selection import (
-    curvature_support,
-    fit_instance,
-    noise_sigma,
-    radius_supported,
-    select_type,
-    supported,
-)
+from v2c.geometry.selection import fit_instance, noise_sigma, radius_supported, select_type, supported
 from v2c.labels import AxisClass, PrimitiveType, type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive, Torus
 from v2c.primitives.directions import unit
@@ -248,17 +241,6 @@ def _seen_by_its_pixels(
     return _rays_hit_share(prim, rays, ip.points, config) >= config.ray_hit_min_share
 
 
-def _frame_weight(prim: Primitive, ip: InstancePoints, inliers: np.ndarray, config: FitConfig) -> float:
-    """An instance's say in the part frame: its inlier count, for a curved primitive with an axis scaled by
-    min(1, turn / frame_weight_turn_deg), turn the angle its normals turn over its inliers (`curvature_support`)."""
-    n = float(np.count_nonzero(inliers))
-    if config.frame_weight_turn_deg <= 0 or isinstance(prim, Plane) or prim.axis_vector is None:
-        return n
-    x = ip.points[inliers] if np.count_nonzero(inliers) >= 3 else ip.points
-    turn, _ = curvature_support(prim, x, config)
-    return n * min(1.0, float(np.degrees(turn)) / config.frame_weight_turn_deg)
-
-
 def _ransac_instances(
     ipts: dict[int, InstancePoints],
     seg: Segmentation,
@@ -288,7 +270,7 @@ def _ransac_instances(
             ax = None if got_type == "sphere" else ax if _same_axis_meaning(seg, i, got_type) else "?"
         out.prims[i] = _canonical(f.primitive, ip.points[f.inliers])
         out.scores[i] = float(seg.scores[i]) if i < len(seg.scores) else 0.0
-        out.want[i], out.weights[i], out.inliers[i] = ax, _frame_weight(out.prims[i], ip, f.inliers, config), f.inliers
+        out.want[i], out.weights[i], out.inliers[i] = ax, float(np.count_nonzero(f.inliers)), f.inliers
     return out
 
 
