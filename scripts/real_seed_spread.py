@@ -33,7 +33,9 @@ def main() -> None:
         cfg = PipelineConfig(refine=RefineConfig(seed=seed))
         rep = real_bench(args.data_dir, progress=False, start=False, masks=args.masks, config=cfg)
         s = rep["summary"]["learned"]
-        worst = max((r.get("box", {}).get("max_error_deg", 0.0) for r in rep["frames"] if r.get("ok")), default=0.0)
+        # a box with fewer than three planes has no three-plane error (None): it does not count here
+        errs = [r.get("box", {}).get("max_error_deg") for r in rep["frames"] if r.get("ok")]
+        worst = max((e for e in errs if e is not None), default=0.0)
         faces = {r["frame"]: r.get("faces") for r in rep["frames"]}
         cover = {r["frame"]: round(r["coverage_3mm_object"], 4) for r in rep["frames"] if r.get("ok")}
         runs[seed] = {"summary": s, "worst_box_deg": worst, "faces": faces, "coverage_3mm_object": cover}
