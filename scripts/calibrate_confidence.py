@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from v2c.vbrep.calibration import DEFAULT_MAP, expected_calibration_error
+from v2c.vbrep.calibration import DEFAULT_MAP, POST_MIN_BLOCK, expected_calibration_error
 
 SEGMENTATIONS = ("learned", "oracle")
 _FACTORS = (
@@ -202,6 +202,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--corpus-val-views", type=int, default=2)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--l2", type=float, default=30.0, help="L2 penalty of the logistic fit (standardised features)")
+    ap.add_argument(
+        "--post-min-block",
+        type=float,
+        default=POST_MIN_BLOCK,
+        help="edge weight each knot of the isotonic post-map rests on (0: no post-map)",
+    )
     ap.add_argument("--candidates", action="store_true", help="print the validation ECE of each candidate feature set")
     ap.add_argument("--label-only", action="store_true", help="label the scans, fit nothing")
     ap.add_argument("--records", type=Path, default=Path.home() / ".cache" / "v2c" / "calibration_records_v2.json")
@@ -239,11 +245,15 @@ def main(argv: list[str] | None = None) -> int:
     train = {k: rows_of(v, records, k) for k, v in sources.items()}
     tr = [r for v in train.values() for r in v]
     valrows = {k: rows_of(v, records, k) for k, v in val.items()}
+    post = a.post_min_block if a.post_min_block > 0 else None
     if a.candidates:
         for name, feats in CANDIDATES.items():
             print(f"candidate {name}: {', '.join(feats)}")
             report(fit_calibration(tr, feats, source_key="source", l2=a.l2), valrows)
-    cmap = fit_calibration(tr, DEFAULT_FEATURES, source_key="source", l2=a.l2)
+            for mb in (20.0, 50.0, 100.0, 200.0, 400.0):
+                print(f"candidate {name}, isotonic post-map, min_block {mb:g}")
+                report(fit_calibration(tr, feats, source_key="source", l2=a.l2, post_min_block=mb), valrows)
+    cmap = fit_calibration(tr, DEFAULT_FEATURES, source_key="source", l2=a.l2, post_min_block=post)
     cmap.meta = {
         "fitted_on": {
             "in-family": f"v2c bench cache seed {a.train_seed}, scans 0..{a.train_n - 1} (procedural families)",
@@ -259,7 +269,13 @@ def main(argv: list[str] | None = None) -> int:
         "label": "v2c.bench.vbrep.edge_correctness",
         "tol_px": 3.0,
         "method": "logistic regression per edge type on features of the edge (v2c.vbrep.calibration"
-        f".FEATURE_FUNCTIONS), L2 penalty {a.l2} on the standardised weights, fitted by Newton's method",
+        f".FEATURE_FUNCTIONS), L2 penalty {a.l2} on the standardised weights, fitted by Newton's method"
+        + (
+            f"; then an isotonic post-map of its probability (knots on at least {post:g} of edge weight; "
+            "v2c.vbrep.calibration.post_isotonic, applied by post_map)"
+            if post
+            else ""
+        ),
         "features": list(DEFAULT_FEATURES),
     }
     print("training:")

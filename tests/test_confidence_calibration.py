@@ -18,6 +18,8 @@ from v2c.vbrep.calibration import (
     fit_map,
     isotonic_fit,
     load_map,
+    post_isotonic,
+    post_map,
     reliability_bins,
     reliability_diagram,
     source_weights,
@@ -138,6 +140,50 @@ def test_logistic_calibration_recovers_known_error_rates() -> None:
     assert expected_calibration_error(cmap.apply("intersection", None, low), ok_low) < 0.06
 
 
+def test_isotonic_post_map_calibrates_what_one_logistic_slope_cannot() -> None:
+    """Edges right with a probability that rises with the raw score and then levels off (0.55 + 0.42 min(1, 2
+    raw): a law no logistic curve of the raw score follows): on a fresh draw the logistic model alone has an ECE
+    over 0.025, with the isotonic post-map (`fit_calibration(post_min_block=...)`) under 0.015, near the floor the
+    true law itself has on that draw; the plateau's rate comes back within 0.02, and the map stays strictly
+    increasing in the raw score (no two edges trade places)."""
+    rng = np.random.default_rng(5)
+
+    def law(raw: np.ndarray) -> np.ndarray:
+        return 0.55 + 0.42 * np.minimum(1.0, 2.0 * raw)
+
+    def draw(n: int) -> tuple[list[dict], np.ndarray]:
+        q = _quantities(n, rng)
+        ok = (rng.uniform(0, 1, n) < law(np.array([x["raw"] for x in q]))).astype(float)
+        for x, k in zip(q, ok):
+            x["type"], x["ok"] = "intersection", int(k)
+        return q, ok
+
+    q, _ = draw(8000)
+    plain = fit_calibration(q, ("logit_raw",), l2=0.01)
+    post = fit_calibration(q, ("logit_raw",), l2=0.01, post_min_block=200.0)
+    q2, ok2 = draw(8000)
+    raw = np.array([x["raw"] for x in q2])
+    cal = post.apply("intersection", None, q2)
+    assert expected_calibration_error(plain.apply("intersection", None, q2), ok2) > 0.025
+    assert expected_calibration_error(cal, ok2) < 0.015
+    assert np.mean(cal[raw > 0.6]) == pytest.approx(0.97, abs=0.02)
+    grid = [dict(q2[0], raw=float(r)) for r in np.linspace(0.001, 0.999, 199)]
+    assert np.all(np.diff(post.apply("intersection", None, grid)) > 0)
+    # beyond the end knots: still strictly increasing, within [0, 1], equal to the end knots at them
+    xk, yk = np.array([0.2, 0.5, 0.8]), np.array([0.3, 0.6, 0.95])
+    p = np.linspace(0.0, 1.0, 1001)
+    y = post_map(p, xk, yk)
+    assert np.all(np.diff(y[1:-1]) > 0) and y.min() >= 0.0 and y.max() <= 1.0
+    assert post_map(xk, xk, yk) == pytest.approx(yk)
+    # the knots rest on at least min_block of weight each
+    xk, yk = post_isotonic(np.linspace(0.1, 0.9, 1000), (rng.uniform(0, 1, 1000) < 0.8).astype(float), None, 200.0)
+    assert len(xk) <= 1000 // 200 and np.all(np.diff(xk) > 0)
+    # a block of edges all right is not certainty: the edges beyond it keep their order
+    xk, yk = post_isotonic(np.linspace(0.1, 0.9, 1000), (np.linspace(0.1, 0.9, 1000) > 0.5).astype(float), None, 200.0)
+    assert 0.0 < yk[0] and yk[-1] == pytest.approx(1.0 - 0.5 / 200, abs=0.002) and np.all(np.diff(yk) > 0)
+    assert np.all(np.diff(post_map(np.linspace(0.0, 1.0, 101), xk, yk)[1:-1]) > 0)
+
+
 def test_the_raw_scores_weight_is_never_negative() -> None:
     """Edges whose chance of being right falls as the raw score rises, the segmentation score fixed (as a refit on
     correlated factors can make it): the unconstrained fit gives the raw score a negative weight; the shipped fit
@@ -188,6 +234,15 @@ def test_map_round_trips_and_rejects_unknown_features(tmp_path) -> None:
     d = cmap.to_dict()
     d["types"]["intersection"]["features"][0] = "colour"
     with pytest.raises(ValueError, match="m.json: unknown feature"):
+        CalibrationMap.from_dict(d, "m.json")
+    # with the isotonic post-map
+    pmap = fit_calibration(q, tuple(FEATURE_FUNCTIONS), post_min_block=50.0)
+    d = json.loads(json.dumps(pmap.to_dict()))
+    assert "post" in d["types"]["intersection"]
+    back = CalibrationMap.from_dict(d, "m.json")
+    assert np.allclose(back.apply("intersection", None, q), pmap.apply("intersection", None, q), atol=1e-5)
+    d["types"]["intersection"]["post"]["y"] = d["types"]["intersection"]["post"]["y"][::-1]
+    with pytest.raises(ValueError, match="m.json: the post-map"):
         CalibrationMap.from_dict(d, "m.json")
 
 
