@@ -20,7 +20,9 @@ leave-out families (`v2c bench --suite unseen`).
 
 Each edge is labelled right/wrong by `v2c.bench.vbrep.edge_correctness` (the bench's own label) and recorded with
 the quantities the extraction hands the calibration (`v2c.vbrep.calibration.EDGE_RECORD`); records are cached per
-scan and segmentation in ``--records`` (JSON), so a re-fit is instant (delete it after changing the extraction).
+scan and segmentation in ``--records`` (JSON), so a re-fit is instant. The file carries the fingerprint of the code
+and weights that labelled it (`code_fingerprint`: every ``v2c/**/*.py`` and the shipped weights); records of other
+code are set aside and every scan labelled again, unless ``--reuse-stale-records`` says to keep them.
 The fit (`v2c.vbrep.calibration.fit_calibration`) weighs the three training sources equally (each source's edges of
 a type sum to the same weight) so that the 80 in-family scans do not outvote the new parts. Deterministic: same
 scans, same map.
@@ -29,6 +31,7 @@ scans, same map.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import itertools
 import json
 import sys
@@ -96,8 +99,9 @@ def label_scan(args: tuple[str, str]) -> list[dict]:
     return [dict(qi, ok=int(k)) for qi, k in zip(q, ok)]
 
 
-def collect(dirs: Sequence[Path], records: dict, jobs: int, records_path: Path) -> None:
-    """Label every (scan, segmentation) not yet in ``records``, saving the records every 10 scans."""
+def collect(dirs: Sequence[Path], records: dict, jobs: int, records_path: Path, fingerprint: str | None = None) -> None:
+    """Label every (scan, segmentation) not yet in ``records``, saving the records (with ``fingerprint``) every 10
+    scans."""
     todo = [(str(d), s) for d in dirs for s in SEGMENTATIONS if f"{d}|{s}" not in records]
     if not todo:
         return
@@ -108,12 +112,53 @@ def collect(dirs: Sequence[Path], records: dict, jobs: int, records_path: Path) 
         for i, (key, rows) in enumerate(zip(todo, pool.map(label_scan, todo))):
             records[f"{key[0]}|{key[1]}"] = rows
             if i % 10 == 9 or i == len(todo) - 1:
-                save_records(records, records_path)
+                save_records(records, records_path, fingerprint)
                 print(f"  {i + 1}/{len(todo)}", file=sys.stderr)
 
 
-def save_records(records: dict, path: Path) -> None:
-    """Write the records (a temporary file renamed into place: a killed run keeps the last complete file)."""
+#: The key of the records file that holds the fingerprint of the code that labelled them.
+FINGERPRINT_KEY = "__code_fingerprint__"
+
+
+def code_fingerprint(root: Path | None = None) -> str:
+    """SHA-1 over the relative path and bytes of every ``.py`` file of the ``v2c`` package under ``root`` (default:
+    the package imported) and of its shipped weights: what decides the reconstructions, their edges and labels.
+    Any change to them changes it, so records labelled by other code are never mixed with new ones."""
+    import v2c
+
+    pkg = Path(v2c.__file__).parent if root is None else Path(root)
+    h = hashlib.sha1()
+    files = sorted(pkg.rglob("*.py")) + sorted((pkg / "segment" / "weights").glob("*.pt"))
+    for f in files:
+        if "__pycache__" in f.parts:
+            continue
+        h.update(f.relative_to(pkg).as_posix().encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def load_records(path: Path, fingerprint: str, reuse_stale: bool = False) -> dict:
+    """The records at ``path`` when they were labelled by the code of ``fingerprint`` (or ``reuse_stale``), else
+    an empty dict (a message says why); empty without a file."""
+    if not path.is_file():
+        return {}
+    records = json.loads(path.read_text())
+    theirs = records.get(FINGERPRINT_KEY)
+    if theirs != fingerprint and not reuse_stale:
+        print(
+            f"{path}: records labelled by other code (fingerprint {theirs or 'none'}, this code {fingerprint}): "
+            "labelling every scan again (--reuse-stale-records keeps them)",
+            file=sys.stderr,
+        )
+        return {}
+    return records
+
+
+def save_records(records: dict, path: Path, fingerprint: str | None = None) -> None:
+    """Write the records with ``fingerprint`` (a temporary file renamed into place: a killed run keeps the last
+    complete file)."""
+    if fingerprint is not None:
+        records[FINGERPRINT_KEY] = fingerprint
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(records))
@@ -211,6 +256,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--candidates", action="store_true", help="print the validation ECE of each candidate feature set")
     ap.add_argument("--label-only", action="store_true", help="label the scans, fit nothing")
     ap.add_argument("--records", type=Path, default=Path.home() / ".cache" / "v2c" / "calibration_records_v2.json")
+    ap.add_argument(
+        "--reuse-stale-records",
+        action="store_true",
+        help="keep records labelled by other code (their fingerprint differs from this code's)",
+    )
     ap.add_argument("--out", type=Path, default=DEFAULT_MAP)
     a = ap.parse_args(argv)
     if 0 in (a.train_seed, a.val_seed, a.feat_seed):
@@ -218,7 +268,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     from v2c.bench.run import BenchConfig, prepare_scans
 
-    records = json.loads(a.records.read_text()) if a.records.is_file() else {}
+    fingerprint = code_fingerprint()
+    records = load_records(a.records, fingerprint, a.reuse_stale_records)
     sources = {
         "in-family": prepare_scans(BenchConfig(n=a.train_n, seed=a.train_seed, jobs=a.jobs), progress=False),
         "features": feature_scans(a.feat_seed, a.feat_n, a.jobs),
@@ -237,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
         val["in-family-val"],
     )
     order = [d for group in itertools.zip_longest(*lists) for d in group if d is not None]
-    collect(order, records, a.jobs, a.records)
+    collect(order, records, a.jobs, a.records, fingerprint)
     if a.label_only:
         return 0
     from v2c.vbrep.calibration import DEFAULT_FEATURES, fit_calibration
