@@ -130,8 +130,6 @@ def code_fingerprint(root: Path | None = None) -> str:
     h = hashlib.sha1()
     files = sorted(pkg.rglob("*.py")) + sorted((pkg / "segment" / "weights").glob("*.pt"))
     for f in files:
-        if "__pycache__" in f.parts:
-            continue
         h.update(f.relative_to(pkg).as_posix().encode())
         h.update(f.read_bytes())
     return h.hexdigest()
