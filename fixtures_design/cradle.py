@@ -148,26 +148,26 @@ def design_cradle(
     contact lines).
     """
     if ref.kind is not ReferenceKind.BOSS:
-        raise ValueError(f"edge e{ref.edge_id} is the rim of a {ref.kind.value}: a cradle needs a boss/cylinder")
-    x, y, z = _cradle_axes(ref, fmap, up)
+        raise ValueError(f"{ref.label} is the rim of a {ref.kind.value}: a cradle needs a boss/cylinder")
     up = unit(up)
-    tilt = float(np.degrees(np.arcsin(min(1.0, abs(z @ up)))))
-    if tilt > params.max_tilt_deg:
+    tilt = float(np.degrees(np.arcsin(min(1.0, abs(unit(fmap.vectors(ref.axis)) @ up)))))
+    if tilt > params.max_tilt_deg:  # (before the axes: a vertical cylinder has no sideways direction)
         raise ValueError(
-            f"cylinder of e{ref.edge_id} is {tilt:.0f} deg off the horizontal (cradles take up to "
+            f"cylinder of {ref.label} is {tilt:.0f} deg off the horizontal (cradles take up to "
             f"{params.max_tilt_deg:.0f} deg)"
         )
+    x, y, z = _cradle_axes(ref, fmap, up)
     if vbrep is not None:
         rest = resting_plane(vbrep, ref, fmap, up, params)
         if rest is not None:
             raise ValueError(
-                f"the cylinder of e{ref.edge_id} stands in the body of face {rest} (an up-facing plane beside it "
+                f"the cylinder of {ref.label} stands in the body of face {rest} (an up-facing plane beside it "
                 "over the cradle's footprint, above the cradle's bottom): nothing under it for a cradle"
             )
     seen = fmap.length(ref.extent)
     length = min(params.length, seen - 2 * params.end_margin)
     if length <= 0:
-        raise ValueError(f"the view shows only {seen:.1f} mm of the cylinder of e{ref.edge_id}")
+        raise ValueError(f"the view shows only {seen:.1f} mm of the cylinder of {ref.label}")
     radius = fmap.length(ref.radius) + params.clearance
     z0, z1 = params.end_margin, params.end_margin + length
     plane = local_plane(fmap.points(ref.center), x, z)

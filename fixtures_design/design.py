@@ -138,7 +138,7 @@ def evidence_refusal(fx: Fixture, points: np.ndarray, evidence: EvidenceConfig) 
     n_in, deepest = observed_inside(fx, points, evidence)
     if n_in > evidence.max_points:
         return (
-            f"e{ref.edge_id}: the {fx.kind.value} would hold {n_in} of the scan's points of the part, up to "
+            f"{ref.label}: the {fx.kind.value} would hold {n_in} of the scan's points of the part, up to "
             f"{deepest:.1f} mm deep (more than {evidence.max_points} beyond {evidence.n_sigma:g} sigma of "
             "depth noise): the reconstruction there is not what the depth shows"
         )
@@ -149,14 +149,14 @@ def evidence_refusal(fx: Fixture, points: np.ndarray, evidence: EvidenceConfig) 
     tol = evidence.opening_tol_mm + evidence.opening_tol_rel * fmap.length(ref.radius)
     if opening is not None and pin_r > fmap.length(opening) + tol:
         return (
-            f"e{ref.edge_id}: the pin (radius {pin_r:.2f} mm) is wider than the opening the hole's plane shows "
+            f"{ref.label}: the pin (radius {pin_r:.2f} mm) is wider than the opening the hole's plane shows "
             f"(radius {fmap.length(opening):.2f} mm) by more than {tol:.2f} mm: the hole is fitted too wide"
         )
     depth = (fx.notes["depth_mm"] + fx.params.clearance) / fmap.scale
     n_in, n_wall = wall_inside(ref.center, ref.axis, ref.radius, pin_r / fmap.scale, depth, points, evidence)
     if n_in >= evidence.min_wall_points and n_in > evidence.max_wall_share * n_wall:
         return (
-            f"e{ref.edge_id}: {n_in} of the hole's {n_wall} wall points lie inside the pin (radius {pin_r:.2f} mm) "
+            f"{ref.label}: {n_in} of the hole's {n_wall} wall points lie inside the pin (radius {pin_r:.2f} mm) "
             f"beyond {evidence.n_sigma:g} sigma of their noise (more than {100 * evidence.max_wall_share:g} %): the "
             "hole is narrower than its fit somewhere"
         )
@@ -219,7 +219,7 @@ def design_fixture(
     for ref in refs:  # best first; the geometry checks of the generator may still refuse one
         sigma = mating_sigma_mm(vbrep, ref)
         if reference is None and max_sigma_mm is not None and sigma is not None and sigma > max_sigma_mm:
-            errors.append(f"e{ref.edge_id}: its faces' 1-sigma {sigma:.2f} mm is over max_sigma_mm {max_sigma_mm:g}")
+            errors.append(f"{ref.label}: its faces' 1-sigma {sigma:.2f} mm is over max_sigma_mm {max_sigma_mm:g}")
             continue
         if not auto:
             p = params
@@ -250,7 +250,7 @@ def design_fixture(
             inside = part_inside_share(fx, vbrep)
             if inside > max_part_inside_share:
                 errors.append(
-                    f"e{ref.edge_id}: the {kind.value} would hold {100 * inside:.1f} % of the reconstructed part's "
+                    f"{ref.label}: the {kind.value} would hold {100 * inside:.1f} % of the reconstructed part's "
                     f"surface (max_part_inside_share {max_part_inside_share:g})"
                 )
                 continue

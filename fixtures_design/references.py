@@ -15,6 +15,11 @@ never references them. Among intersection edges with ``confidence >= min_confide
   a shaft's filleted or chamfered end, or a step to a coaxial section. A cradle needs the cylinder's axis, radius
   and the end its seen length starts from, which such a circle gives as well as a plane's; a turned part seldom
   shows a flat end face to the camera.
+- **boss** last: a convex cylinder face on its own (``site`` "face", no edge: ``edge_id`` -1), for a shaft whose
+  ends the view does not show (its coaxial sections meet at visibility edges, the steps between them hidden). A
+  cradle mates with the cylinder's surface, not with an edge: the face gives its axis and radius, and its seen
+  length along the axis where the block may lie. Its confidence is the face's (`VFace.confidence`), and such
+  references are tried after every edge reference, so a cylinder that has a rim or a shoulder is cradled from it.
 
 Everything here is in the VB-Rep's camera frame (OpenCV: x right, y down, z forward), metres. Plane normals are
 oriented outwards, i.e. towards the camera: a face the camera sees has its outward normal facing the viewer.
@@ -66,6 +71,8 @@ class SelectionConfig:
     # 1.2-1.3 x radius 25 of 26 rings lay on it in >= 94 % of the directions
     shoulder_axis_tol_rel: float = 0.15  # fraction of the cylinder's radius: how far a torus', cone's or second
     # cylinder's axis may pass from the cylinder's axis (at the circle) for their circle to be a shoulder
+    cylinder_faces: bool = True  # convex cylinder faces on their own are boss references too, after every edge
+    # reference (``site`` "face"; a shaft whose ends the view does not show)
     reach_bin_frac: float = 0.02  # fraction of VBRep.scale: bin length along a dihedral edge over which each face's
     # reach from the edge is measured (`DihedralReference.reach`)
 
@@ -105,6 +112,11 @@ class DihedralReference:
         """Edge length (metres)."""
         return float(np.linalg.norm(self.end - self.start))
 
+    @property
+    def label(self) -> str:
+        """How messages name the reference: its edge (``e12``)."""
+        return f"e{self.edge_id}"
+
 
 @dataclass(frozen=True)
 class CircleReference:
@@ -133,6 +145,11 @@ class CircleReference:
     extent: float
     site: str = "rim"
     land: float = 0.0
+
+    @property
+    def label(self) -> str:
+        """How messages name the reference: its edge (``e12``), or its cylinder face (``face f3``) for a face's."""
+        return f"e{self.edge_id}" if self.edge_id >= 0 else f"face f{self.cylinder_face}"
 
 
 Reference = DihedralReference | CircleReference
@@ -479,6 +496,50 @@ def _shoulder_of(e: VEdge, cyl: VFace, other: VFace, cfg: SelectionConfig) -> Ci
     )
 
 
+def _cylinder_face(f: VFace, cfg: SelectionConfig) -> CircleReference | str:
+    """A boss reference on a convex cylinder face itself (module docstring, ``site`` "face"), or why it is none:
+    ``center`` is on the axis at the face's seen end nearer the axis origin's side, ``axis`` points along the seen
+    length, ``extent`` is that length (metres)."""
+    cp = f.primitive["params"]
+    axis, o, radius = _unit(cp["axis"]), np.asarray(cp["origin"], float), float(cp["radius"])
+    pc = face_samples(f)
+    if not len(pc) or not len(f.mesh_triangles):
+        return "the cylinder face has no mesh"
+    if not seen_from_outside(pc, radial_directions(pc, o, axis)):
+        return "the cylinder is concave (a hole's wall): a cradle needs a boss"
+    h = (pc - o) @ axis
+    center = o + axis * float(h.min())
+    span = 360.0 * len(_arc_bins(pc, center, axis, ARC_SECTORS)) / ARC_SECTORS
+    if span < cfg.min_arc_deg:
+        return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a boss"
+    extent = float(h.max() - h.min())
+    return CircleReference(
+        -1, float(f.confidence), ReferenceKind.BOSS, f.id, -1, center, axis, radius, -axis, extent, "face", radius
+    )
+
+
+def _face_references(
+    vb: VBRep, taken: set[int], min_confidence: float, cfg: SelectionConfig, audit: _Audit
+) -> list[CircleReference]:
+    """Boss references on convex cylinder faces (`_cylinder_face`) that no edge reference already uses (``taken``:
+    their cylinder face ids), best first (confidence, then radius); each verdict is added to ``audit``."""
+    out = []
+    for f in vb.faces:
+        if _ptype(f) != "cylinder" or f.id in taken:
+            continue
+        if f.confidence < min_confidence:
+            audit.lines.append(f"  face f{f.id}: cylinder conf {f.confidence:.2f}: under {min_confidence:.2f}")
+            continue
+        r = _cylinder_face(f, cfg)
+        if isinstance(r, str):
+            audit.lines.append(f"  face f{f.id}: cylinder conf {f.confidence:.2f}: {r}")
+        else:
+            audit.lines.append(f"  face f{f.id}: cylinder conf {f.confidence:.2f}: qualifies as a boss (its face)")
+            out.append(r)
+    out.sort(key=lambda r: (-r.confidence, -r.radius))
+    return out
+
+
 def _select(
     vb: VBRep, wanted: set[ReferenceKind], min_confidence: float, cfg: SelectionConfig
 ) -> tuple[list[Reference], _Audit]:
@@ -512,6 +573,9 @@ def _select(
             audit.add(e, f"qualifies as a {r.kind.value}")
             refs.append(r)
     refs.sort(key=lambda r: (-r.confidence, -(r.length if isinstance(r, DihedralReference) else r.radius)))
+    if ReferenceKind.BOSS in wanted and cfg.cylinder_faces:  # after every edge reference
+        taken = {r.cylinder_face for r in refs if isinstance(r, CircleReference) and r.kind is ReferenceKind.BOSS}
+        refs += _face_references(vb, taken, min_confidence, cfg, audit)
     return refs, audit
 
 
@@ -531,7 +595,8 @@ def select_references(
     if not refs:
         need = " or ".join(sorted(k.value for k in wanted))
         raise NoReferenceError(
-            f"no intersection edge with confidence >= {min_confidence:.2f} qualifies as a {need} reference; "
+            f"no intersection edge{' or cylinder face' if ReferenceKind.BOSS in wanted else ''} with confidence >= "
+            f"{min_confidence:.2f} qualifies as a {need} reference; "
             f"the VB-Rep has {len(vbrep.edges)} edges:\n" + "\n".join(audit.lines)
         )
     return refs

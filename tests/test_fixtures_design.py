@@ -292,3 +292,38 @@ def test_a_filleted_holes_rim_is_no_shoulder():
     with pytest.raises(NoReferenceError, match="the cylinder is concave"):
         select_references(vb, ["boss"])
     assert "concave (a hole's wall)" in explain_edges(vb)
+
+
+def test_a_cradle_takes_a_bare_cylinder_face_when_no_edge_qualifies():
+    """A shaft whose ends the view does not show gives the reconstruction no intersection edge (its coaxial
+    sections meet at visibility edges: the fixture bench's validation scans 3 and 20 of seed 7200). Emulated on a
+    lying rod's ground-truth VB-Rep with every edge typed visibility: its cylinder face alone is a boss reference
+    of site "face" (the rod's radius, the axis along it, its seen length), and the cradle designed from it does not
+    cut the rod and, pushed home, holds it within the clearance. With its end circles as intersection edges the
+    rod's references start with them, and the face comes after every edge reference."""
+    from dataclasses import replace
+
+    from fixtures_design.references import select_references
+    from fixtures_design.seat import seat_part
+    from v2c.vbrep.model import EdgeType
+
+    from scenes.truth import lying_rod, posed_part, vbrep_from_shape
+
+    rod, axes = posed_part(lying_rod(80.0, 30.0), elevation_deg=30.0, azimuth_deg=-60.0)
+    vb = _seen_meshes(vbrep_from_shape(rod, axes))
+    with_edges = select_references(vb, ["boss"])
+    assert with_edges[0].site != "face"
+    assert [r.site for r in with_edges].count("face") == 0  # the rod's face is taken by its circles' references
+
+    bare = replace(vb, edges=[replace(e, type=EdgeType.VISIBILITY) for e in vb.edges])
+    (ref,) = select_references(bare, ["boss"])
+    assert ref.site == "face" and ref.edge_id == -1 and ref.label == f"face f{ref.cylinder_face}"
+    assert ref.radius == pytest.approx(0.015, abs=1e-6)
+    assert abs(ref.axis @ axes[0]) == pytest.approx(1.0, abs=1e-6)
+    assert 0.079 < ref.extent < 0.0801  # the seen face runs the rod's whole length
+    fx = design_fixture(bare, "cradle", frame="part")
+    assert fx.reference.site == "face"
+    truth = transformed(rod, camera_mm_matrix(fx.fmap))
+    assert interference(fx, truth)[1] < 1e-3
+    seat = seat_part(fx, truth)
+    assert seat.ok and seat.move_mm < fx.params.clearance + 0.05

@@ -114,7 +114,11 @@ def command(
         raise click.ClickException(str(exc) if str(scan) in str(exc) else f"{scan}: {exc}") from None
     fx = res.fixture
     ref = fx.reference
-    if hasattr(ref, "edge_id"):
+    if getattr(ref, "edge_id", 0) < 0:  # a cradle on a cylinder face alone (no edge)
+        sig = next((f.sigma_mm for f in res.vbrep.faces if f.id == ref.cylinder_face), None)
+        extra = "" if sig is None else f", position 1-sigma {sig:.2f} mm"
+        what = f"cylinder face f{ref.cylinder_face} (boss, face confidence {ref.confidence:.2f}{extra})"
+    elif hasattr(ref, "edge_id"):
         # the chosen edge's figures: calibrated probability that it is a true edge, raw score, 1-sigma position
         e = next((e for e in res.vbrep.edges if e.id == ref.edge_id), None)
         extra = ""
