@@ -18,8 +18,9 @@ never references them. Among intersection edges with ``confidence >= min_confide
 - **boss** last: a convex cylinder face on its own (``site`` "face", no edge: ``edge_id`` -1), for a shaft whose
   ends the view does not show (its coaxial sections meet at visibility edges, the steps between them hidden). A
   cradle mates with the cylinder's surface, not with an edge: the face gives its axis and radius, and its seen
-  length along the axis where the block may lie. Its confidence is the face's (`VFace.confidence`), and such
-  references are tried after every edge reference, so a cylinder that has a rim or a shoulder is cradled from it.
+  length along the axis where the block may lie. Its confidence is the face's raw score (`VFace.confidence`; only
+  edges carry a calibrated probability), and such references are tried after every edge reference, so a cylinder
+  that has a rim or a shoulder is cradled from it.
 
 Everything here is in the VB-Rep's camera frame (OpenCV: x right, y down, z forward), metres. Plane normals are
 oriented outwards, i.e. towards the camera: a face the camera sees has its outward normal facing the viewer.
