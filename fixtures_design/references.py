@@ -604,5 +604,6 @@ def select_references(
 
 
 def explain_edges(vbrep: VBRep, min_confidence: float = 0.5, config: SelectionConfig = SelectionConfig()) -> str:
-    """One line per edge saying whether (and as what) it qualifies as a mating reference."""
+    """One line per edge saying whether (and as what) it qualifies as a mating reference, then one per cylinder face
+    that no edge reference uses (as a cradle's reference on its own, `_cylinder_face`)."""
     return "\n".join(_select(vbrep, set(ReferenceKind), min_confidence, config)[1].lines)
