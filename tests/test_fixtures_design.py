@@ -245,6 +245,19 @@ def _filleted_rod(radius_mm: float = 15.0, length_mm: float = 80.0, fillet_mm: f
     return chamfer_edges(ends, fillet_mm) if chamfer else fillet(ends, fillet_mm)
 
 
+def _assert_cradle_holds(vb, rod, site: str) -> None:
+    """The default cradle of ``vb`` rests on a reference of ``site``, does not cut the true ``rod`` (camera frame,
+    mm) and, pushed home, holds it within its clearance."""
+    from fixtures_design.seat import seat_part
+
+    fx = design_fixture(vb, "cradle", frame="part")
+    assert fx.reference.site == site
+    truth = transformed(rod, camera_mm_matrix(fx.fmap))
+    assert interference(fx, truth)[1] < 1e-3
+    seat = seat_part(fx, truth)
+    assert seat.ok and seat.move_mm < fx.params.clearance + 0.05
+
+
 @pytest.mark.parametrize("chamfer", [False, True])
 def test_a_cradle_takes_a_shafts_filleted_or_chamfered_end_as_its_boss(chamfer):
     """A lying rod whose ends are filleted (chamfered) shows no cylinder/plane circle: its cylinder meets a torus
@@ -252,7 +265,6 @@ def test_a_cradle_takes_a_shafts_filleted_or_chamfered_end_as_its_boss(chamfer):
     its body, its seen length), and the cradle designed from it (ground-truth VB-Rep, default clearance) does not
     cut the rod and, pushed home, holds it with its groove within the clearance."""
     from fixtures_design.references import select_references
-    from fixtures_design.seat import seat_part
 
     from scenes.truth import posed_part, vbrep_from_shape
 
@@ -266,12 +278,7 @@ def test_a_cradle_takes_a_shafts_filleted_or_chamfered_end_as_its_boss(chamfer):
         assert r.radius == pytest.approx(0.015, abs=1e-6)
         assert abs(r.axis @ axes[0]) == pytest.approx(1.0, abs=1e-6)  # along the rod
         assert 0.07 < r.extent < 0.08  # from one end circle to the other: 80 mm less the two blends
-    fx = design_fixture(vb, "cradle", frame="part")
-    assert fx.reference.site == "shoulder"
-    truth = transformed(rod, camera_mm_matrix(fx.fmap))
-    assert interference(fx, truth)[1] < 1e-3
-    seat = seat_part(fx, truth)
-    assert seat.ok and seat.move_mm < fx.params.clearance + 0.05
+    _assert_cradle_holds(vb, rod, "shoulder")
 
 
 def test_a_filleted_holes_rim_is_no_shoulder():
@@ -304,7 +311,6 @@ def test_a_cradle_takes_a_bare_cylinder_face_when_no_edge_qualifies():
     from dataclasses import replace
 
     from fixtures_design.references import select_references
-    from fixtures_design.seat import seat_part
     from v2c.vbrep.model import EdgeType
 
     from scenes.truth import lying_rod, posed_part, vbrep_from_shape
@@ -321,9 +327,4 @@ def test_a_cradle_takes_a_bare_cylinder_face_when_no_edge_qualifies():
     assert ref.radius == pytest.approx(0.015, abs=1e-6)
     assert abs(ref.axis @ axes[0]) == pytest.approx(1.0, abs=1e-6)
     assert 0.079 < ref.extent < 0.0801  # the seen face runs the rod's whole length
-    fx = design_fixture(bare, "cradle", frame="part")
-    assert fx.reference.site == "face"
-    truth = transformed(rod, camera_mm_matrix(fx.fmap))
-    assert interference(fx, truth)[1] < 1e-3
-    seat = seat_part(fx, truth)
-    assert seat.ok and seat.move_mm < fx.params.clearance + 0.05
+    _assert_cradle_holds(bare, rod, "face")
