@@ -499,8 +499,8 @@ def _shoulder_of(e: VEdge, cyl: VFace, other: VFace, cfg: SelectionConfig) -> Ci
 
 def _cylinder_face(f: VFace, cfg: SelectionConfig) -> CircleReference | str:
     """A boss reference on a convex cylinder face itself (module docstring, ``site`` "face"), or why it is none:
-    ``center`` is on the axis at the face's seen end nearer the axis origin's side, ``axis`` points along the seen
-    length, ``extent`` is that length (metres)."""
+    ``axis`` is the fitted axis' direction, ``center`` the point on it where the seen face starts along that
+    direction (the smallest projection of its mesh samples), ``extent`` the seen length from there (metres)."""
     cp = f.primitive["params"]
     axis, o, radius = _unit(cp["axis"]), np.asarray(cp["origin"], float), float(cp["radius"])
     pc = face_samples(f)
