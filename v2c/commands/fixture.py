@@ -80,8 +80,9 @@ def command(
     """Design a fixture for SCAN (a scan folder, a VB-Rep JSON, or a STEP written by `v2c to-step`) and write
     <kind> STEP, STL and assembly STEP. A STEP input keeps its own frame.
 
-    Only intersection edges at or above --min-confidence are used as references; when none qualifies the
-    command says what was needed and lists the edges, and writes nothing.
+    Only intersection edges at or above --min-confidence are used as references (a cradle may also rest on a
+    convex cylinder face at or above it, after every edge); when none qualifies the command says what was
+    needed and lists the edges (and cylinder faces), and writes nothing.
     """
     import dataclasses
 
