@@ -169,6 +169,9 @@ class _Audit:
             f"{tuple(int(f) for f in e.faces)}: {verdict}"
         )
 
+    def add_face(self, f: VFace, verdict: str) -> None:
+        self.lines.append(f"  face f{f.id}: {_ptype(f)} conf {f.confidence:.2f}: {verdict}")
+
 
 def _unit(v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, float)
@@ -435,6 +438,27 @@ def _circle(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     return CircleReference(e.id, float(e.confidence), kind, cyl.id, pln.id, center, into, radius, n, extent, site, land)
 
 
+def _convex_samples(cyl: VFace, origin: np.ndarray, axis: np.ndarray, need: str) -> np.ndarray | str:
+    """(N, 3) samples over the mesh of cylinder face ``cyl`` (axis through ``origin`` along unit ``axis``) when it is
+    a boss's wall (convex: `seen_from_outside`; a hole's wall shows its far side), else why not (``need``: what
+    needs the boss, for the message)."""
+    pc = face_samples(cyl)
+    if not len(pc) or not len(cyl.mesh_triangles):
+        return "the cylinder face has no mesh"
+    if not seen_from_outside(pc, radial_directions(pc, origin, axis)):
+        return f"the cylinder is concave (a hole's wall): {need} needs a boss"
+    return pc
+
+
+def _short_arc(pc: np.ndarray, center: np.ndarray, axis: np.ndarray, cfg: SelectionConfig) -> str | None:
+    """Why a boss's cylinder face (samples ``pc``, axis through ``center``) is none: it spans less than
+    ``cfg.min_arc_deg`` around its axis (a fillet or part-round); None when it spans enough."""
+    span = 360.0 * len(_arc_bins(pc, center, axis, ARC_SECTORS)) / ARC_SECTORS
+    if span < cfg.min_arc_deg:
+        return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a boss"
+    return None
+
+
 def _shoulder(vb: VBRep, e: VEdge, cfg: SelectionConfig) -> CircleReference | str:
     """A boss reference where a convex cylinder meets a coaxial torus, cone or cylinder (module docstring), or why
     the edge is none. With two cylinders, each is tried and the one seen longer from the circle is taken."""
@@ -470,14 +494,12 @@ def _shoulder_of(e: VEdge, cyl: VFace, other: VFace, cfg: SelectionConfig) -> Ci
     off = float(np.linalg.norm(rel - (rel @ oa) * oa))  # the other axis' distance from the cylinder's at the circle
     if off > cfg.shoulder_axis_tol_rel * radius:
         return f"the {_ptype(other)}'s axis passes {1000 * off:.1f} mm from the cylinder's: not a shoulder circle"
-    pc = face_samples(cyl)
-    if not len(pc) or not len(cyl.mesh_triangles):
-        return "the cylinder face has no mesh"
-    if not seen_from_outside(pc, radial_directions(pc, o, axis)):  # a hole's wall shows its far side
-        return "the cylinder is concave (a hole's wall): a shoulder needs a boss"
-    span = 360.0 * len(_arc_bins(pc, center, axis, ARC_SECTORS)) / ARC_SECTORS
-    if span < cfg.min_arc_deg:
-        return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a boss"
+    pc = _convex_samples(cyl, o, axis, "a shoulder")
+    if isinstance(pc, str):
+        return pc
+    short = _short_arc(pc, center, axis, cfg)
+    if short is not None:
+        return short
     h = (pc - center) @ axis
     into = axis if float(np.median(h)) > 0 else -axis
     extent = float(np.abs(h).max())
@@ -503,16 +525,14 @@ def _cylinder_face(f: VFace, cfg: SelectionConfig) -> CircleReference | str:
     direction (the smallest projection of its mesh samples), ``extent`` the seen length from there (metres)."""
     cp = f.primitive["params"]
     axis, o, radius = _unit(cp["axis"]), np.asarray(cp["origin"], float), float(cp["radius"])
-    pc = face_samples(f)
-    if not len(pc) or not len(f.mesh_triangles):
-        return "the cylinder face has no mesh"
-    if not seen_from_outside(pc, radial_directions(pc, o, axis)):
-        return "the cylinder is concave (a hole's wall): a cradle needs a boss"
+    pc = _convex_samples(f, o, axis, "a cradle")
+    if isinstance(pc, str):
+        return pc
     h = (pc - o) @ axis
     center = o + axis * float(h.min())
-    span = 360.0 * len(_arc_bins(pc, center, axis, ARC_SECTORS)) / ARC_SECTORS
-    if span < cfg.min_arc_deg:
-        return f"cylinder face spans {span:.0f} deg around its axis: a fillet or part-round, not a boss"
+    short = _short_arc(pc, center, axis, cfg)
+    if short is not None:
+        return short
     extent = float(h.max() - h.min())
     return CircleReference(
         -1, float(f.confidence), ReferenceKind.BOSS, f.id, -1, center, axis, radius, -axis, extent, "face", radius
@@ -529,13 +549,11 @@ def _face_references(
         if _ptype(f) != "cylinder" or f.id in taken:
             continue
         if f.confidence < min_confidence:
-            audit.lines.append(f"  face f{f.id}: cylinder conf {f.confidence:.2f}: under {min_confidence:.2f}")
+            audit.add_face(f, f"under {min_confidence:.2f}")
             continue
         r = _cylinder_face(f, cfg)
-        if isinstance(r, str):
-            audit.lines.append(f"  face f{f.id}: cylinder conf {f.confidence:.2f}: {r}")
-        else:
-            audit.lines.append(f"  face f{f.id}: cylinder conf {f.confidence:.2f}: qualifies as a boss (its face)")
+        audit.add_face(f, r if isinstance(r, str) else "qualifies as a boss (its face)")
+        if not isinstance(r, str):
             out.append(r)
     out.sort(key=lambda r: (-r.confidence, -r.radius))
     return out

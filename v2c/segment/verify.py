@@ -63,7 +63,7 @@ from v2c.geometry.ransac import ransac_fit, refine_primitive
 from v2c.geometry.selection import supported
 from v2c.groups import UnionFind
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
-from v2c.primitives import Cylinder
+from v2c.primitives import Cylinder, Primitive
 from v2c.segment.refine import _is_plane, _relabel, scan_geometry
 from v2c.segment.types import Segmentation
 
@@ -505,6 +505,36 @@ def _join_nearest(inst: np.ndarray, seeds: np.ndarray, rest: np.ndarray) -> None
     inst[rest] = lut[near[rest]]
 
 
+#: The types `split_unexplained` tries, in this order after an instance's own label's.
+_TYPES = ("plane", "cylinder", "cone", "sphere", "torus")
+
+
+def _explaining_fit(
+    types: list[str] | tuple[str, ...],
+    x: np.ndarray,
+    normals: np.ndarray,
+    tol: np.ndarray,
+    size: float,
+    tight: RansacConfig,
+    rng: np.random.Generator,
+    share: float,
+) -> tuple[str | None, np.ndarray, Primitive | None]:
+    """(type, inliers, primitive) of the fit that holds most of the points ``x`` within their tolerance ``tol``: a
+    RANSAC (band ``tight``) of each of ``types`` in turn, stopping at the first that holds ``share`` of them;
+    (None, no inliers, None) when no type fits."""
+    best_type, best_in, best_prim = None, np.zeros(len(x), bool), None
+    for t in types:
+        got = ransac_fit(t, x, normals, size, tight, rng)
+        if got is None:
+            continue
+        inl = np.abs(got.primitive.signed_distance(x)) < tol
+        if inl.sum() > best_in.sum():
+            best_type, best_in, best_prim = t, inl, got.primitive
+        if best_in.mean() >= share:
+            break
+    return best_type, best_in, best_prim
+
+
 def _outlier_pieces(
     shape: tuple[int, int],
     ip: InstancePoints,
@@ -518,8 +548,8 @@ def _outlier_pieces(
 ) -> list[np.ndarray]:
     """(H, W) bool masks of the pieces of an instance's ``outliers`` (of its points ``x``, pixels ``ip.pixels``)
     that are surfaces of their own: each 4-connected piece after a 3 x 3 opening, with at least
-    ``explain_piece_px`` valid pixels, that one primitive (plane, cylinder, cone, sphere or torus; a RANSAC with the
-    band ``tight``) holds in ``explain_share`` of its points within their tolerance ``tol``."""
+    ``explain_piece_px`` valid pixels, that one primitive (plane, cylinder, cone, sphere or torus; `_explaining_fit`)
+    holds in ``explain_share`` of its points within their tolerance ``tol``."""
     h, w = shape
     out = np.zeros(h * w, np.uint8)
     out[ip.pixels[outliers]] = 1
@@ -534,14 +564,9 @@ def _outlier_pieces(
         idx = idx[idx >= 0]
         if len(idx) < cfg.explain_piece_px:
             continue
-        for t in ("plane", "cylinder", "cone", "sphere", "torus"):
-            got = ransac_fit(t, x[idx], ip.normals[idx], size, tight, rng)
-            if (
-                got is not None
-                and np.mean(np.abs(got.primitive.signed_distance(x[idx])) < tol[idx]) >= cfg.explain_share
-            ):
-                pieces.append(piece)
-                break
+        inl = _explaining_fit(_TYPES, x[idx], ip.normals[idx], tol[idx], size, tight, rng, cfg.explain_share)[1]
+        if inl.mean() >= cfg.explain_share:
+            pieces.append(piece)
     return pieces
 
 
@@ -593,27 +618,22 @@ def split_unexplained(
         lab = int(labels[i])  # every id here is one of labels' (the pieces' are appended as they are made)
         own = TYPE_NAMES[int(TYPE_OF_LABEL[lab])] if 1 <= lab <= 17 else None
         rng = np.random.default_rng([cfg.seed, i, level])
-        best_type, best_in, best_prim = None, np.zeros(len(x), bool), None
-        for t in [own] + [u for u in ("plane", "cylinder", "cone", "sphere", "torus") if u != own]:
-            if t is None:
-                continue
-            got = ransac_fit(t, x, ip.normals, size, tight, rng)
-            if got is None:
-                continue
-            inl = np.abs(got.primitive.signed_distance(x)) < tol
-            if inl.sum() > best_in.sum():
-                best_type, best_in, best_prim = t, inl, got.primitive
-            if best_in.mean() >= cfg.explain_share:
-                break
-        curved = best_type not in (None, "plane") and supported(best_prim, x[best_in], ransac)
-        if curved and best_in.mean() >= cfg.explain_share and cfg.explain_curved_pieces:
+        types = ([own] if own else []) + [u for u in _TYPES if u != own]
+        best_type, best_in, best_prim = _explaining_fit(types, x, ip.normals, tol, size, tight, rng, cfg.explain_share)
+        explained = best_in.mean() >= cfg.explain_share
+        if (
+            explained
+            and cfg.explain_curved_pieces
+            and best_type not in (None, "plane")
+            and supported(best_prim, x[best_in], ransac)
+        ):
             for piece in _outlier_pieces(inst.shape, ip, x, ~best_in, tol, size, tight, cfg, rng):
                 changed = True
                 inst[piece] = len(labels)
                 labels.append(undecided)
                 scores.append(np.float32(0.0))
             continue
-        if best_type is None or best_in.mean() >= cfg.explain_share or best_in.mean() < cfg.explain_min_part:
+        if best_type is None or explained or best_in.mean() < cfg.explain_min_part:
             continue
         h, w = inst.shape
         core = np.zeros(h * w, np.uint8)
