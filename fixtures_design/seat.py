@@ -10,11 +10,12 @@ mating faces (and the fixture's stops) hold it, and across the push only as far 
 moving the part further than ``bound_clearance_factor`` x the clearance + ``bound_mm`` (+ the design's standoff)
 is a failed design: the fixture does not locate the part where it was meant to.
 
-How: points sampled on the mating faces (and stops) each cast a ray along the face's outward normal to the true
+How: points sampled on the mating faces (and stops) each cast a ray along the face's outward normal n to the true
 part; the signed distance to its surface along that ray (negative where the point lies inside the part) is the
-gap, which a translation t of the part changes by n . t. The largest push whose gaps stay >= 0 (a linear
-program), then the smallest move reaching it (a small quadratic program), repeated from the moved part until the
-move changes by less than ``tol_mm``. Output frame, millimetres.
+gap, which a translation t of the part changes by (m . t) / (m . n), m the part's outward normal where the ray
+meets it (n . t where the two faces are parallel; a cone's side against a hole's rim or plane is not). The largest
+push whose gaps stay >= 0 (a linear program), then the smallest move reaching it (a small quadratic program),
+repeated from the moved part until the move changes by less than ``tol_mm``. Output frame, millimetres.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ class SeatConfig:
     reach_mm: float = 40.0  # mm: how far each ray looks for the part either way; also the largest move tried
     max_iter: int = 8  # re-linearisations from the moved part
     tol_mm: float = 0.002  # mm: the seat has converged when an iteration moves the part less than this
+    graze_cos: float = 0.2  # a ray meeting the part's surface more obliquely than this cosine (78 degrees) changes
+    # its gap as if the surface faced the fixture's face (n . t): the exact rate grows without bound there
 
 
 @dataclass(frozen=True)
@@ -120,7 +123,7 @@ class _Rays:
     it, negative back to where it ends behind a point inside it; NaN where a point inside sees no end within reach,
     +inf where a point outside sees no solid in front."""
 
-    def __init__(self, part: Shape, reach: float) -> None:
+    def __init__(self, part: Shape, reach: float, graze_cos: float = 0.2) -> None:
         from OCP.BRepClass3d import BRepClass3d_SolidClassifier
         from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
 
@@ -128,12 +131,19 @@ class _Rays:
         self.inter.Load(part.wrapped, 1e-6)
         self.cls = BRepClass3d_SolidClassifier(part.wrapped)
         self.reach = reach
+        self.graze_cos = graze_cos
 
-    def gaps(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
-        from OCP.gp import gp_Dir, gp_Lin, gp_Pnt
+    def gaps(self, points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(gaps (N,), rates (N, 3)): each point's signed distance along its normal to the part, and the vector r
+        with which a translation t of the part changes that gap by r . t: for a point outside the part the hit's
+        outward normal m over m . n (exact for a plane of the part at any angle), else n itself (inside, on the
+        surface, without a hit, or past ``graze_cos``)."""
+        from OCP.BRepGProp import BRepGProp_Face
+        from OCP.gp import gp_Dir, gp_Lin, gp_Pnt, gp_Vec
         from OCP.TopAbs import TopAbs_IN, TopAbs_ON
 
         out = np.empty(len(points))
+        rate = np.array(normals, float, copy=True)
         for i, (p, n) in enumerate(zip(points, normals)):
             pnt = gp_Pnt(*map(float, p))
             self.cls.Perform(pnt, 1e-6)
@@ -143,24 +153,36 @@ class _Rays:
                 continue
             self.inter.Perform(gp_Lin(pnt, gp_Dir(*map(float, n))), -self.reach, self.reach)
             w = np.array([self.inter.WParameter(j) for j in range(1, self.inter.NbPnt() + 1)])
-            if state == TopAbs_IN:
-                back = w[w <= 0]
-                out[i] = back.max() if len(back) else np.nan
-            else:
-                ahead = w[w >= 0]
-                out[i] = ahead.min() if len(ahead) else np.inf
-        return out
+            pick = np.flatnonzero(w <= 0) if state == TopAbs_IN else np.flatnonzero(w >= 0)
+            if not len(pick):
+                out[i] = np.nan if state == TopAbs_IN else np.inf
+                continue
+            if state == TopAbs_IN:  # inside: freed along the face's own normal (an edge of the part, such as a
+                out[i] = w[pick].max()  # hole's rim against a cone, frees it either way: no one rate holds)
+                continue
+            j = int(pick[np.argmin(w[pick])])
+            out[i] = w[j]
+            hit, m = gp_Pnt(), gp_Vec()
+            BRepGProp_Face(self.inter.Face(j + 1)).Normal(
+                self.inter.UParameter(j + 1), self.inter.VParameter(j + 1), hit, m
+            )
+            if m.Magnitude() > 0:
+                m_ = np.array([m.X(), m.Y(), m.Z()]) / m.Magnitude()
+                cos = float(m_ @ n)
+                if abs(cos) >= self.graze_cos:
+                    rate[i] = m_ / cos
+        return out, rate
 
 
 def _solve_move(
-    dirs: np.ndarray, push: np.ndarray, normals: np.ndarray, gaps: np.ndarray, cap: float, tol: float
+    dirs: np.ndarray, push: np.ndarray, rates: np.ndarray, gaps: np.ndarray, cap: float, tol: float
 ) -> np.ndarray | None:
-    """The increment u (coordinates in ``dirs``) with gaps + (normals . dirs^T) u >= 0 that pushes furthest along
+    """The increment u (coordinates in ``dirs``) with gaps + (rates . dirs^T) u >= 0 that pushes furthest along
     ``push``, and of those the shortest; None when no u within +-cap keeps every gap >= 0."""
     from scipy.optimize import linprog, minimize
 
     keep = np.isfinite(gaps)
-    a = -(normals[keep] @ dirs.T)  # a u <= gaps
+    a = -(rates[keep] @ dirs.T)  # a u <= gaps
     b = gaps[keep]
     k = len(dirs)
     pk = dirs @ push
@@ -177,13 +199,13 @@ def _solve_move(
     return np.asarray(u, float)
 
 
-def _least_overlap(dirs: np.ndarray, normals: np.ndarray, gaps: np.ndarray, cap: float) -> float:
+def _least_overlap(dirs: np.ndarray, rates: np.ndarray, gaps: np.ndarray, cap: float) -> float:
     """The smallest s (mm) such that some move u within +-cap keeps every gap >= -s: how much too tight the
     fixture's faces are for the part (a linear program; ``cap`` when even that fails)."""
     from scipy.optimize import linprog
 
     keep = np.isfinite(gaps)
-    a = -(normals[keep] @ dirs.T)
+    a = -(rates[keep] @ dirs.T)
     k = len(dirs)
     cost = np.zeros(k + 1)
     cost[-1] = 1.0
@@ -207,12 +229,12 @@ def seat_part(fixture: Fixture, part: Shape, config: SeatConfig = SeatConfig()) 
     push = unit(fixture.seating.push)
     bound = seat_bound_mm(fixture, config)
     pts, nrm = seat_samples(fixture, config.points)
-    rays = _Rays(part, config.reach_mm)
+    rays = _Rays(part, config.reach_mm, config.graze_cos)
     move = np.zeros(3)
     reason = ""
     overlap = 0.0
     for _ in range(config.max_iter):
-        g = rays.gaps(pts - move, nrm)
+        g, rate = rays.gaps(pts - move, nrm)
         # A point deeper in the part than the bound is not held by its face (a pin's tip in a hole's floor, a block
         # inside a boss's base): moving along that face cannot clear it, so it does not steer the seat; the cut
         # measured after seating counts it.
@@ -220,9 +242,9 @@ def seat_part(fixture: Fixture, part: Shape, config: SeatConfig = SeatConfig()) 
         if not np.isfinite(g).any():
             reason = "no mating face has the part in front of it, or less than the bound inside it"
             break
-        u = _solve_move(dirs, push, nrm, g, config.reach_mm, 1e-3 * config.tol_mm)
+        u = _solve_move(dirs, push, rate, g, config.reach_mm, 1e-3 * config.tol_mm)
         if u is None:
-            overlap = _least_overlap(dirs, nrm, g, config.reach_mm)
+            overlap = _least_overlap(dirs, rate, g, config.reach_mm)
             reason = (
                 f"no move keeps the part clear of the mating faces: wherever it goes, it overlaps them by at least "
                 f"{overlap:.2f} mm (the fixture is too tight for it)"
@@ -235,7 +257,7 @@ def seat_part(fixture: Fixture, part: Shape, config: SeatConfig = SeatConfig()) 
             break
         if np.linalg.norm(step) < config.tol_mm:
             break
-    g = rays.gaps(pts - move, nrm)
+    g, _ = rays.gaps(pts - move, nrm)
     fin = g[np.isfinite(g)]
     size = float(np.linalg.norm(move))
     if not reason and size > bound:

@@ -56,10 +56,13 @@ def test_fixture_mates_with_the_true_part_and_does_not_cut_it(scans, family, see
     tol = max(0.5, 0.01 * vb.scale * 1000.0)
     mating, common, frac = _measure(vb, truth_cam, fx, 8 if kind == "nest" else 40)
     assert fx.solid.is_valid and fx.volume_mm3 > 1000.0
-    assert mating.max < tol, (kind, mating)
+    # A pin's side is a cone below its flange: it stands off the hole's wall by the clearance at the flange and by
+    # up to the clearance + its taper at the cone's foot, half the taper more at its middle.
+    taper = fx.params.taper if kind == "pin" else 0.0
+    assert mating.max < tol + taper, (kind, mating)
     # The clearance is the designed gap: every mating face sits about that far from its true face.
     clearance = fx.params.clearance
-    assert mating.median == pytest.approx(clearance, abs=0.25)
+    assert clearance - 0.25 <= mating.median <= clearance + taper / 2 + 0.25, (kind, mating.median)
     assert frac < 1e-3, (kind, common, fx.volume_mm3)
     assert len(fx.mating_faces) == len(fx.mating_refs) >= 1
 

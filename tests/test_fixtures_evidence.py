@@ -100,14 +100,19 @@ def test_a_hole_fitted_too_wide_gives_a_pin_that_is_refused(
     flange: tuple, radius_error_mm: float, refusal: str
 ) -> None:
     """A generated flange's bolt hole (ground-truth VB-Rep) fitted 2 mm / 1.5 mm too wide, as a short arc of its
-    wall can fit it: its pin cuts into the true part and no move seats the part on it. Given the scan's points, the
-    plane round the rim lies inside the pin (2 mm), or the wall's own points do (1.5 mm), and the pin is refused."""
+    wall can fit it: a plain cylindrical pin (no taper) cuts into the true part and no move seats the part on it.
+    Given the scan's points, the plane round the rim lies inside the pin (2 mm), or the wall's own points do (1.5
+    mm), and the default pin is refused (its top at the flange is as wide as the plain pin; its taper takes some of
+    such an error, not all)."""
+    from fixtures_design import PinParams
+    from fixtures_design.design import HOLE_RADIUS_SIGMA_MM, PIN_CLEARANCE_K
     from fixtures_design.seat import seat_part
 
     vb, truth_cam, points = flange
     ref = design_fixture(vb, "pin", points=points).reference
     wrong = replace(ref, radius=ref.radius + radius_error_mm / 1000.0)
-    bad = design_fixture(vb, "pin", reference=wrong)
+    plain = PinParams(clearance=PIN_CLEARANCE_K * HOLE_RADIUS_SIGMA_MM, taper=0.0)
+    bad = design_fixture(vb, "pin", plain, reference=wrong)
     truth = transformed(truth_cam, camera_mm_matrix(bad.fmap))
     assert interference(bad, truth)[1] > 0.05
     assert not seat_part(bad, truth).ok

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import runpy
 import shutil
 import subprocess
@@ -230,8 +231,12 @@ def test_cli_says_where_a_pins_clearance_comes_from(tmp_path):
         f"clearance {c:.2f} mm ({PIN_CLEARANCE_K:g} x the hole radius's 1-sigma {HOLE_RADIUS_SIGMA_MM:g} mm)"
         in r.output
     )
+    # ... and the pin's radius at the flange and at its taper's foot, the default taper (2 mm) narrower
+    m = re.search(r"pin radius ([0-9.]+) mm at the flange, narrowing along a 45-degree cone to ([0-9.]+) mm", r.output)
+    assert m is not None, r.output
+    assert float(m.group(1)) - float(m.group(2)) == pytest.approx(2.0, abs=0.011)
     r = CliRunner().invoke(
         main, ["fixture", str(src), "--kind", "pin", "-o", str(tmp_path / "b"), "--clearance", "0.3"]
     )
     assert r.exit_code == 0, r.output
-    assert "clearance 0.30 mm\n" in r.output
+    assert "clearance 0.30 mm; pin radius " in r.output

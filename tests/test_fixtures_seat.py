@@ -88,10 +88,15 @@ def designs(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return res
 
 
-def test_a_pin_seats_the_hole_on_its_flange_and_clears_it_across_the_axis(designs: dict) -> None:
+@pytest.mark.parametrize("taper", [0.0, 2.0])
+def test_a_pin_seats_the_hole_on_its_flange_and_clears_it_across_the_axis(designs: dict, taper: float) -> None:
     """The hole moved 0.6 mm across its axis (into the pin, clearance 0.1) and 0.4 mm onto the flange: the seat
-    lifts it back to the flange (0.3 mm) and moves it across by 0.5 mm, just clear of the pin."""
+    lifts it back to the flange (0.3 mm) and moves it across by 0.5 mm, just clear of the pin, a plain cylinder or
+    the default tapered one (whose cone's top circle is what meets the rim)."""
+    from fixtures_design import PinParams, design_pin
+
     fx, truth = designs["pin"]
+    fx = design_pin(fx.reference, fx.fmap, PinParams(clearance=fx.params.clearance, taper=taper))
     c = fx.params.clearance
     z = -fx.seating.push  # the hole's axis, into the part
     r = np.cross(z, [1.0, 0.0, 0.0])
@@ -135,17 +140,47 @@ def test_a_nest_lets_the_part_down_to_its_floor_and_off_its_walls(designs: dict)
 
 
 def test_a_pin_wider_than_its_hole_cannot_be_seated_and_says_by_how_much(designs: dict) -> None:
-    """A pin 0.4 mm wider in radius than the true hole (a negative clearance): no move clears it, the seat fails
-    and reports the least overlap, 0.4 mm. (It was 0.5 mm until 2026-11-28: the seat's bound is then 3 x -0.5 +
-    2 = 0.5 mm, exactly the overlap, where the rule that a point deeper than the bound does not steer the seat
-    flips on 1e-13 mm of rounding; an exporter change that moved the output frame by that much made the seat
-    ignore the pin and report a 26.7 mm move instead.)"""
+    """A plain cylindrical pin (no taper) 0.4 mm wider in radius than the true hole (a negative clearance): no move
+    clears it, the seat fails and reports the least overlap, 0.4 mm. (It was 0.5 mm until 2026-11-28: the seat's
+    bound is then 3 x -0.5 + 2 = 0.5 mm, exactly the overlap, where the rule that a point deeper than the bound
+    does not steer the seat flips on 1e-13 mm of rounding; an exporter change that moved the output frame by that
+    much made the seat ignore the pin and report a 26.7 mm move instead.)"""
     from fixtures_design import PinParams, design_pin
     from fixtures_design.seat import seat_bound_mm
 
     fx, truth = designs["pin"]
-    tight = design_pin(fx.reference, fx.fmap, PinParams(clearance=-0.4))
+    tight = design_pin(fx.reference, fx.fmap, PinParams(clearance=-0.4, taper=0.0))
     assert seat_bound_mm(tight) == pytest.approx(0.8)  # the overlap is well inside the bound
     seat = seat_part(tight, truth)
     assert not seat.ok and "too tight" in seat.reason
     assert seat.overlap_mm == pytest.approx(0.4, abs=0.05)
+
+
+@pytest.mark.parametrize("too_wide_mm", [1.0, 1.5])
+def test_a_tapered_pin_takes_a_hole_fitted_too_wide_on_its_cone(designs: dict, too_wide_mm: float) -> None:
+    """The hole's radius fitted 1 or 1.5 mm too wide, the pin's clearance 0.66 mm (the default, 3 x 0.22): the pin's
+    top is 0.34 or 0.84 mm wider than the true hole. A plain cylinder cannot be seated; the default pin, whose side
+    narrows by 2 mm along a 45-degree cone below the flange, takes the hole: seated, the rim rests on the cone and
+    the part's plane stands (top radius - true radius) / tan(45) above the flange (no higher; lower by at most the
+    seat's sample spacing along the cone's 2.8 mm side, 0.3 mm), cutting under the bench's 0.1 % and touching
+    (median under 1 mm)."""
+    import dataclasses
+
+    from fixtures_design import PinParams, design_pin
+
+    fx, truth = designs["pin"]
+    c = 0.66
+    wide = dataclasses.replace(fx.reference, radius=fx.reference.radius + too_wide_mm / 1000.0)
+    plain = design_pin(wide, fx.fmap, PinParams(clearance=c, taper=0.0))
+    assert not seat_part(plain, truth).ok
+    tapered = design_pin(wide, fx.fmap, PinParams(clearance=c))
+    assert tapered.notes["shank_radius_mm"] == pytest.approx(tapered.notes["pin_radius_mm"] - PinParams().taper)
+    seat = seat_part(tapered, truth)
+    assert seat.ok, seat.reason
+    z = -tapered.seating.push  # the hole's axis, into the part; the flange's underside lies at -c along it
+    above_flange = seat.move @ z + c
+    expected = too_wide_mm - c  # the top radius less the true one, over tan(45 degrees)
+    assert expected - 0.3 <= above_flange <= expected + 0.05, (above_flange, expected)
+    seated = _moved(truth, seat.move)
+    assert interference(tapered, seated)[1] < 1e-3
+    assert check_mating(tapered, seated, None, max_points_per_face=120).median < 1.0

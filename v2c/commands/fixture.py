@@ -17,7 +17,7 @@ from v2c.commands import frame_index_option, pick_options, segmentation_option
     "--kind",
     type=click.Choice(["corner", "pin", "cradle", "nest"]),
     required=True,
-    help="corner: L block on a convex edge; pin: locating pin in a hole; cradle: U block under a "
+    help="corner: L block on a convex edge; pin: tapered locating pin in a hole; cradle: U block under a "
     "horizontal cylinder; nest: plate with a pocket following the visible footprint.",
 )
 @click.option(
@@ -135,6 +135,11 @@ def command(
         from fixtures_design.design import HOLE_RADIUS_SIGMA_MM, PIN_CLEARANCE_K
 
         why = f" ({PIN_CLEARANCE_K:g} x the hole radius's 1-sigma {HOLE_RADIUS_SIGMA_MM:g} mm)"
+    if kind == "pin":
+        n = fx.notes
+        why += f"; pin radius {n['pin_radius_mm']:.2f} mm at the flange"
+        if n["shank_radius_mm"] < n["pin_radius_mm"]:
+            why += f", narrowing along a {fx.params.taper_deg:g}-degree cone to {n['shank_radius_mm']:.2f} mm"
     click.echo(
         f"{kind} fixture on {what}: {fx.volume_mm3:.0f} mm^3, {len(fx.mating_faces)} mating faces, "
         f"clearance {fx.params.clearance:.2f} mm{why}"
