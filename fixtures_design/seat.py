@@ -157,20 +157,22 @@ class _Rays:
             if not len(pick):
                 out[i] = np.nan if state == TopAbs_IN else np.inf
                 continue
-            if state == TopAbs_IN:  # inside: freed along the face's own normal (an edge of the part, such as a
-                out[i] = w[pick].max()  # hole's rim against a cone, frees it either way: no one rate holds)
+            if state == TopAbs_IN:
+                # Inside: freed along the face's own normal n (at an edge of the part, a hole's rim in a cone, the
+                # point is freed either way: no one rate holds).
+                out[i] = w[pick].max()
                 continue
             j = int(pick[np.argmin(w[pick])])
             out[i] = w[j]
-            hit, m = gp_Pnt(), gp_Vec()
+            hit, normal = gp_Pnt(), gp_Vec()
             BRepGProp_Face(self.inter.Face(j + 1)).Normal(
-                self.inter.UParameter(j + 1), self.inter.VParameter(j + 1), hit, m
+                self.inter.UParameter(j + 1), self.inter.VParameter(j + 1), hit, normal
             )
-            if m.Magnitude() > 0:
-                m_ = np.array([m.X(), m.Y(), m.Z()]) / m.Magnitude()
-                cos = float(m_ @ n)
+            if normal.Magnitude() > 0:
+                m = np.array([normal.X(), normal.Y(), normal.Z()]) / normal.Magnitude()
+                cos = float(m @ n)
                 if abs(cos) >= self.graze_cos:
-                    rate[i] = m_ / cos
+                    rate[i] = m / cos
         return out, rate
 
 
