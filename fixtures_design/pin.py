@@ -75,9 +75,10 @@ def design_pin(ref: CircleReference, fmap: FrameMap, params: PinParams = PinPara
     plane = local_plane(fmap.points(ref.center), x, z)
     # Flange from z = -(c + wall) to -c; pin from -c to depth (local z points into the hole).
     flange = Solid.make_cylinder(flange_r, params.wall, Plane.XY.offset(-(c + params.wall)))
+    slope = np.tan(np.radians(params.taper_deg))  # the cone's loss of radius per mm of depth
     shank_r = max(r - max(params.taper, 0.0), params.shank_share * r)
-    cone_h = min((r - shank_r) / np.tan(np.radians(params.taper_deg)), depth + c) if shank_r < r else 0.0
-    end_r = r - cone_h * np.tan(np.radians(params.taper_deg))  # the shank's radius (r without a cone)
+    cone_h = min((r - shank_r) / slope, depth + c) if shank_r < r else 0.0
+    end_r = r - cone_h * slope  # the shank's radius (r without a cone; less deep than the cone, the cone's end)
     if cone_h > 0:  # the lead: a cone from r at the flange down to the shank, then the shank to the pin's end
         pin = Solid.make_cone(r, end_r, cone_h, Plane.XY.offset(-c))
         if depth + c - cone_h > 1e-6:

@@ -123,7 +123,7 @@ class _Rays:
     it, negative back to where it ends behind a point inside it; NaN where a point inside sees no end within reach,
     +inf where a point outside sees no solid in front."""
 
-    def __init__(self, part: Shape, reach: float, graze_cos: float = 0.2) -> None:
+    def __init__(self, part: Shape, reach: float, graze_cos: float) -> None:
         from OCP.BRepClass3d import BRepClass3d_SolidClassifier
         from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
 

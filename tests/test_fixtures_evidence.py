@@ -105,13 +105,13 @@ def test_a_hole_fitted_too_wide_gives_a_pin_that_is_refused(
     mm), and the default pin is refused (its top at the flange is as wide as the plain pin; its taper takes some of
     such an error, not all)."""
     from fixtures_design import PinParams
-    from fixtures_design.design import HOLE_RADIUS_SIGMA_MM, PIN_CLEARANCE_K
+    from fixtures_design.design import pin_clearance
     from fixtures_design.seat import seat_part
 
     vb, truth_cam, points = flange
     ref = design_fixture(vb, "pin", points=points).reference
     wrong = replace(ref, radius=ref.radius + radius_error_mm / 1000.0)
-    plain = PinParams(clearance=PIN_CLEARANCE_K * HOLE_RADIUS_SIGMA_MM, taper=0.0)
+    plain = pin_clearance(PinParams(taper=0.0))  # the default pin's clearance, without its taper
     bad = design_fixture(vb, "pin", plain, reference=wrong)
     truth = transformed(truth_cam, camera_mm_matrix(bad.fmap))
     assert interference(bad, truth)[1] > 0.05
