@@ -25,7 +25,14 @@ from fixtures_design.references import (
     SelectionConfig,
     select_references,
 )
-from fixtures_design.verify import EvidenceConfig, hole_opening, observed_inside, part_inside_share, wall_inside
+from fixtures_design.verify import (
+    EvidenceConfig,
+    hole_opening,
+    observed_inside,
+    part_inside_share,
+    wall_inside,
+    wall_narrowing,
+)
 from v2c.vbrep.model import VBRep
 
 Params = CornerParams | PinParams | CradleParams | NestParams
@@ -132,7 +139,9 @@ def evidence_refusal(fx: Fixture, points: np.ndarray, evidence: EvidenceConfig) 
     A pin besides: it is wider than the opening its hole's plane shows by more than ``opening_tol_mm`` +
     ``opening_tol_rel`` x the hole's radius (`hole_opening`), or more than ``max_wall_share`` (and at least
     ``min_wall_points``) of the hole's wall points lie inside it beyond their radial noise (`wall_inside`): the hole
-    is fitted too wide, or narrower somewhere than its fit (a counterbore's step).
+    is fitted too wide, or narrower somewhere than its fit (a counterbore's step); or its wall points come nearer
+    the axis going down it faster than ``wall_max_narrowing`` at ``wall_narrowing_z`` standard errors
+    (`wall_narrowing`): a chamfer or countersink was fitted as the hole.
     """
     ref, fmap = fx.reference, fx.fmap
     n_in, deepest = observed_inside(fx, points, evidence)
@@ -159,6 +168,14 @@ def evidence_refusal(fx: Fixture, points: np.ndarray, evidence: EvidenceConfig) 
             f"{ref.label}: {n_in} of the hole's {n_wall} wall points lie inside the pin (radius {pin_r:.2f} mm) "
             f"beyond {evidence.n_sigma:g} sigma of their noise (more than {100 * evidence.max_wall_share:g} %): the "
             "hole is narrower than its fit somewhere"
+        )
+    slope, se, n_wall = wall_narrowing(ref.center, ref.axis, ref.radius, depth, points, evidence)
+    narrows = slope - evidence.wall_narrowing_z * se > evidence.wall_max_narrowing
+    if n_wall >= evidence.wall_narrowing_min_points and narrows:
+        return (
+            f"{ref.label}: the hole's {n_wall} wall points come {slope:.2f} +- {se:.2f} mm nearer its axis per mm "
+            f"of depth (more than {evidence.wall_max_narrowing:g} at {evidence.wall_narrowing_z:g} standard "
+            "errors): a chamfer or countersink was fitted as the hole, which is narrower below"
         )
     return None
 

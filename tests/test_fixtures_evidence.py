@@ -122,7 +122,7 @@ def test_a_hole_fitted_too_wide_gives_a_pin_that_is_refused(
 
 def test_the_true_hole_keeps_its_pin_which_seats(flange: tuple) -> None:
     from fixtures_design.seat import seat_part
-    from fixtures_design.verify import hole_opening, wall_inside
+    from fixtures_design.verify import EvidenceConfig, hole_opening, wall_inside, wall_narrowing
 
     vb, truth_cam, points = flange
     fx = design_fixture(vb, "pin", points=points)
@@ -133,6 +133,35 @@ def test_the_true_hole_keeps_its_pin_which_seats(flange: tuple) -> None:
         ref.center, ref.axis, ref.radius, fx.notes["pin_radius_mm"] / 1000.0, fx.notes["depth_mm"] / 1000.0, points
     )
     assert n_wall > 0 and n_in == 0
+    # ... and its wall, a cylinder, does not narrow going in (within the refusal's margin)
+    slope, se, n = wall_narrowing(ref.center, ref.axis, ref.radius, fx.notes["depth_mm"] / 1000.0, points)
+    cfg = EvidenceConfig()
+    assert n > 0
+    assert not (n >= cfg.wall_narrowing_min_points and slope - cfg.wall_narrowing_z * se > cfg.wall_max_narrowing)
     truth = transformed(truth_cam, camera_mm_matrix(fx.fmap))
     assert seat_part(fx, truth).ok
     assert interference(fx, truth)[1] < 1e-3
+
+
+@pytest.mark.parametrize(("half_angle_deg", "narrowing"), [(45.0, 1.0), (20.0, np.tan(np.radians(20.0))), (0.0, 0.0)])
+def test_a_walls_narrowing_is_its_slope_towards_the_axis(half_angle_deg: float, narrowing: float) -> None:
+    """Points on a hole's wall seen over a 140-degree arc from 1 to 5 mm deep, 0.1 mm of radial noise: a 45-degree
+    countersink (the fit's 12 mm radius at its rim), a 20-degree taper and a cylinder. `wall_narrowing` recovers
+    how fast the wall comes nearer the axis (tan of the half-angle) within three of its standard errors, which are
+    small (under 0.05), and only the cones are refused by the default bounds."""
+    from fixtures_design.verify import EvidenceConfig, wall_narrowing
+
+    rng = np.random.default_rng(3)
+    center, axis = np.array([0.01, -0.02, 0.5]), np.array([0.0, 0.6, 0.8])
+    u = np.cross(axis, [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    w = np.cross(axis, u)
+    t = rng.uniform(0.001, 0.005, 400)
+    phi = rng.uniform(-np.radians(70), np.radians(70), 400)
+    r = 0.012 - narrowing * t + rng.normal(0.0, 1e-4, 400)
+    pts = center + np.outer(t, axis) + r[:, None] * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w)
+    slope, se, n = wall_narrowing(center, axis, 0.012, 0.010, pts)
+    assert n == 400
+    assert 0 < se < 0.05 and abs(slope - narrowing) < 3 * se
+    cfg = EvidenceConfig()
+    assert (slope - cfg.wall_narrowing_z * se > cfg.wall_max_narrowing) == (half_angle_deg > 17.0)
