@@ -177,6 +177,23 @@ def _along_axis(
     return a, p, v, v @ a
 
 
+def _wall_points(
+    center: np.ndarray, axis: np.ndarray, radius: float, depth: float, points: np.ndarray, config: EvidenceConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A hole's wall points (`wall_inside`): (points (M, 3), their depths along the axis (M,), distances from it
+    (M,), offsets from it (M, 3)); camera frame, metres."""
+    a, p, v, t = _along_axis(center, axis, points)
+    radial = v - np.outer(t, a)
+    rad = np.linalg.norm(radial, axis=1)
+    wall = (
+        (t > config.wall_skip_m)
+        & (t < depth)
+        & (rad > (1.0 - config.wall_band_rel) * radius)
+        & (rad < radius + config.wall_band_m)
+    )
+    return p[wall], t[wall], rad[wall], radial[wall]
+
+
 def wall_narrowing(
     center: np.ndarray,
     axis: np.ndarray,
@@ -190,16 +207,8 @@ def wall_narrowing(
     their depth), over the wall points of `wall_inside` (camera frame, metres). NaN slope with fewer than three
     points or no spread in depth.
     """
-    a, p, v, t = _along_axis(center, axis, points)
-    rad = np.linalg.norm(v - np.outer(t, a), axis=1)
-    wall = (
-        (t > config.wall_skip_m)
-        & (t < depth)
-        & (rad > (1.0 - config.wall_band_rel) * radius)
-        & (rad < radius + config.wall_band_m)
-    )
-    n = int(wall.sum())
-    t, rad = t[wall], rad[wall]
+    _, t, rad, _ = _wall_points(center, axis, radius, depth, points, config)
+    n = len(t)
     if n < 3 or np.ptp(t) <= 0:
         return float("nan"), float("nan"), n
     fit = np.polynomial.polynomial.Polynomial.fit(t, rad, 1).convert()
@@ -258,18 +267,9 @@ def wall_inside(
     than along the ray. A fitted cylinder that merged a counterbore with the narrower hole below, or a hole fitted
     too wide from a short arc of its wall, leaves the wall's own points inside the pin.
     """
-    a, p, v, t = _along_axis(center, axis, points)
-    radial = v - np.outer(t, a)
-    rad = np.linalg.norm(radial, axis=1)
-    wall = (
-        (t > config.wall_skip_m)
-        & (t < depth)
-        & (rad > (1.0 - config.wall_band_rel) * radius)
-        & (rad < radius + config.wall_band_m)
-    )
-    if not wall.any():
+    p, _, rad, radial = _wall_points(center, axis, radius, depth, points, config)
+    if not len(p):
         return 0, 0
-    p, rad, radial = p[wall], rad[wall], radial[wall]
     ray = p / np.linalg.norm(p, axis=1, keepdims=True)
     along = np.abs(np.sum(ray * radial, axis=1)) / np.maximum(rad, 1e-12)
     sigma = np.maximum(config.noise_coeff_per_m * p[:, 2] ** 2 * along, config.wall_min_sigma_m)
