@@ -211,11 +211,10 @@ def wall_narrowing(
     n = len(t)
     if n < 3 or np.ptp(t) <= 0:
         return float("nan"), float("nan"), n
-    fit = np.polynomial.polynomial.Polynomial.fit(t, rad, 1).convert()
-    slope = -float(fit.coef[1]) if len(fit.coef) > 1 else 0.0
-    resid = rad - fit(t)
-    se = float(np.sqrt(resid @ resid / (n - 2) / np.sum((t - t.mean()) ** 2)))
-    return slope, se, n
+    from scipy.stats import linregress
+
+    line = linregress(t, rad)
+    return -float(line.slope), float(line.stderr), n
 
 
 def hole_opening(
