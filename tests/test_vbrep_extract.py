@@ -576,3 +576,51 @@ def test_small_chamfer_seen_beside_a_nearer_face_keeps_its_own_plane() -> None:
 
     assert tilt(VBRepConfig()) < 3.0
     assert tilt(replace(VBRepConfig(), fallback_own_first=False)) > 20.0
+
+
+@pytest.mark.parametrize("noise_m", [0.0, 0.0008])
+def test_curved_surface_that_misses_its_readings_becomes_their_plane(noise_m: float) -> None:
+    # A flat patch at 0.6 m (rows 60-99) fitted as a torus that the patch's rays meet centimetres off its depth (the
+    # real tuna can's lid piece): the extraction leaves its face without a mesh. The plane through its readings
+    # meets them, so it takes the torus's place (and the extraction runs again). A face left with a mesh is not
+    # passed; a plane that cannot meet a face's readings (a 50 mm cylinder's patch at a 1 mm bound) is not taken.
+    from types import SimpleNamespace
+
+    from v2c.camera import pixel_rays
+    from v2c.labels import label_of
+    from v2c.primitives import Cylinder, Plane, Torus
+    from v2c.vbrep.config import VBRepConfig
+    from v2c.vbrep.faces import face_geoms, planes_for_unseen_surfaces
+
+    K = np.array([[600.0, 0.0, 160.0], [0.0, 600.0, 120.0], [0.0, 0.0, 1.0]])
+    inst = np.zeros((240, 320), np.int32)
+    inst[60:100, 100:220] = 1
+    inst[120:180, 130:190] = 2
+    vs, us = np.nonzero(inst > 0)
+    rays = pixel_rays(np.stack([us, vs], 1).astype(float), K)
+    cyl = Cylinder([0.0, 0.0, 0.66], [0.0, 1.0, 0.0], 0.05)  # axis along Y at z 0.66, radius 50 mm
+    depth = np.zeros(inst.shape)
+    z_plane = np.full(len(us), 0.6)
+    # the cylinder's near sheet along each ray: |(r z - c) x a| = R, a = Y: (r_x z)^2 + (r_z z - 0.66)^2 = R^2
+    rx, rz = rays[:, 0], rays[:, 2]
+    qa, qb, qc = rx**2 + rz**2, -2 * rz * 0.66, 0.66**2 - 0.05**2
+    z_cyl = (-qb - np.sqrt(np.maximum(qb**2 - 4 * qa * qc, 0.0))) / (2 * qa)
+    depth[vs, us] = np.where(inst[vs, us] == 1, z_plane, z_cyl)
+    depth[vs, us] += np.random.default_rng(0).normal(0.0, noise_m, len(us))
+    assert np.all(depth[inst == 2] < 0.66)  # every cylinder pixel met its near sheet
+    torus = Torus([0.0, 0.0, 0.45], [0.0, 0.0, 1.0], 0.05, 0.02)  # 15 cm in front of the patch
+    fit = SimpleNamespace(
+        primitives={1: torus, 2: cyl}, residuals={1: 0.0, 2: 0.0}, axis_labels={1: None, 2: "Y"}, frame=np.eye(3)
+    )
+    seg = SimpleNamespace(instances=inst, labels=np.array([0, label_of("torus", "Z"), label_of("cylinder", "Y")]))
+    faces, sheets = face_geoms(fit, seg, depth, K, (0.05, 5.0), 0.1, VBRepConfig(), {})
+    assert isinstance(faces[1].prim, Torus) and isinstance(faces[2].prim, Cylinder)
+    args = (seg, depth, K, (0.05, 5.0), 0.1)
+    tight = VBRepConfig(mesh_evidence_tol=0.01)  # 1 mm at this scale: the cylinder patch's plane misses by more
+    assert planes_for_unseen_surfaces(*args, tight, faces, sheets, [2]) == []
+    assert planes_for_unseen_surfaces(*args, VBRepConfig(), faces, sheets, [1]) == [1]
+    plane = faces[1].prim
+    assert isinstance(plane, Plane) and faces[1].extra.get("refit") == "plane"
+    assert abs(abs(float(plane.axis_vector[2])) - 1.0) < 1e-3  # face-on, as the patch
+    assert abs(abs(float(plane.axis_vector @ plane.origin)) - 0.6) < 1e-3  # at its 0.6 m
+    assert isinstance(faces[2].prim, Cylinder) and sheets[1].sheet == 0

@@ -122,3 +122,41 @@ def test_drop_end_hooks_removes_a_hook_past_the_corner_and_nothing_else():
     assert drop_end_hooks([rev], K, 0.0) == 0 and len(rev.pts) == 6
     assert drop_end_hooks([rev], K, 45.0) == 1
     np.testing.assert_allclose(rev.pts, np.delete(before[0], 1, axis=0)[::-1])
+
+
+def test_a_boundary_run_past_its_turn_and_back_becomes_one_edge():
+    from v2c.vbrep.model import EdgeType, VertexKind
+    from v2c.vbrep.postprocess import ProtoEdge, ProtoVertex, _drop_fold_backs
+
+    K = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+
+    def vertex(uv):
+        return ProtoVertex(VertexKind.CORNER, _on_plane([uv], K)[0], np.asarray(uv, float))
+
+    # one intersection edge of faces 1 and 2 from A (100, 100) to V (140, 140), and a second one of the same faces
+    # from V back to B (132, 131): B lies 0.7 px off the first edge's path, 8 px short of V (the real corpus part's
+    # top face, 10,400 mm2, went to its mesh outline for this)
+    verts = [vertex((100, 100)), vertex((140, 140)), vertex((132, 131)), vertex((150, 90))]
+    run = [(100 + 4 * k, 100 + 4 * k) for k in range(11)]
+    long = ProtoEdge(EdgeType.INTERSECTION, (1, 2), _on_plane(run, K), np.asarray(run, float), v0=0, v1=1)
+    back = [(140, 140), (137, 136), (132, 131)]
+    short = ProtoEdge(EdgeType.INTERSECTION, (2, 1), _on_plane(back, K), np.asarray(back, float), v0=1, v1=2)
+    other = ProtoEdge(EdgeType.SILHOUETTE, (1,), _on_plane([(132, 131), (150, 90)], K), v0=2, v1=3)
+    out = _drop_fold_backs([long, short, other], verts, K, 30.0, 3.0)
+    assert len(out) == 2 and other in out
+    merged = next(p for p in out if p is not other)
+    assert (merged.v0, merged.v1) == (0, 2) and merged.faces == (1, 2)
+    np.testing.assert_allclose(merged.pts[-1], verts[2].position)
+    # the run up to the start of its segment nearest B, (128, 128), then B
+    assert len(merged.pts) == 9 and len(merged.uv) == 9
+    np.testing.assert_allclose(merged.pts[:-1], long.pts[:8])
+    # a turn (B well off the first edge's path), other faces or other types, and fold_deg 0 change nothing
+    turned = [(140, 140), (150, 135), (160, 131)]
+    verts[2] = vertex((160, 131))
+    short_t = ProtoEdge(EdgeType.INTERSECTION, (1, 2), _on_plane(turned, K), np.asarray(turned, float), v0=1, v1=2)
+    assert len(_drop_fold_backs([long, short_t], verts, K, 30.0, 3.0)) == 2
+    verts[2] = vertex((132, 131))
+    for kind, faces in ((EdgeType.INTERSECTION, (1, 3)), (EdgeType.OCCLUDED, (1, 2))):
+        q = ProtoEdge(kind, faces, _on_plane(back, K), np.asarray(back, float), v0=1, v1=2)
+        assert len(_drop_fold_backs([long, q], verts, K, 30.0, 3.0)) == 2
+    assert len(_drop_fold_backs([long, short], verts, K, 0.0, 3.0)) == 2

@@ -85,6 +85,10 @@ class VBRepConfig:
     simplify_deg: float = 36.0  # degrees: two same-type edges of the same faces meeting at a vertex no other
     #                             edge uses (and that is not an outline corner) are merged into one when the
     #                             polyline turns there by less than this
+    fold_deg: float = 30.0  # degrees: two such edges leaving their vertex within this angle of each other (one
+    #                         boundary run past its turn and back along itself) become one edge ending where the
+    #                         shorter one ends, when that end projects within fold_px of the longer one; 0 = off
+    fold_px: float = 3.0  # pixels: ... (`postprocess._drop_fold_backs`)
     corner_scale_px: float = 5.0  # pixels: arm length of the turn measured along an edge to find its corners
     corner_deg: float = 20.0  # degrees: an edge whose image polyline turns by more than this at one point (a
     #                           corner of the outline) is split there
@@ -221,6 +225,10 @@ class VBRepConfig:
     #                                    angle, gets none (`mesh.beyond_measured`: its surface misses what its
     #                                    pixels measured, a wrong primitive: a 19 px face fitted as a 101 mm
     #                                    cylinder 8 mm off its readings)
+    unseen_surface_plane: bool = True  # a curved face left without a mesh because its surface misses its own
+    #                                    readings gets the plane through them instead, where that plane meets them
+    #                                    within mesh_evidence_tol, and the edges and meshes are extracted again
+    #                                    (`faces.planes_for_unseen_surfaces`): the face stays where the sensor saw it
     mesh_evidence_min_share: float = 0.5  # fraction: ... and a face whose clipped mesh keeps less than this share
     #                                       of its area gets none (its readings contradict the surface over most
     #                                       of it: a wrong primitive). Half, not tuned

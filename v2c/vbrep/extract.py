@@ -15,7 +15,9 @@
 4. postprocess.py: labelling rules, short-edge removal, simplification below ``simplify_deg``, plane-plane
    edges that would collapse a loop onto the planes' line split into a silhouette and an occluded edge; topology.py:
    vertices and polylines snapped onto their surfaces, degenerate closed edges dropped;
-5. assemble.py: face meshes (mesh.py), loops, edge and face confidences (confidence.py), positional sigmas.
+5. assemble.py: face meshes (mesh.py), loops, edge and face confidences (confidence.py), positional sigmas;
+6. a curved face left without a mesh because its surface misses its own readings gets the plane through them
+   (faces.py, `planes_for_unseen_surfaces`, where that plane meets them), and steps 2-5 run once more.
 
 Camera frame, metres; pixels (u, v).
 """
@@ -31,7 +33,7 @@ from v2c.vbrep.assemble import assemble
 from v2c.vbrep.config import VBRepConfig
 from v2c.vbrep.context import ExtractContext, depth_window
 from v2c.vbrep.edges import edge_protos
-from v2c.vbrep.faces import absorb_islands, absorb_specks, face_geoms
+from v2c.vbrep.faces import absorb_islands, absorb_specks, face_geoms, planes_for_unseen_surfaces
 from v2c.vbrep.model import VBRep
 from v2c.vbrep.postprocess import ProtoEdge, postprocess
 from v2c.vbrep.topology import drop_degenerate, drop_end_hooks, snap_to_surfaces
@@ -56,12 +58,43 @@ def extract_vbrep(scan: Scan, seg: Segmentation, fit: FitResult, config: VBRepCo
     stats: dict[str, Any] = {}
     # 1. faces: surfaces and sheets
     faces, sheets = face_geoms(fit, seg, depth, K, window, scale, cfg, stats)
-    gap_thr = max(cfg.int_gap * scale, cfg.int_gap_min_m)
     # specks: instances too small for a face merge into their faced neighbours, so they leave no junction clutter
     # islands: stray pieces of a faced instance go to the faced instance around them, in the edges and the meshes
     regions = absorb_islands(np.asarray(seg.instances), set(faces), cfg, stats, np.asarray(seg.scores))
     graph = fit.graph if stats["islands_absorbed"] == 0 else build_edge_graph(regions, cfg.graph_simplify_px)
     instances, graph = absorb_specks(regions, graph, set(faces), cfg, stats)
+    stats["planes_for_unseen_surfaces"] = []
+    vbrep = _edges_to_vbrep(faces, sheets, graph, instances, regions, fit, seg, depth, K, window, scale, cfg, stats)
+    # 6. a curved face its own readings contradict lost its mesh: its plane instead, and steps 2-5 once more
+    inst_of = {f.id: f.instance for f in vbrep.faces}
+    unseen = [inst_of[fid] for fid in stats.get("faces_off_their_readings", []) if fid in inst_of]
+    if cfg.unseen_surface_plane and unseen:
+        replaced = planes_for_unseen_surfaces(seg, depth, K, window, scale, cfg, faces, sheets, unseen)
+        if replaced:
+            stats["planes_for_unseen_surfaces"] = replaced
+            vbrep = _edges_to_vbrep(
+                faces, sheets, graph, instances, regions, fit, seg, depth, K, window, scale, cfg, stats
+            )
+    return vbrep
+
+
+def _edges_to_vbrep(
+    faces: dict,
+    sheets: dict,
+    graph: Any,
+    instances: np.ndarray,
+    regions: np.ndarray,
+    fit: FitResult,
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    scale: float,
+    cfg: VBRepConfig,
+    stats: dict[str, Any],
+) -> VBRep:
+    """Steps 2-5 (module docstring) on the faces' surfaces and sheets; ``stats`` gets their counts."""
+    gap_thr = max(cfg.int_gap * scale, cfg.int_gap_min_m)
     ctx = ExtractContext(faces, sheets, K, window, scale, gap_thr, depth, instances, cfg, stats)
     ctx.regions = regions  # a face's mesh and measures keep its own pixels
     # 2. edges: typed, split and lifted

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
 
 from v2c.camera import pixel_rays
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, type_axis_of
@@ -28,6 +29,7 @@ from v2c.segment.refine import touching_pairs
 from v2c.vbrep.ambiguity import SheetChoice, choose_sheet
 from v2c.vbrep.classify import FaceGeom
 from v2c.vbrep.config import VBRepConfig
+from v2c.vbrep.mesh import lift_points
 from v2c.vbrep.pointfit import (
     fit_axis_cylinder_points,
     fit_axis_line_cone_points,
@@ -406,6 +408,55 @@ def face_geoms(
     _add_fallbacks(fs, seg, fit, scale)
     stats["rejected_primitives"] = rejected
     return fs.faces, fs.sheets
+
+
+def _ray_miss(fs: _FaceSet, inst: int, prim: Primitive, sheet: int, scale: float) -> tuple[float, float]:
+    """(median distance (metres) from ``prim`` (on ``sheet``) lifted along the rays of instance ``inst``'s pixels
+    with a reading to the nearest point those pixels measured (inf where no ray meets it; `v2c.vbrep.mesh.
+    beyond_measured`'s measure, per pixel), the readings' median depth (metres)); (0, 0) for an instance with
+    fewer than 3 readings."""
+    vs, us = np.nonzero((fs.inst_map == inst) & (fs.depth > 0))
+    if len(us) < 3:
+        return 0.0, 0.0
+    uv = np.stack([us, vs], 1).astype(float)
+    own = pixel_rays(uv, fs.K) * fs.depth[vs, us, None]
+    lifted, good = lift_points(prim, sheet, uv, fs.depth, fs.K, fs.window, fs.cfg.mesh_surface_tol * scale)
+    z = float(np.median(fs.depth[vs, us]))
+    if not good.any():
+        return float("inf"), z
+    return float(np.median(cKDTree(own).query(lifted[good], k=1)[0])), z
+
+
+def planes_for_unseen_surfaces(
+    seg: Segmentation,
+    depth: np.ndarray,
+    K: np.ndarray,
+    window: tuple[float, float],
+    scale: float,
+    cfg: VBRepConfig,
+    faces: dict[int, FaceGeom],
+    sheets: dict[int, SheetChoice],
+    insts: list[int],
+) -> list[int]:
+    """The curved surfaces of instances ``insts`` whose meshes missed their own readings (the extraction left
+    those faces without a mesh, and so without a face in the STEP, though the sensor saw them: a real tuna can's
+    lid piece fitted as a torus its pixels' rays meet 4 mm off their depth) replaced, in ``faces`` and ``sheets``,
+    by the plane through those readings where that plane's rays meet them within mesh_evidence_tol (the mesh
+    test's own bound). Returns the instance ids replaced."""
+    fs = _FaceSet(np.asarray(seg.instances), depth, K, window, cfg)
+    fs.faces, fs.sheets = dict(faces), dict(sheets)
+    out = []
+    for inst in sorted(insts):
+        fg = faces.get(inst)
+        if fg is None or isinstance(fg.prim, Plane):
+            continue
+        got = fit_plane_points(measured_points(fs.inst_map == inst, depth, K), cfg.fallback_trim)
+        if got is None or _ray_miss(fs, inst, got[0], 0, scale)[0] > cfg.mesh_evidence_tol * scale:
+            continue
+        fs.add(inst, got[0], got[1], None, {**fg.extra, "refit": "plane"})
+        faces[inst], sheets[inst] = fs.faces[inst], fs.sheets[inst]
+        out.append(int(inst))
+    return out
 
 
 def absorb_islands(

@@ -189,6 +189,73 @@ def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplif
     return protos
 
 
+def _drop_fold_backs(
+    protos: list[ProtoEdge], verts: list[ProtoVertex], K: np.ndarray, fold_deg: float, fold_px: float
+) -> list[ProtoEdge]:
+    """Rule 3a: two edges of the same type and faces that meet at a vertex no other edge uses and leave it the same
+    way (their directions within ``fold_deg`` degrees in 3D) where the shorter one's far end projects within
+    ``fold_px`` pixels of the longer one's image path: one boundary that ran past where it turns and came back
+    along itself (a vertex placed a few pixels beyond the junction it belongs to). The two become one edge, the
+    longer one's polyline up to the point nearest that far end, then the far end; the vertex between them goes."""
+    if fold_deg <= 0:
+        return protos
+    cos_lim = np.cos(np.deg2rad(fold_deg))
+    changed = True
+    while changed:
+        changed = False
+        inc: dict[int, list[tuple[int, bool]]] = {}
+        for i, p in enumerate(protos):
+            inc.setdefault(p.v0, []).append((i, True))
+            inc.setdefault(p.v1, []).append((i, False))
+        for v, ends in inc.items():  # loop over vertices
+            if len(ends) != 2 or ends[0][0] == ends[1][0] or verts[v].outline_corner:
+                continue
+            (i, si), (j, sj) = ends
+            p, q = protos[i], protos[j]
+            if p.type is not q.type or tuple(sorted(p.faces)) != tuple(sorted(q.faces)):
+                continue
+            if _end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
+                continue
+            (lng, sl, li), (sht, ss) = (
+                ((p, si, i), (q, sj)) if image_length(p.pts, K) >= image_length(q.pts, K) else ((q, sj, j), (p, si))
+            )
+            far = sht.v1 if ss else sht.v0
+            near_end = lng.v1 if sl else lng.v0  # the longer edge's other end
+            if far == near_end:
+                continue
+            a = lng.pts[::-1] if sl else lng.pts  # from its other end to v
+            ua = project(a, K)
+            b = project(np.asarray(verts[far].position, float)[None], K)[0]
+            seg_a, seg_b = ua[:-1], ua[1:]
+            d = seg_b - seg_a
+            t = np.clip(np.einsum("ij,ij->i", b - seg_a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-12), 0.0, 1.0)
+            dist = np.linalg.norm(seg_a + t[:, None] * d - b, axis=1)
+            k = int(np.argmin(dist))
+            if dist[k] > fold_px:
+                continue
+            pts = np.concatenate([a[: k + 1], np.asarray(verts[far].position, float)[None]])
+            uv_l = lng.uv[::-1] if sl else lng.uv
+            uv = np.concatenate([uv_l[: k + 1], b[None]]) if len(uv_l) == len(a) else np.zeros((0, 2))
+            merged = ProtoEdge(
+                lng.type,
+                lng.faces,
+                pts,
+                uv,
+                lng.key1 if sl else lng.key0,
+                sht.key1 if ss else sht.key0,
+                lng.graph_edge,
+                lng.curve,
+                dict(lng.stats),
+                near_end,
+                far,
+                lng.apart,
+            )
+            protos = [x for n, x in enumerate(protos) if n not in (i, j)] + [merged]
+            changed = True
+            break
+    return protos
+
+
 def _plane_pair(p: ProtoEdge, prims: dict[int, Primitive]) -> bool:
     """Whether ``p`` is an intersection edge of two planes (its curve a line)."""
     return (
@@ -258,6 +325,7 @@ def postprocess(
     (rule 4 needs them; without, it is skipped); stats: gets ``collapsed_lifted`` (edges lifted by rule 4)."""
     protos = _labelling(protos)
     protos = _contract_short(protos, verts, K, cfg.min_edge_px, cfg.min_loop_edges * cfg.min_edge_px, same_m)
+    protos = _drop_fold_backs(protos, verts, K, cfg.fold_deg, cfg.fold_px)
     protos = _merge_degree_two(protos, verts, cfg.simplify_deg)
     if prims is not None:
         n_lifted = lift_collapsed(protos, verts, prims, K)
