@@ -138,22 +138,31 @@ def _end_dir(p: ProtoEdge, at_start: bool) -> np.ndarray:
     return d / max(np.linalg.norm(d), 1e-12)
 
 
+def _same_kind_pairs(protos: list[ProtoEdge], verts: list[ProtoVertex]) -> list[tuple[int, bool, int, bool]]:
+    """(i, si, j, sj) for each vertex that exactly two distinct edges use, of the same type and faces, and that is
+    not an outline corner: the two edges' indices, each with True where it starts at that vertex (vertex order)."""
+    inc: dict[int, list[tuple[int, bool]]] = {}
+    for i, p in enumerate(protos):
+        inc.setdefault(p.v0, []).append((i, True))
+        inc.setdefault(p.v1, []).append((i, False))
+    out = []
+    for v, ends in inc.items():  # loop over vertices
+        if len(ends) != 2 or ends[0][0] == ends[1][0] or verts[v].outline_corner:
+            continue
+        (i, si), (j, sj) = ends
+        p, q = protos[i], protos[j]
+        if p.type is q.type and tuple(sorted(p.faces)) == tuple(sorted(q.faces)):
+            out.append((i, si, j, sj))
+    return out
+
+
 def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplify_deg: float) -> list[ProtoEdge]:
     cos_lim = np.cos(np.deg2rad(simplify_deg))
     changed = True
     while changed:
         changed = False
-        inc: dict[int, list[tuple[int, bool]]] = {}
-        for i, p in enumerate(protos):
-            inc.setdefault(p.v0, []).append((i, True))
-            inc.setdefault(p.v1, []).append((i, False))
-        for v, ends in inc.items():
-            if len(ends) != 2 or ends[0][0] == ends[1][0] or verts[v].outline_corner:
-                continue
-            (i, si), (j, sj) = ends
+        for i, si, j, sj in _same_kind_pairs(protos, verts):
             p, q = protos[i], protos[j]
-            if p.type is not q.type or tuple(sorted(p.faces)) != tuple(sorted(q.faces)):
-                continue
             # leaving v into p and into q: a straight continuation has these opposite
             if -_end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
                 continue
@@ -203,17 +212,8 @@ def _drop_fold_backs(
     changed = True
     while changed:
         changed = False
-        inc: dict[int, list[tuple[int, bool]]] = {}
-        for i, p in enumerate(protos):
-            inc.setdefault(p.v0, []).append((i, True))
-            inc.setdefault(p.v1, []).append((i, False))
-        for v, ends in inc.items():  # loop over vertices
-            if len(ends) != 2 or ends[0][0] == ends[1][0] or verts[v].outline_corner:
-                continue
-            (i, si), (j, sj) = ends
+        for i, si, j, sj in _same_kind_pairs(protos, verts):
             p, q = protos[i], protos[j]
-            if p.type is not q.type or tuple(sorted(p.faces)) != tuple(sorted(q.faces)):
-                continue
             if _end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
                 continue
             (lng, sl, li), (sht, ss) = (
