@@ -324,7 +324,13 @@ def build_brep(
     # VFace id -> (piece, the VEdge ids its loops hold) for a face built from its loops in several pieces
     loop_parts: dict[int, list[tuple[TopoDS_Face, set[int]]]] = {}
     mesh_deflection = max(cfg.mesh_check_deflection_abs, cfg.mesh_check_deflection_rel * fmap.length(vbrep.scale))
+    # instances whose curved fit missed their readings and that the extraction wrote as their readings' plane
+    replaced = set((vbrep.meta.get("extract") or {}).get("planes_for_unseen_surfaces") or [])
     for f in vbrep.faces:
+        if f.instance in replaced:
+            eb.warnings.append(
+                f"face {f.id}: its curved fit missed its own readings; written as the plane through them"
+            )
         if f.id not in eb.surfaces:
             out.skipped_faces.append(f.id)
             continue

@@ -453,3 +453,17 @@ def test_a_corner_cut_skips_an_edge_occt_could_not_make() -> None:
     eb = EdgeBuilder(vb, CAMERA, BrepConfig()).run()
     del eb.edges[1]
     assert FaceBuilder(eb).build_face(vb.faces[0], eb.edges) is None
+
+
+def test_a_face_the_extraction_wrote_as_its_readings_plane_is_named_in_the_warnings() -> None:
+    # `v2c.vbrep.faces.planes_for_unseen_surfaces` lists, in the VB-Rep's meta, the instances whose curved fit missed
+    # their readings and that became planes: the STEP writer says so for each such face, and only for those.
+    vb = box_corner()
+    vb.meta["extract"] = {"planes_for_unseen_surfaces": [vb.faces[1].instance]}
+    built = build_brep(vb, CAMERA)
+    named = [w for w in built.warnings if "written as the plane through them" in w]
+    assert named == [
+        f"face {vb.faces[1].id}: its curved fit missed its own readings; written as the plane through them"
+    ]
+    vb.meta["extract"] = {"planes_for_unseen_surfaces": []}
+    assert not [w for w in build_brep(vb, CAMERA).warnings if "plane through them" in w]
