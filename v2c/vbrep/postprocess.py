@@ -216,8 +216,8 @@ def _drop_fold_backs(
             p, q = protos[i], protos[j]
             if _end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
                 continue
-            (lng, sl, li), (sht, ss) = (
-                ((p, si, i), (q, sj)) if image_length(p.pts, K) >= image_length(q.pts, K) else ((q, sj, j), (p, si))
+            (lng, sl), (sht, ss) = (
+                ((p, si), (q, sj)) if image_length(p.pts, K) >= image_length(q.pts, K) else ((q, sj), (p, si))
             )
             far = sht.v1 if ss else sht.v0
             near_end = lng.v1 if sl else lng.v0  # the longer edge's other end
