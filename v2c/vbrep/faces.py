@@ -410,21 +410,19 @@ def face_geoms(
     return fs.faces, fs.sheets
 
 
-def _ray_miss(fs: _FaceSet, inst: int, prim: Primitive, sheet: int, scale: float) -> tuple[float, float]:
-    """(median distance (metres) from ``prim`` (on ``sheet``) lifted along the rays of instance ``inst``'s pixels
+def _ray_miss(fs: _FaceSet, inst: int, prim: Primitive, sheet: int, scale: float) -> float:
+    """Median distance (metres) from ``prim`` (on ``sheet``) lifted along the rays of instance ``inst``'s pixels
     with a reading to the nearest point those pixels measured (inf where no ray meets it; `v2c.vbrep.mesh.
-    beyond_measured`'s measure, per pixel), the readings' median depth (metres)); (0, 0) for an instance with
-    fewer than 3 readings."""
+    beyond_measured`'s measure, per pixel); 0 for an instance with fewer than 3 readings."""
     vs, us = np.nonzero((fs.inst_map == inst) & (fs.depth > 0))
     if len(us) < 3:
-        return 0.0, 0.0
+        return 0.0
     uv = np.stack([us, vs], 1).astype(float)
     own = pixel_rays(uv, fs.K) * fs.depth[vs, us, None]
     lifted, good = lift_points(prim, sheet, uv, fs.depth, fs.K, fs.window, fs.cfg.mesh_surface_tol * scale)
-    z = float(np.median(fs.depth[vs, us]))
     if not good.any():
-        return float("inf"), z
-    return float(np.median(cKDTree(own).query(lifted[good], k=1)[0])), z
+        return float("inf")
+    return float(np.median(cKDTree(own).query(lifted[good], k=1)[0]))
 
 
 def planes_for_unseen_surfaces(
@@ -451,7 +449,7 @@ def planes_for_unseen_surfaces(
         if fg is None or isinstance(fg.prim, Plane):
             continue
         got = fit_plane_points(measured_points(fs.inst_map == inst, depth, K), cfg.fallback_trim)
-        if got is None or _ray_miss(fs, inst, got[0], 0, scale)[0] > cfg.mesh_evidence_tol * scale:
+        if got is None or _ray_miss(fs, inst, got[0], 0, scale) > cfg.mesh_evidence_tol * scale:
             continue
         fs.add(inst, got[0], got[1], None, {**fg.extra, "refit": "plane"})
         faces[inst], sheets[inst] = fs.faces[inst], fs.sheets[inst]
