@@ -8,6 +8,7 @@ import shapely
 from shapely.geometry.polygon import signed_area as _ring_signed_area
 
 from v2c.groups import groups_sharing_keys
+from v2c.polyline import segment_distances
 
 
 def simplify_polyline(points: np.ndarray, tol: float) -> np.ndarray:
@@ -43,10 +44,7 @@ def densify(pts: np.ndarray, n_max: int = 120) -> np.ndarray:
 
 def dist_to_polyline_2d(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """(M,) distances of 2D points to a 2D polyline."""
-    a, d = poly[:-1], np.diff(poly, axis=0)
-    dd = np.maximum(np.einsum("kj,kj->k", d, d), 1e-300)
-    t = np.clip(np.einsum("mkj,kj->mk", q[:, None] - a[None], d) / dd, 0.0, 1.0)
-    return np.linalg.norm(q[:, None] - (a[None] + t[..., None] * d[None]), axis=2).min(1)
+    return segment_distances(q, poly).min(1)
 
 
 def polygon_crossings(polygons: list[np.ndarray]) -> np.ndarray:

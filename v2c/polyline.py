@@ -40,3 +40,11 @@ def rdp_indices(points: np.ndarray, tol: float, clamp: bool = False) -> np.ndarr
             keep[m] = True
             stack += [(i, m), (m, j)]
     return np.flatnonzero(keep)
+
+
+def segment_distances(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """(M, K) distances of the points ``q`` (M, D) to each of the K segments of the polyline ``poly`` (K + 1, D)."""
+    a, d = poly[:-1], np.diff(poly, axis=0)
+    dd = np.maximum(np.einsum("kj,kj->k", d, d), 1e-300)
+    t = np.clip(np.einsum("mkj,kj->mk", q[:, None] - a[None], d) / dd, 0.0, 1.0)
+    return np.linalg.norm(q[:, None] - (a[None] + t[..., None] * d[None]), axis=2)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from v2c.camera import pixel_rays, project
-from v2c.polyline import rdp_indices
+from v2c.polyline import rdp_indices, segment_distances
 from v2c.primitives import Plane
 from v2c.primitives.base import Primitive
 from v2c.vbrep.config import VBRepConfig
@@ -226,10 +226,7 @@ def _drop_fold_backs(
             a = lng.pts[::-1] if sl else lng.pts  # from its other end to v
             ua = project(a, K)
             b = project(np.asarray(verts[far].position, float)[None], K)[0]
-            seg_a, seg_b = ua[:-1], ua[1:]
-            d = seg_b - seg_a
-            t = np.clip(np.einsum("ij,ij->i", b - seg_a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-12), 0.0, 1.0)
-            dist = np.linalg.norm(seg_a + t[:, None] * d - b, axis=1)
+            dist = segment_distances(b[None], ua)[0]
             k = int(np.argmin(dist))
             if dist[k] > fold_px:
                 continue
