@@ -51,14 +51,6 @@ class FitConfig(RansacConfig):
     # cylinder (oracle label, score 1: a poor RANSAC radius, 154 mm for 46)
     # for a plane (alignment 0.0046 -> 0.0070); the learned labels it turned
     # were 0.77 and 0.78 probable (alignment 0.0095 -> 0.0055)
-    flat_label_sigma: float = 1.0  # ... and a curved label under unsupported_label_certain whose points its own
-    # plane explains within this many sensor sigmas (robust residual sigma; `stage._plane_explains`) becomes a
-    # plane whatever GRIC says: the depth cannot tell it from a plane, and thousands of readings let a curved fit
-    # win GRIC on the sensor's slow warp (issue 17: the real cracker box's front, labelled cylinder at 0.67, a
-    # 157 mm cylinder over 166 mm whose plane leaves 0.82 sensor sigmas). 0: off
-    flat_label_min_px: int = 150  # ... for patches of at least this many points (pixels; as
-    # VerifyConfig.flat_min_px: on a small patch the depth's flatness is no evidence against the label; the real
-    # cans' 35-45-point rim pieces, demoted, redrew the part frame and moved the tuna can's radius -1.3 -> -3.2 %)
     nested_selection: bool = True  # a cone or torus (labelled or type-searched) must beat its simpler nested
     # type (the cylinder: a cone of half angle 0, a torus of infinite major
     # radius) by GRIC with the sensor's noise model (`geometry.selection.

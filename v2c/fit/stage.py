@@ -300,28 +300,19 @@ def _planes_where_unsupported(
         x = ip.points[fits.inliers[i]]
         score = fits.scores.get(i, 0.0)
         certain = score >= config.support_label_certain
-        kept = certain and not (
+        if certain and not (
             config.unsupported_labels
             and score < config.unsupported_label_certain
             and not radius_supported(p, x, config)
-        )  # a certain label, unless its radius is more than its patch's extent supports
-        may_be_flat = (
-            config.flat_label_sigma > 0
-            and score < config.unsupported_label_certain
-            and len(ip.points) >= config.flat_label_min_px
-        )
-        if kept and not may_be_flat:
-            continue
+        ):
+            continue  # a certain label, unless its radius is more than its patch's extent supports
         f = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 3]))
         if f is None:
             continue
-        if not (may_be_flat and _plane_explains(f.primitive, ip.points, config)):
-            if kept:
-                continue
-            if (certain or supported(p, x, config)) and select_type(
-                {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config
-            ) != "plane":
-                continue
+        if (certain or supported(p, x, config)) and select_type(
+            {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config
+        ) != "plane":
+            continue
         demoted.append(i)
         q = _canonical(f.primitive, ip.points[f.inliers] if f.inliers.any() else ip.points)
         axis_idx[i] = -1
@@ -341,14 +332,6 @@ def _planes_where_unsupported(
         fits.want[i] = "?"
         fits.searched.append(i)
     return demoted
-
-
-def _plane_explains(plane: Primitive, x: np.ndarray, config: FitConfig) -> bool:
-    """True when ``plane`` explains the instance points ``x`` (N, 3, metres) within the sensor's noise: their
-    robust residual sigma (`mad_sigma`) at most flat_label_sigma times the sensor's depth sigma at their median
-    point (`noise_sigma`)."""
-    sigma = float(np.median(noise_sigma(x, config)))
-    return mad_sigma(plane.signed_distance(x)) <= config.flat_label_sigma * sigma
 
 
 #: The simpler types nested in a curved type (a cone of half angle 0 is a cylinder; a torus of infinite major
