@@ -265,3 +265,69 @@ def test_a_band_off_a_curved_instance_is_split_off_and_a_plane_keeps_its_pad() -
     plane = _tilted_plane(rng)
     flat = _seg(np.ones((H, W), np.int32), [0, PLANE_Z], [0, 0.9])
     assert split_unexplained(flat, np.where(band, plane - 0.005, plane), K) is flat
+
+
+def _domed_can(rng: np.random.Generator, junction_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(depth (metres) with Gaussian noise NOISE_M, True where the dome is seen) of a can of radius CAN_R whose axis
+    runs along the camera's y axis at depth CAN_Z, its side below the camera height ``junction_mm`` (mm; y grows
+    down the image) and a hemispherical dome of the same radius above it, tangent to the side (a domed pin's end);
+    0 where a ray misses both or meets the side within 10 px of its silhouette."""
+    u = (np.arange(W, dtype=float) - K_CAN[0, 2]) / K_CAN[0, 0]
+    v = (np.arange(H, dtype=float) - K_CAN[1, 2]) / K_CAN[1, 1]
+    tx, ty = np.meshgrid(u, v)
+    yc = junction_mm / 1000.0
+    # the side: x^2 + (z - CAN_Z)^2 = R^2 along the ray (x, y, z) = s (tx, ty, 1)
+    disc = CAN_Z**2 - (1 + tx**2) * (CAN_Z**2 - CAN_R**2)
+    s_side = np.where(disc > 0, (CAN_Z - np.sqrt(np.maximum(disc, 0.0))) / (1 + tx**2), 0.0)
+    side = (s_side > 0) & (s_side * ty >= yc) & (np.abs(tx) * K_CAN[0, 0] < CAN_R / CAN_Z * K_CAN[0, 0] - 10)
+    # the dome: |s d - (0, yc, CAN_Z)|^2 = R^2
+    a = 1 + tx**2 + ty**2
+    b = yc * ty + CAN_Z
+    disc2 = b**2 - a * (yc**2 + CAN_Z**2 - CAN_R**2)
+    s_dome = np.where(disc2 > 0, (b - np.sqrt(np.maximum(disc2, 0.0))) / a, 0.0)
+    dome = (s_dome > 0) & (s_dome * ty < yc) & ~side
+    depth = np.where(side, s_side, np.where(dome, s_dome, 0.0))
+    return np.where(depth > 0, depth + rng.normal(0.0, NOISE_M, depth.shape), 0.0), dome
+
+
+def test_an_unexplained_instance_is_cut_around_its_labels_surface() -> None:
+    """A domed can (a 50 mm cylinder's side and the hemispherical dome on it, tangent) in one instance labelled
+    cylinder: no one primitive explains it, and the sphere holds more of it than the cylinder (the dome is the
+    larger part). The cut follows the label's surface (`VerifyConfig.explain_core_label`): the side stays one
+    instance, with the dome's rim within the noise of the cylinder, and the dome's top is another; the side's
+    instance is left to the fit stage's type search (an undecided plane of score 0), as every cut piece is.
+    Without the rule the cut follows the sphere, which takes the dome and the side's upper part and leaves the
+    side's lower rows a piece of their own."""
+    from v2c.geometry.config import RansacConfig
+    from v2c.geometry.points import instance_points
+    from v2c.geometry.ransac import ransac_fit
+    from v2c.segment.refine import scan_geometry
+    from v2c.segment.verify import split_unexplained
+
+    rng = np.random.default_rng(3)
+    depth, dome = _domed_can(rng, junction_mm=25.0)
+    on = depth > 0
+    side = on & ~dome
+    one = _seg(on.astype(np.int32), [0, CYL_Z], [0, 0.7])
+    # the precondition: the sphere holds more than the cylinder, and neither holds 85 %
+    cfg = VerifyConfig()
+    pts, size = scan_geometry(depth, K_CAN, on.astype(np.int32), RansacConfig())
+    ip = instance_points(pts, on, on.astype(np.int32), np.array([1]), RansacConfig())[1]
+    tol = cfg.explain_sigma * cfg.noise_sigma_coeff * ip.points[:, 2] ** 2 + cfg.explain_floor_m
+    tight = RansacConfig(d_inlier=float(np.median(tol)) / size)
+    held = {}
+    for t in ("cylinder", "sphere"):
+        f = ransac_fit(t, ip.points, ip.normals, size, tight, np.random.default_rng(0))
+        held[t] = float(np.mean(np.abs(f.primitive.signed_distance(ip.points)) < tol))
+    assert held["cylinder"] < held["sphere"] < cfg.explain_share, held
+
+    out = split_unexplained(one, depth, K_CAN)
+    low = out.instances[H - 5, int(K_CAN[0, 2])]  # the side's bottom row
+    top = out.instances[np.argmax(dome.any(axis=1)) + 2, int(K_CAN[0, 2])]  # near the dome's top
+    assert low > 0 and top > 0 and low != top
+    assert np.count_nonzero((out.instances == low) & side) > 0.97 * side.sum()  # the side is one instance ...
+    assert np.count_nonzero((out.instances == low) & dome) < 0.5 * dome.sum()  # ... with the dome's rim only
+    assert out.labels[low] == PLANE_U and out.scores[low] == 0.0  # ... whose type the fit stage searches
+    old = split_unexplained(one, depth, K_CAN, VerifyConfig(explain_core_label=False))
+    low_old = old.instances[H - 5, int(K_CAN[0, 2])]
+    assert np.count_nonzero((old.instances == low_old) & side) < 0.6 * side.sum()  # the side cut in two

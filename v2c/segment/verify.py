@@ -114,6 +114,10 @@ class VerifyConfig:
     explain_min_part: float = 0.25  # the best primitive must explain at least this share of the instance, so the
     # split is a surface and the rest (fraction)
     explain_depth: int = 2  # pieces are tested again down to this many splits (count)
+    explain_core_label: bool = True  # an instance no one primitive explains is cut around its label's surface (the
+    # label's type, else the simpler type nested in it: a cone's or a torus's cylinder) where that holds at least
+    # explain_min_part of it, not around whichever type holds most: the network names the surface, the depth
+    # says it holds more than one
     explain_curved_pieces: bool = True  # in an instance that a curved primitive explains (its patch supporting the
     # curvature), a piece of its outliers that one primitive of its own explains is split off too (`_outlier_pieces`):
     # the curved instances' analogue of the plane instances' off-plane split (`refine`), e.g. the real tuna can's
@@ -508,6 +512,10 @@ def _join_nearest(inst: np.ndarray, seeds: np.ndarray, rest: np.ndarray) -> None
 #: The types `split_unexplained` tries, in this order after an instance's own label's.
 _TYPES = ("plane", "cylinder", "cone", "sphere", "torus")
 
+#: The simpler type nested in a curved one (a cone of half angle 0, a torus of infinite major radius: a cylinder),
+#: as the fit stage's `v2c.fit.stage.NESTED`.
+_NESTED = {"cone": ("cylinder",), "torus": ("cylinder",)}
+
 
 def _explaining_fit(
     types: list[str] | tuple[str, ...],
@@ -621,6 +629,14 @@ def split_unexplained(
         types = ([own] if own else []) + [u for u in _TYPES if u != own]
         best_type, best_in, best_prim = _explaining_fit(types, x, ip.normals, tol, size, tight, rng, cfg.explain_share)
         explained = best_in.mean() >= cfg.explain_share
+        by_label = False  # the cut follows the label's surface, not the type holding most (explain_core_label)
+        if not explained and cfg.explain_core_label and own is not None and best_type not in (own, None):
+            family = [own, *_NESTED.get(own, ())]
+            rng_label = np.random.default_rng([cfg.seed, i, level, 1])
+            got = _explaining_fit(family, x, ip.normals, tol, size, tight, rng_label, cfg.explain_share)
+            if got[0] is not None and got[1].mean() >= cfg.explain_min_part:
+                best_type, best_in, best_prim = got
+                by_label = True
         if (
             explained
             and cfg.explain_curved_pieces
@@ -651,7 +667,7 @@ def split_unexplained(
         if not pieces:
             continue
         changed = True
-        keep = best_type == own
+        keep = best_type == own and not by_label  # a cut along the label's surface still leaves its type to the fit
         whole = inst == i  # every pixel of the instance, with or without depth
         inst[whole] = 0
         inst[first] = i
