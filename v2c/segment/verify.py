@@ -34,7 +34,9 @@ the depth says one surface, whatever is printed on it. This step uses those regi
 
 - **instances no one primitive explains** (``explain_split``, `split_unexplained`, after the rest): an instance
   that no one primitive holds within the noise is cut into the best primitive's inliers and the rest (the curved
-  instances the plane regions cannot split: a watering can's body, a boss and the flange it stands on).
+  instances the plane regions cannot split: a watering can's body, a boss and the flange it stands on); where
+  another type holds more than the label's, around the label's surface (``explain_core_label``: the real tuna can's
+  side, which a sphere held together with its rim's inner wall).
 
 A region counts when it holds ``region_min_px`` valid pixels and is labelled a plane, or its own plane explains it
 within the noise (robust residual sigma within ``region_sigma`` sensor sigmas). Sensor sigma =
@@ -592,12 +594,15 @@ def split_unexplained(
     band, 3 % of the part, holds two surfaces a few millimetres apart). Otherwise the best primitive's inliers
     (their largest 4-connected piece after a 1-px opening) become one instance and what is left another (each
     4-connected piece of at least ``explain_piece_px`` valid pixels its own; smaller ones and the pixels without
-    depth join the nearest piece). The pieces left are tested again, down to ``explain_depth`` splits. The first
-    piece keeps the label when its type is the label's; the others are undecided planes of score 0, so the fit
-    stage searches their type. With ``explain_curved_pieces``, an instance that a curved primitive explains, whose
-    patch supports that curvature (`geometry.selection.supported`: not a near-flat cylinder over a box's side), gives
-    up each piece of its outliers that one primitive of its own explains (`_outlier_pieces`), as such a piece too
-    (plane instances have the off-plane split of `refine` for that)."""
+    depth join the nearest piece); with ``explain_core_label``, where the best type is not the label's, the inliers
+    of the label's type (or of the type nested in it) instead, when they hold at least ``explain_min_part``: the
+    network names the surface. The pieces left are tested again, down to ``explain_depth`` splits. The first
+    piece keeps the label when its type is the label's (and the cut was not made along the label's surface for
+    that reason); the others are undecided planes of score 0, so the fit stage searches their type. With
+    ``explain_curved_pieces``, an instance that a curved primitive explains, whose patch supports that curvature
+    (`geometry.selection.supported`: not a near-flat cylinder over a box's side), gives up each piece of its
+    outliers that one primitive of its own explains (`_outlier_pieces`), as such a piece too (plane instances have
+    the off-plane split of `refine` for that)."""
     if not cfg.explain_split:
         return seg
     ransac = ransac or RansacConfig()
