@@ -317,3 +317,43 @@ def test_an_instance_of_flying_pixels_is_dropped() -> None:
     whole = Segmentation(np.where(inst == 2, 3, inst), seg.labels, seg.scores, "learned")
     assert without_flying(whole, depth, RAMP_K, 0.5) is whole
     assert without_flying(seg, depth, RAMP_K, 1.0) is seg
+
+
+def test_the_real_bench_counts_the_objects_readings_above_its_support(tmp_path: Path) -> None:
+    """`v2c.bench.real.object_on_support`, the real-frame bench's object pixels: a box on a table top, with a floor
+    0.3 m below that is the frame's largest plane, and the box's outline drawn 4 px too wide (a hand-drawn polygon takes
+    in the table around the object). The frame's ground is the floor, so every polygon pixel stands above it,
+    table and box alike (the ruler of ``coverage_3mm_object``); the pixels standing above the support found around
+    the ROI are the box's alone: at least 97 % of its pixels, and not one of the table's."""
+    from v2c.bench.real import object_on_support
+    from v2c.segment.geometric import GeometricConfig, part_region
+
+    faces = [
+        BoundedFace(_plane((0, 0, -0.3), (0, 0, 1)), lambda p: np.all(np.abs(p[:, :2]) <= 3.0, axis=1), 3, "Z"),
+        BoundedFace(_plane((0, 0, 0), (0, 0, 1)), lambda p: np.all(np.abs(p[:, :2]) <= 0.3, axis=1), 3, "Z"),
+        *_box_faces(0.0, 0.0, (0.08, 0.06, 0.10)),
+    ]
+    target = np.array([0.0, 0.0, 0.05])
+    eye = target + 0.9 * np.array([0.15, -0.75, 0.65]) / np.linalg.norm([0.15, -0.75, 0.65])
+    r = render_scene(Scene(faces, eye, target, 0.5, K=K.copy(), image_size=(W, H)))
+    floor, table, box = r.faces == 1, r.faces == 2, r.faces >= 3
+    assert floor.sum() > table.sum() and box.sum() > 1000  # the floor is the frame's largest plane
+    depth = np.where(r.depth > 0, r.depth + np.random.default_rng(1).normal(0.0, 0.001, r.depth.shape), 0.0)
+    folder = tmp_path / "scene"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "color.png"), np.full((H, W, 3), 128, np.uint8))
+    cv2.imwrite(str(folder / "depth.png"), np.round(depth / DEPTH_SCALE).astype(np.uint16))
+    (folder / "camera.json").write_text(
+        json.dumps({"width": W, "height": H, "K": K.tolist(), "depth_scale": DEPTH_SCALE})
+    )
+    ys, xs = np.nonzero(box)
+    roi = (int(xs.min()) - 10, int(ys.min()) - 10, int(xs.max()) + 10, int(ys.max()) + 10)
+    scan = load_scan(folder, roi=roi)
+    polygon = cv2.dilate(box.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+    ring = polygon & table & scan.valid
+    assert ring.sum() > 200  # the polygon takes in the table around the box
+    old = part_region(scan, GeometricConfig(roi_one_object=False, roi_ground_margin=0.0))[0] & polygon
+    assert (old & ring).sum() > 0.9 * ring.sum()  # above the floor: counted as the object's
+    got = object_on_support(scan, polygon)
+    assert not (got & ring).any()
+    assert (got & box).sum() >= 0.97 * (box & scan.valid).sum()
