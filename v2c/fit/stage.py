@@ -23,7 +23,14 @@ from v2c.fit.tangency import adjacent_terms, constrain_blends, tangent_junctions
 from v2c.geometry.points import InstancePoints, estimate_part_size, instance_points, mad_sigma
 from v2c.geometry.ransac import RansacFit, cone_ok, inlier_mask, plausible, ransac_fit, refine_primitive, torus_ok
 from v2c.geometry.residuals import Term
-from v2c.geometry.selection import fit_instance, noise_sigma, radius_supported, select_type, supported
+from v2c.geometry.selection import (
+    NESTED_TYPES,
+    fit_instance,
+    noise_sigma,
+    radius_supported,
+    select_type,
+    supported,
+)
 from v2c.labels import AxisClass, PrimitiveType, type_axis_of
 from v2c.primitives import Cylinder, Plane, Primitive, Torus
 from v2c.primitives.directions import unit
@@ -334,11 +341,8 @@ def _planes_where_unsupported(
     return demoted
 
 
-#: The simpler types nested in a curved type (a cone of half angle 0 is a cylinder; a torus of infinite major
-#: radius a cylinder). A sphere is a torus of zero major radius, but the fitted tori are ring tori (major radius
-#: above torus_min_ratio minor radii), whose family does not hold it: on the validation set the sphere took two
-#: small true fillet tori (82 and 172 px) by GRIC.
-NESTED = {"cone": ("cylinder",), "torus": ("cylinder",)}
+#: The simpler types nested in a curved type (`geometry.selection.NESTED_TYPES`).
+NESTED = NESTED_TYPES
 
 
 def _label_trusted(fits: _Fits, i: int, config: FitConfig) -> bool:

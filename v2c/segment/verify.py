@@ -62,7 +62,7 @@ from v2c.camera import backproject
 from v2c.geometry.config import RansacConfig
 from v2c.geometry.points import InstancePoints, instance_points, mad_sigma, median_depth_sigma
 from v2c.geometry.ransac import ransac_fit, refine_primitive
-from v2c.geometry.selection import supported
+from v2c.geometry.selection import NESTED_TYPES, supported
 from v2c.groups import UnionFind
 from v2c.labels import TYPE_NAMES, TYPE_OF_LABEL, label_of
 from v2c.primitives import Cylinder, Primitive
@@ -514,10 +514,6 @@ def _join_nearest(inst: np.ndarray, seeds: np.ndarray, rest: np.ndarray) -> None
 #: The types `split_unexplained` tries, in this order after an instance's own label's.
 _TYPES = ("plane", "cylinder", "cone", "sphere", "torus")
 
-#: The simpler type nested in a curved one (a cone of half angle 0, a torus of infinite major radius: a cylinder),
-#: as the fit stage's `v2c.fit.stage.NESTED`.
-_NESTED = {"cone": ("cylinder",), "torus": ("cylinder",)}
-
 
 def _explaining_fit(
     types: list[str] | tuple[str, ...],
@@ -636,7 +632,7 @@ def split_unexplained(
         explained = best_in.mean() >= cfg.explain_share
         by_label = False  # the cut follows the label's surface, not the type holding most (explain_core_label)
         if not explained and cfg.explain_core_label and own is not None and best_type not in (own, None):
-            family = [own, *_NESTED.get(own, ())]
+            family = [own, *NESTED_TYPES.get(own, ())]
             rng_label = np.random.default_rng([cfg.seed, i, level, 1])
             got = _explaining_fit(family, x, ip.normals, tol, size, tight, rng_label, cfg.explain_share)
             if got[0] is not None and got[1].mean() >= cfg.explain_min_part:
