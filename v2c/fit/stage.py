@@ -341,10 +341,6 @@ def _planes_where_unsupported(
     return demoted
 
 
-#: The simpler types nested in a curved type (`geometry.selection.NESTED_TYPES`).
-NESTED = NESTED_TYPES
-
-
 def _label_trusted(fits: _Fits, i: int, config: FitConfig) -> bool:
     """Whether instance ``i`` keeps its labelled type untested against the nested simpler one: its type came from
     its label, not the type search, and the label is at least ``nested_label_certain`` probable."""
@@ -412,7 +408,7 @@ def _simpler_where_nested(
     scale: float,
     config: FitConfig,
 ) -> None:
-    """Cones and tori (labelled or type-searched) whose simpler nested type (`NESTED`: the cylinder) explains
+    """Cones and tori (labelled or type-searched) whose simpler nested type (`NESTED_TYPES`: the cylinder) explains
     their points as well by GRIC with the sensor's noise model (`geometry.selection.select_type`: the extra
     parameters must buy more than their log(3N) each; a cone of half angle within noise of 0 buys nothing) take
     that type, in place. A cone's cylinder is the nested one with ``nested_from_axis`` (`_nested_cylinder`: on
@@ -427,12 +423,12 @@ def _simpler_where_nested(
         return
     for i in sorted(fits.prims):  # loop over instances
         p, ip = fits.prims[i], ipts[i]
-        if p.type not in NESTED:
+        if p.type not in NESTED_TYPES:
             continue
         if _label_trusted(fits, i, config):
             continue
         cands = {p.type: RansacFit(p, fits.inliers[i], 0.0)}
-        for k, t in enumerate(NESTED[p.type]):  # loop over the simpler types
+        for k, t in enumerate(NESTED_TYPES[p.type]):  # loop over the simpler types
             tries = []
             if config.nested_from_axis and p.type == "cone":
                 tries.append(_nested_cylinder(p, ip, fits.inliers[i], scale, config))

@@ -22,6 +22,7 @@ Camera frame, metres; pixels (u, v).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -156,46 +157,60 @@ def _same_kind_pairs(protos: list[ProtoEdge], verts: list[ProtoVertex]) -> list[
     return out
 
 
-def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplify_deg: float) -> list[ProtoEdge]:
-    cos_lim = np.cos(np.deg2rad(simplify_deg))
+def _join_pairs(
+    protos: list[ProtoEdge],
+    verts: list[ProtoVertex],
+    join: Callable[[ProtoEdge, bool, ProtoEdge, bool], ProtoEdge | None],
+) -> list[ProtoEdge]:
+    """``protos`` with the first pair of `_same_kind_pairs` that ``join`` makes one edge (``join(p, si, q, sj)``:
+    the edge, or None to leave the pair) replaced by that edge, again and again until no pair joins."""
     changed = True
     while changed:
         changed = False
         for i, si, j, sj in _same_kind_pairs(protos, verts):
-            p, q = protos[i], protos[j]
-            # leaving v into p and into q: a straight continuation has these opposite
-            if -_end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
-                continue
-            a = p.pts[::-1] if si else p.pts  # ends at v
-            b = q.pts if sj else q.pts[::-1]  # starts at v
-            ua = p.uv[::-1] if si else p.uv
-            ub = q.uv if sj else q.uv[::-1]
-            v_start = p.v1 if si else p.v0
-            v_end = q.v1 if sj else q.v0
-            n_a, n_b = len(a), len(b)
-            stats = {
-                k: (p.stats[k] * n_a + q.stats[k] * n_b) / (n_a + n_b)
-                if k in q.stats and np.isfinite(p.stats[k]) and np.isfinite(q.stats[k])
-                else p.stats[k]
-                for k in p.stats
-            }
-            merged = ProtoEdge(
-                p.type,
-                p.faces,
-                np.concatenate([a, b[1:]]),
-                np.concatenate([ua, ub[1:]]) if len(ua) and len(ub) else ua,
-                p.key0,
-                q.key1,
-                p.graph_edge,
-                p.curve,
-                stats,
-                v_start,
-                v_end,
-            )
-            protos = [x for k, x in enumerate(protos) if k not in (i, j)] + [merged]
-            changed = True
-            break
+            merged = join(protos[i], si, protos[j], sj)
+            if merged is not None:
+                protos = [x for k, x in enumerate(protos) if k not in (i, j)] + [merged]
+                changed = True
+                break
     return protos
+
+
+def _merge_degree_two(protos: list[ProtoEdge], verts: list[ProtoVertex], simplify_deg: float) -> list[ProtoEdge]:
+    cos_lim = np.cos(np.deg2rad(simplify_deg))
+
+    def join(p: ProtoEdge, si: bool, q: ProtoEdge, sj: bool) -> ProtoEdge | None:
+        # leaving v into p and into q: a straight continuation has these opposite
+        if -_end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
+            return None
+        a = p.pts[::-1] if si else p.pts  # ends at v
+        b = q.pts if sj else q.pts[::-1]  # starts at v
+        ua = p.uv[::-1] if si else p.uv
+        ub = q.uv if sj else q.uv[::-1]
+        v_start = p.v1 if si else p.v0
+        v_end = q.v1 if sj else q.v0
+        n_a, n_b = len(a), len(b)
+        stats = {
+            k: (p.stats[k] * n_a + q.stats[k] * n_b) / (n_a + n_b)
+            if k in q.stats and np.isfinite(p.stats[k]) and np.isfinite(q.stats[k])
+            else p.stats[k]
+            for k in p.stats
+        }
+        return ProtoEdge(
+            p.type,
+            p.faces,
+            np.concatenate([a, b[1:]]),
+            np.concatenate([ua, ub[1:]]) if len(ua) and len(ub) else ua,
+            p.key0,
+            q.key1,
+            p.graph_edge,
+            p.curve,
+            stats,
+            v_start,
+            v_end,
+        )
+
+    return _join_pairs(protos, verts, join)
 
 
 def _drop_fold_backs(
@@ -209,48 +224,43 @@ def _drop_fold_backs(
     if fold_deg <= 0:
         return protos
     cos_lim = np.cos(np.deg2rad(fold_deg))
-    changed = True
-    while changed:
-        changed = False
-        for i, si, j, sj in _same_kind_pairs(protos, verts):
-            p, q = protos[i], protos[j]
-            if _end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
-                continue
-            (lng, sl), (sht, ss) = (
-                ((p, si), (q, sj)) if image_length(p.pts, K) >= image_length(q.pts, K) else ((q, sj), (p, si))
-            )
-            far = sht.v1 if ss else sht.v0
-            near_end = lng.v1 if sl else lng.v0  # the longer edge's other end
-            if far == near_end:
-                continue
-            a = lng.pts[::-1] if sl else lng.pts  # from its other end to v
-            ua = project(a, K)
-            b = project(np.asarray(verts[far].position, float)[None], K)[0]
-            dist = segment_distances(b[None], ua)[0]
-            k = int(np.argmin(dist))
-            if dist[k] > fold_px:
-                continue
-            pts = np.concatenate([a[: k + 1], np.asarray(verts[far].position, float)[None]])
-            uv_l = lng.uv[::-1] if sl else lng.uv
-            uv = np.concatenate([uv_l[: k + 1], b[None]]) if len(uv_l) == len(a) else np.zeros((0, 2))
-            merged = ProtoEdge(
-                lng.type,
-                lng.faces,
-                pts,
-                uv,
-                lng.key1 if sl else lng.key0,
-                sht.key1 if ss else sht.key0,
-                lng.graph_edge,
-                lng.curve,
-                dict(lng.stats),
-                near_end,
-                far,
-                lng.apart,
-            )
-            protos = [x for n, x in enumerate(protos) if n not in (i, j)] + [merged]
-            changed = True
-            break
-    return protos
+
+    def join(p: ProtoEdge, si: bool, q: ProtoEdge, sj: bool) -> ProtoEdge | None:
+        if _end_dir(p, si) @ _end_dir(q, sj) < cos_lim:
+            return None
+        (lng, sl), (sht, ss) = (
+            ((p, si), (q, sj)) if image_length(p.pts, K) >= image_length(q.pts, K) else ((q, sj), (p, si))
+        )
+        far = sht.v1 if ss else sht.v0
+        near_end = lng.v1 if sl else lng.v0  # the longer edge's other end
+        if far == near_end:
+            return None
+        a = lng.pts[::-1] if sl else lng.pts  # from its other end to v
+        ua = project(a, K)
+        b = project(np.asarray(verts[far].position, float)[None], K)[0]
+        dist = segment_distances(b[None], ua)[0]
+        k = int(np.argmin(dist))
+        if dist[k] > fold_px:
+            return None
+        pts = np.concatenate([a[: k + 1], np.asarray(verts[far].position, float)[None]])
+        uv_l = lng.uv[::-1] if sl else lng.uv
+        uv = np.concatenate([uv_l[: k + 1], b[None]]) if len(uv_l) == len(a) else np.zeros((0, 2))
+        return ProtoEdge(
+            lng.type,
+            lng.faces,
+            pts,
+            uv,
+            lng.key1 if sl else lng.key0,
+            sht.key1 if ss else sht.key0,
+            lng.graph_edge,
+            lng.curve,
+            dict(lng.stats),
+            near_end,
+            far,
+            lng.apart,
+        )
+
+    return _join_pairs(protos, verts, join)
 
 
 def _plane_pair(p: ProtoEdge, prims: dict[int, Primitive]) -> bool:
