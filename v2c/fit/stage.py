@@ -298,7 +298,10 @@ def _planes_where_unsupported(
     snap_deg of a frame axis (the label's axis class named the cylinder's axis, not a plane normal). Certain
     labels (score >= support_label_certain: the oracle's) stay, unless (unsupported_labels, scores under
     unsupported_label_certain) their radius is beyond what the patch's extent supports (`radius_supported`) and
-    the plane wins GRIC. Returns the instances that became planes."""
+    the plane wins GRIC. A curved label under unsupported_label_certain on at least flat_label_min_px points
+    becomes a plane, certain or not, where its own plane explains its points within the sensor's noise and its
+    curved fit explains them flat_label_worse times worse or more (`_plane_explains`). Returns the instances that
+    became planes."""
     demoted = []
     for i in sorted(fits.prims):  # loop over instances
         p, ip = fits.prims[i], ipts[i]
@@ -307,19 +310,28 @@ def _planes_where_unsupported(
         x = ip.points[fits.inliers[i]]
         score = fits.scores.get(i, 0.0)
         certain = score >= config.support_label_certain
-        if certain and not (
+        kept = certain and not (
             config.unsupported_labels
             and score < config.unsupported_label_certain
             and not radius_supported(p, x, config)
-        ):
-            continue  # a certain label, unless its radius is more than its patch's extent supports
+        )  # a certain label, unless its radius is more than its patch's extent supports
+        may_be_flat = (
+            config.flat_label_sigma > 0
+            and score < config.unsupported_label_certain
+            and len(ip.points) >= config.flat_label_min_px
+        )
+        if kept and not may_be_flat:
+            continue
         f = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 3]))
         if f is None:
             continue
-        if (certain or supported(p, x, config)) and select_type(
-            {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config
-        ) != "plane":
-            continue
+        if not (may_be_flat and _plane_explains(f.primitive, p, ip.points, config)):
+            if kept:
+                continue
+            if (certain or supported(p, x, config)) and select_type(
+                {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config
+            ) != "plane":
+                continue
         demoted.append(i)
         q = _canonical(f.primitive, ip.points[f.inliers] if f.inliers.any() else ip.points)
         axis_idx[i] = -1
@@ -339,6 +351,18 @@ def _planes_where_unsupported(
         fits.want[i] = "?"
         fits.searched.append(i)
     return demoted
+
+
+def _plane_explains(plane: Primitive, curved: Primitive, x: np.ndarray, config: FitConfig) -> bool:
+    """True when ``plane`` explains the instance points ``x`` (N, 3, metres) within the sensor's noise (their
+    robust residual sigma, `mad_sigma`, at most flat_label_sigma times the sensor's depth sigma at their median
+    point, `noise_sigma`) and the ``curved`` fit explains them flat_label_worse times worse or more: a curved
+    label the depth contradicts."""
+    sigma = float(np.median(noise_sigma(x, config)))
+    s_plane = mad_sigma(plane.signed_distance(x))
+    return s_plane <= config.flat_label_sigma * sigma and mad_sigma(curved.signed_distance(x)) >= (
+        config.flat_label_worse * s_plane
+    )
 
 
 def _label_trusted(fits: _Fits, i: int, config: FitConfig) -> bool:
