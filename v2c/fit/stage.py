@@ -325,13 +325,12 @@ def _planes_where_unsupported(
         f = ransac_fit("plane", ip.points, ip.normals, scale, config, np.random.default_rng([config.seed, i, 3]))
         if f is None:
             continue
-        if not (may_be_flat and _plane_explains(f.primitive, p, ip.points, config)):
-            if kept:
-                continue
-            if (certain or supported(p, x, config)) and select_type(
-                {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}, ip.points, scale, config
-            ) != "plane":
-                continue
+        flat = may_be_flat and _plane_explains(f.primitive, p, ip.points, config)
+        cands = {"plane": f, p.type: RansacFit(p, fits.inliers[i], 0.0)}
+        if not flat and (
+            kept or ((certain or supported(p, x, config)) and select_type(cands, ip.points, scale, config) != "plane")
+        ):
+            continue  # the label stands: certain, or not beaten by its plane
         demoted.append(i)
         q = _canonical(f.primitive, ip.points[f.inliers] if f.inliers.any() else ip.points)
         axis_idx[i] = -1
